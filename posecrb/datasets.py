@@ -1,0 +1,72 @@
+"""Dataset lookup: a bare name resolves through the search path of DESIGN.md section 9.
+
+Search path, first hit wins: ``--data-dir``, ``$POSECRB_DATA``, ``./datasets``,
+``../shared/datasets`` (this workplace), the user cache ``~/.cache/posecrb``.
+Each directory is searched together with its ``toro/`` subfolder.
+"""
+from __future__ import annotations
+
+import os
+from pathlib import Path
+
+from .errors import DatasetNotFound
+
+EXTENSIONS = (".g2o", ".graph", ".toro")
+
+
+def cache_dir() -> Path:
+    base = os.environ.get("XDG_CACHE_HOME") or os.path.join(os.path.expanduser("~"), ".cache")
+    return Path(base) / "posecrb"
+
+
+def search_path(data_dir: str | os.PathLike | None = None) -> list[Path]:
+    dirs: list[Path] = []
+    if data_dir:
+        dirs.append(Path(data_dir))
+    env = os.environ.get("POSECRB_DATA")
+    if env:
+        dirs += [Path(p) for p in env.split(os.pathsep) if p]
+    dirs += [Path("datasets"), Path("..") / "shared" / "datasets", cache_dir()]
+    out: list[Path] = []
+    for d in dirs:
+        for sub in (d, d / "toro"):
+            if sub not in out:
+                out.append(sub)
+    return out
+
+
+def resolve(name_or_path: str | os.PathLike, data_dir: str | os.PathLike | None = None) -> Path:
+    """An existing path is returned as is; a bare name (with or without extension) is searched."""
+    p = Path(name_or_path)
+    if p.is_file():
+        return p
+    name = str(name_or_path)
+    if os.sep in name or (os.altsep and os.altsep in name):
+        raise DatasetNotFound(name, [])
+    candidates = [name] if name.endswith(EXTENSIONS) else [name + ext for ext in EXTENSIONS]
+    dirs = search_path(data_dir)
+    for d in dirs:
+        if not d.is_dir():
+            continue
+        for c in candidates:
+            f = d / c
+            if f.is_file():
+                return f
+        # case-insensitive match (users type `csail` for CSAIL.g2o)
+        lowered = {c.lower() for c in candidates}
+        for f in sorted(d.iterdir()):
+            if f.is_file() and f.name.lower() in lowered:
+                return f
+    raise DatasetNotFound(name, [str(d) for d in dirs if d.is_dir()])
+
+
+def discover(data_dir: str | os.PathLike | None = None) -> list[Path]:
+    """Every dataset file on the search path; the first hit of each name wins."""
+    seen: dict[str, Path] = {}
+    for d in search_path(data_dir):
+        if not d.is_dir():
+            continue
+        for f in sorted(d.iterdir()):
+            if f.is_file() and f.suffix in EXTENSIONS and f.stem.lower() not in seen:
+                seen[f.stem.lower()] = f
+    return list(seen.values())

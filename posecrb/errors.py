@@ -1,0 +1,68 @@
+"""Exception hierarchy. The CLI maps these to exit codes in one place (posecrb.cli).
+
+Every error a user can cause through data carries enough context to act on it:
+file and line for parse errors, matrix name and reason for factorization failures,
+component sizes for disconnected graphs.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+
+class PosecrbError(Exception):
+    """Base class: a data or solver error (exit code 1)."""
+
+
+class ParseError(PosecrbError):
+    def __init__(self, path: str, line: int | None, reason: str):
+        self.path, self.line, self.reason = str(path), line, reason
+        where = f"{self.path}:{line}" if line is not None else self.path
+        super().__init__(f"{where}: {reason}")
+
+
+class DatasetNotFound(PosecrbError):
+    def __init__(self, name: str, searched: list[str]):
+        self.name, self.searched = name, searched
+        hint = "; searched: " + ", ".join(searched) if searched else ""
+        super().__init__(
+            f"dataset {name!r} not found{hint}. "
+            f"Pass a path, set --data-dir or $POSECRB_DATA, or run `posecrb datasets fetch {name}`."
+        )
+
+
+class NotPositiveDefinite(PosecrbError):
+    """A matrix that must be symmetric positive definite is not (reported, never a silent NaN)."""
+
+    def __init__(self, matrix: str, reason: str, column: int | None = None):
+        self.matrix, self.reason, self.column = matrix, reason, column
+        col = f" (pivot failed at column {column})" if column is not None else ""
+        super().__init__(f"{matrix} is not positive definite{col}: {reason}")
+
+
+@dataclass(frozen=True)
+class ComponentSummary:
+    size: int
+    sample_ids: tuple[int, ...]
+
+
+class DisconnectedGraph(PosecrbError):
+    def __init__(self, path: str | None, components: list[ComponentSummary]):
+        self.path, self.components = path, components
+        parts = "; ".join(
+            f"#{k}: {c.size} poses (ids {', '.join(map(str, c.sample_ids))}{', ...' if c.size > len(c.sample_ids) else ''})"
+            for k, c in enumerate(components[:6])
+        )
+        more = f"; ... {len(components) - 6} more" if len(components) > 6 else ""
+        src = f"{path}: " if path else ""
+        super().__init__(
+            f"{src}the pose graph is disconnected ({len(components)} components): {parts}{more}. "
+            "Anchored quantities need a connected graph."
+        )
+
+
+class SolverError(PosecrbError):
+    """The solver could not produce a certified estimate."""
+
+
+class UsageError(Exception):
+    """A usage error the library detects (exit code 2), e.g. an anchor id not in the graph."""

@@ -1,0 +1,45 @@
+"""g2o writer: original ids, every edge, vertices from an estimate."""
+from __future__ import annotations
+
+import io
+import os
+
+import numpy as np
+
+from ..graph import PoseGraph
+from ..lie import angle2, rot_to_quat
+
+
+def _fmt_rows(arr: np.ndarray) -> list[str]:
+    buf = io.StringIO()
+    np.savetxt(buf, arr, fmt="%.17g")
+    return buf.getvalue().splitlines()
+
+
+def write_g2o(graph: PoseGraph, path: str | os.PathLike, rot: np.ndarray | None = None,
+              trans: np.ndarray | None = None) -> None:
+    """Write ``graph`` as a g2o file; vertices from (rot, trans) or the graph's own estimate.
+
+    Information matrices are written in g2o order whatever the input format was.
+    """
+    rot = graph.vertex_rot if rot is None else rot
+    trans = graph.vertex_trans if trans is None else trans
+    iu = np.triu_indices(graph.q)
+    info = graph.info[:, iu[0], iu[1]]
+    if graph.dim == 2:
+        vtag, etag = "VERTEX_SE2", "EDGE_SE2"
+        vcols = None if rot is None else np.column_stack([trans, angle2(rot)])
+        ecols = np.column_stack([graph.trans, angle2(graph.rot), info])
+    else:
+        vtag, etag = "VERTEX_SE3:QUAT", "EDGE_SE3:QUAT"
+        vcols = None if rot is None else np.column_stack([trans, rot_to_quat(rot)])
+        ecols = np.column_stack([graph.trans, rot_to_quat(graph.rot), info])
+    lines: list[str] = []
+    if vcols is not None:
+        lines += [f"{vtag} {i} {row}" for i, row in zip(graph.ids, _fmt_rows(vcols))]
+    lines += [f"{etag} {i} {j} {row}" for i, j, row in
+              zip(graph.ids[graph.src], graph.ids[graph.dst], _fmt_rows(ecols))]
+    tmp = f"{os.fspath(path)}.tmp"
+    with open(tmp, "w") as fh:
+        fh.write("\n".join(lines) + "\n")
+    os.replace(tmp, path)
