@@ -21,7 +21,8 @@ from .errors import PosecrbError, UsageError
 
 class _StderrHandler(logging.Handler):
     def emit(self, record: logging.LogRecord) -> None:
-        level = "warning" if record.levelno >= logging.WARNING else "info"
+        level = ("error" if record.levelno >= logging.ERROR else
+                 "warning" if record.levelno >= logging.WARNING else "info")
         click.echo(f"posecrb: {level}: {record.getMessage()}", err=True)
 
 

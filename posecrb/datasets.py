@@ -2,7 +2,10 @@
 
 Search path, first hit wins: ``--data-dir``, ``$POSECRB_DATA``, ``./datasets``,
 ``../shared/datasets`` (this workplace), the user cache ``~/.cache/posecrb``.
-Each directory is searched together with its ``toro/`` subfolder.
+Each directory is searched together with its ``toro/`` subfolder. "../shared/datasets"
+is looked for relative to the working directory, each of its ancestors and the
+repository holding this package, so a bare name works from any directory of the
+workplace.
 """
 from __future__ import annotations
 
@@ -19,6 +22,17 @@ def cache_dir() -> Path:
     return Path(base) / "posecrb"
 
 
+def _workplace_shared() -> list[Path]:
+    """``shared/datasets`` beside the repository and beside any ancestor of the working directory."""
+    out = []
+    repo = Path(__file__).resolve().parent.parent
+    for base in [repo.parent, *Path.cwd().resolve().parents]:
+        cand = base / "shared" / "datasets"
+        if cand.is_dir() and cand not in out:
+            out.append(cand)
+    return out
+
+
 def search_path(data_dir: str | os.PathLike | None = None) -> list[Path]:
     dirs: list[Path] = []
     if data_dir:
@@ -26,7 +40,9 @@ def search_path(data_dir: str | os.PathLike | None = None) -> list[Path]:
     env = os.environ.get("POSECRB_DATA")
     if env:
         dirs += [Path(p) for p in env.split(os.pathsep) if p]
-    dirs += [Path("datasets"), Path("..") / "shared" / "datasets", cache_dir()]
+    dirs += [Path("datasets"), Path("..") / "shared" / "datasets"]
+    dirs += _workplace_shared()
+    dirs.append(cache_dir())
     out: list[Path] = []
     for d in dirs:
         for sub in (d, d / "toro"):
@@ -42,7 +58,9 @@ def resolve(name_or_path: str | os.PathLike, data_dir: str | os.PathLike | None 
         return p
     name = str(name_or_path)
     if os.sep in name or (os.altsep and os.altsep in name):
-        raise DatasetNotFound(name, [])
+        from .errors import ParseError
+
+        raise ParseError(name, None, "no such file")
     candidates = [name] if name.endswith(EXTENSIONS) else [name + ext for ext in EXTENSIONS]
     dirs = search_path(data_dir)
     for d in dirs:

@@ -66,3 +66,18 @@ class SolverError(PosecrbError):
 
 class UsageError(Exception):
     """A usage error the library detects (exit code 2), e.g. an anchor id not in the graph."""
+
+
+def status_of(exc: BaseException) -> str:
+    """Short status word for a failed row in a multi-dataset report."""
+    if isinstance(exc, DatasetNotFound):
+        return "not found"
+    if isinstance(exc, DisconnectedGraph):
+        return "disconnected"
+    if isinstance(exc, ParseError):
+        return "parse error"
+    if isinstance(exc, NotPositiveDefinite):
+        return "not positive definite"
+    if isinstance(exc, SolverError):
+        return "uncertified"
+    return "error"

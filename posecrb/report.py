@@ -127,7 +127,11 @@ def print_rows(rows: list[dict[str, Any]], fmt: str, columns: Sequence[str] | No
     elif fmt == "table":
         from rich.console import Console
 
-        Console(soft_wrap=False).print(to_rich_table(rows, columns, title, headers, caption))
+        import sys
+
+        # Piped output: no terminal width to respect, so never squeeze columns.
+        width = None if sys.stdout.isatty() else 250
+        Console(soft_wrap=False, width=width).print(to_rich_table(rows, columns, title, headers, caption))
     else:  # pragma: no cover - click validates choices
         raise ValueError(fmt)
 

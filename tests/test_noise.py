@@ -1,0 +1,54 @@
+"""Noise model: SE-Sync precisions vs dense per-edge computation; eq. (59) vs mpmath."""
+import mpmath as mp
+import numpy as np
+import pytest
+
+from posecrb.noise import isotropic_precisions, omega, rotation_weight
+
+from .conftest import random_spd
+
+
+@pytest.mark.parametrize("dim", [2, 3])
+def test_precisions_match_per_edge_dense(dim):
+    rng = np.random.default_rng(1)
+    info = random_spd(rng, 20, dim + (1 if dim == 2 else 3))
+    tau, kappa = isotropic_precisions(info, dim)
+    for k in range(20):
+        cov_t = np.linalg.inv(info[k, :dim, :dim])
+        assert tau[k] == pytest.approx(dim / np.trace(cov_t), rel=1e-12)
+        if dim == 2:
+            assert kappa[k] == info[k, 2, 2]
+        else:
+            assert kappa[k] == pytest.approx(3 / (2 * np.trace(np.linalg.inv(info[k, 3:, 3:]))), rel=1e-12)
+
+
+def _omega_mp(k):
+    mp.mp.dps = 80
+    x = 2 * mp.mpf(k)
+    i = [mp.besseli(v, x) for v in range(4)]
+    return k ** 2 * (2 * i[0] - i[1] - 2 * i[2] + i[3]) / (2 * i[0] - 2 * i[1])
+
+
+def test_omega_matches_eq59_in_high_precision():
+    ks = np.geomspace(1e-3, 1e8, 120)
+    got = omega(ks)
+    ref = np.array([float(_omega_mp(mp.mpf(float(k)))) for k in ks])
+    assert np.all(np.isfinite(got))
+    np.testing.assert_allclose(got, ref, rtol=1e-12)
+
+
+def test_omega_limits():
+    # Small kappa: omega ~ kappa^2 (leading Bessel terms); large: omega / 3 -> kappa.
+    assert omega(1e-6) == pytest.approx(1e-12, rel=1e-5)
+    assert omega(1e8) / 3 == pytest.approx(1e8, rel=1e-7)
+    assert np.ndim(omega(2.0)) == 0
+
+
+def test_rotation_weights():
+    k = np.array([0.5, 10.0, 1e4])
+    np.testing.assert_allclose(rotation_weight(k, 2), 2 * k)
+    np.testing.assert_allclose(rotation_weight(k, 3), omega(k) / 3)
+    np.testing.assert_allclose(rotation_weight(k, 3, "table2"), 0.5515 * k ** 2)
+    np.testing.assert_allclose(rotation_weight(k, 2, "table2"), 2 * k)
+    with pytest.raises(ValueError):
+        rotation_weight(k, 3, "nope")
