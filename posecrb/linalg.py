@@ -8,8 +8,6 @@ the matrix and the failed pivot, never a NaN.
 """
 from __future__ import annotations
 
-import warnings
-
 import numpy as np
 import scipy.sparse as sp
 from sksparse.cholmod import CholmodNotPositiveDefiniteError, Factor, analyze
@@ -42,9 +40,7 @@ class SymbolicCholesky:
             raise ValueError(f"{name}: shape {a.shape} does not match the analysed pattern {self.shape}")
         a = _as_csc(a)
         try:
-            with warnings.catch_warnings():
-                warnings.simplefilter("ignore")
-                f = self._symbolic.cholesky(a, beta=beta)
+            f = self._symbolic.cholesky(a, beta=beta)
         except CholmodNotPositiveDefiniteError as exc:
             raise NotPositiveDefinite(name, str(exc).split(": ", 1)[-1]) from None
         _check_positive(f, name)
