@@ -70,7 +70,9 @@ def dataset_row(name: str, settings: TableSettings,
     try:
         step("parse")
         graph, t_parse = timed(lambda: load(path), 1)
-        row.update(dataset=graph.name, path=str(path), sha256=graph.sha256, dim=graph.dim,
+        if os.sep in name:  # a path: name the row after the file
+            row["dataset"] = graph.name
+        row.update(path=str(path), sha256=graph.sha256, dim=graph.dim,
                    poses=graph.n, edges=graph.m)
         step("bounds")
         b = compute_bounds(graph, 0, settings.rotation_model, settings.repeat)
@@ -244,10 +246,12 @@ def run_record(settings: TableSettings, rows: list[dict], argv: Sequence[str] | 
     from . import __version__
 
     versions = {"posecrb": __version__, "python": sys.version.split()[0]}
-    for mod in ("numpy", "scipy", "pandas", "sksparse", "numba", "click", "rich"):
+    from importlib.metadata import PackageNotFoundError, version
+
+    for dist in ("numpy", "scipy", "pandas", "scikit-sparse", "numba", "click", "rich"):
         try:
-            versions[mod] = __import__(mod).__version__
-        except Exception:  # noqa: BLE001
+            versions[dist] = version(dist)
+        except PackageNotFoundError:
             pass
     cpu = platform.processor() or platform.machine()
     try:

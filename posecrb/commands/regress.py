@@ -1,0 +1,64 @@
+"""`posecrb regress`: recompute metric values and compare them with datasets/expected.json."""
+from __future__ import annotations
+
+import logging
+from dataclasses import asdict
+
+import click
+
+from ..errors import DatasetNotFound, PosecrbError
+from ..regress import compare, compute_metrics, load_expected, save_expected
+from ..report import print_rows
+from ._common import data_dir_option, format_option
+
+log = logging.getLogger("posecrb")
+
+
+@click.command("regress")
+@click.option("--datasets", "names", default=None,
+              help="Comma-separated dataset names (default: every dataset in the expected file).")
+@click.option("--update", is_flag=True, help="Write the recomputed values into the expected file.")
+@click.option("--expected", "expected_path", type=click.Path(dir_okay=False), default=None,
+              help="Expected-values file (default: datasets/expected.json).")
+@click.option("--all-rows", is_flag=True, help="Show every compared value, not only drifts.")
+@data_dir_option
+@format_option()
+def command(names, update, expected_path, all_rows, data_dir, fmt):
+    """Recompute lb, ub, ub_lambda (tolerance 1e-9 relative) and fim_logdet, objective, trace_crlb
+    at the certified optimum (1e-6) and compare them with the expected file. Exits 1 on any
+    drift or changed input checksum. A dataset not found is skipped with a warning unless it
+    was named with --datasets."""
+    data = load_expected(expected_path)
+    stored = data["datasets"]
+    requested = [n.strip() for n in names.split(",") if n.strip()] if names else None
+    todo = requested or sorted(stored)
+    if not todo:
+        raise click.UsageError("nothing to compare: the expected file is empty; name datasets and use --update")
+    diffs, missing = [], []
+    for name in todo:
+        try:
+            got = compute_metrics(name, data_dir)
+        except DatasetNotFound as exc:
+            (missing if requested else []).append(name)
+            log.warning("%s", exc)
+            continue
+        if update:
+            stored[name] = got
+            continue
+        if name not in stored:
+            raise PosecrbError(f"{name}: no expected values; run `posecrb regress --update --datasets {name}`")
+        diffs += compare(name, stored[name], got)
+    if update:
+        click.echo(f"updated {save_expected(data, expected_path)} ({len(todo) - len(missing)} dataset(s))")
+    else:
+        bad = [d for d in diffs if not d.ok]
+        rows = [asdict(d) for d in (diffs if all_rows else bad)]
+        if rows:
+            print_rows(rows, fmt, title="regression: recomputed vs expected", single_json=False)
+        click.echo(f"{len(diffs) - len(bad)} of {len(diffs)} values within tolerance "
+                   f"({len({d.dataset for d in diffs})} dataset(s))", err=True)
+        if bad:
+            raise PosecrbError(f"{len(bad)} value(s) drifted: " +
+                               ", ".join(f"{d.dataset}.{d.quantity}" for d in bad[:8]))
+    if missing:
+        raise PosecrbError(f"not found: {', '.join(missing)}")

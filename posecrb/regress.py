@@ -1,0 +1,92 @@
+"""Regression of metric values against ``datasets/expected.json``.
+
+For each dataset the file stores the input's sha256 and ``lb, ub, ub_lambda``
+(graph-only: relative tolerance 1e-9) and ``fim_logdet, objective, trace_crlb``
+(at the certified optimum: relative tolerance 1e-6, since they depend on the
+solver's stopping point). A changed input file is reported, not compared.
+"""
+from __future__ import annotations
+
+import json
+import os
+from dataclasses import dataclass
+from pathlib import Path
+
+from . import datasets
+from .bounds import compute_bounds
+from .errors import PosecrbError
+from .estimate import get_estimate
+from .io import load
+
+GRAPH_ONLY = ("lb", "ub", "ub_lambda")
+ESTIMATE_DEPENDENT = ("fim_logdet", "objective", "trace_crlb")
+TOLERANCES = {**{k: 1e-9 for k in GRAPH_ONLY}, **{k: 1e-6 for k in ESTIMATE_DEPENDENT}}
+
+
+def default_expected_path() -> Path:
+    """``datasets/expected.json`` of the repository (a symlink to the package-data copy)."""
+    repo = Path(__file__).resolve().parent.parent / "datasets" / "expected.json"
+    return repo if repo.exists() else Path(__file__).resolve().parent / "data" / "expected.json"
+
+
+def load_expected(path: str | os.PathLike | None = None) -> dict:
+    p = Path(path) if path else default_expected_path()
+    try:
+        data = json.loads(p.read_text())
+    except FileNotFoundError:
+        return {"version": 1, "datasets": {}}
+    except json.JSONDecodeError as exc:
+        raise PosecrbError(f"{p}:{exc.lineno}: invalid JSON ({exc.msg})") from None
+    if not isinstance(data, dict) or not isinstance(data.get("datasets"), dict):
+        raise PosecrbError(f"{p}: expected an object with a 'datasets' mapping")
+    return data
+
+
+def save_expected(data: dict, path: str | os.PathLike | None = None) -> Path:
+    p = Path(path) if path else default_expected_path()
+    target = p.resolve()
+    tmp = target.with_suffix(".json.tmp")
+    tmp.write_text(json.dumps(data, indent=2, sort_keys=True) + "\n")
+    os.replace(tmp, target)
+    return p
+
+
+def compute_metrics(name: str, data_dir: str | None = None) -> dict:
+    """The regressed quantities of one dataset, at its certified optimum."""
+    from .crlb import paper_crlb
+    from .fim import fim_logdet, paper_fim
+
+    path = datasets.resolve(name, data_dir)
+    graph = load(path)
+    b = compute_bounds(graph)
+    est = get_estimate(graph, "solve")
+    if not est.certified:
+        raise PosecrbError(f"{name}: the solver did not certify its estimate")
+    fim = paper_fim(graph, est.rot, est.trans, 0)
+    return {"sha256": graph.sha256, "lb": b.lb, "ub": b.ub, "ub_lambda": b.ub_lambda,
+            "fim_logdet": fim_logdet(fim), "objective": est.objective,
+            "trace_crlb": paper_crlb(graph, est.rot, est.trans, 0).trace_crlb}
+
+
+@dataclass(frozen=True)
+class Diff:
+    dataset: str
+    quantity: str
+    expected: float | str | None
+    got: float | str | None
+    rel_diff: float | None
+    tolerance: float | None
+    ok: bool
+
+
+def compare(name: str, expected: dict, got: dict) -> list[Diff]:
+    if expected.get("sha256") and got.get("sha256") != expected["sha256"]:
+        return [Diff(name, "sha256", expected["sha256"], got.get("sha256"), None, None, False)]
+    out = []
+    for q, tol in TOLERANCES.items():
+        e, g = expected.get(q), got.get(q)
+        if e is None:
+            continue
+        rel = abs(g - e) / max(abs(e), 1e-300) if g is not None else None
+        out.append(Diff(name, q, e, g, rel, tol, rel is not None and rel <= tol))
+    return out

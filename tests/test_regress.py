@@ -1,0 +1,52 @@
+"""`posecrb regress`: the CI subset holds, and drift or a changed input is caught."""
+import json
+
+import pytest
+
+from posecrb.cli import main
+from posecrb.regress import compare, default_expected_path, load_expected
+
+# The CI subset (well under the 3-minute budget); `make regress` runs every dataset.
+CI_SUBSET = ["CSAIL", "intel", "MIT", "kitti_05", "tinyGrid3D", "smallGrid3D"]
+
+
+def test_expected_file_covers_the_ci_subset():
+    stored = load_expected()["datasets"]
+    assert set(CI_SUBSET) <= set(stored)
+    for name in CI_SUBSET:
+        assert {"sha256", "lb", "ub", "ub_lambda", "fim_logdet", "objective", "trace_crlb"} <= set(stored[name])
+
+
+def test_ci_subset_has_no_drift(shared_datasets, capfd):
+    assert main(["regress", "--datasets", ",".join(CI_SUBSET)]) == 0
+
+
+@pytest.mark.parametrize("quantity,factor", [("lb", 1 + 1e-8), ("objective", 1 + 1e-5)])
+def test_perturbed_expected_value_is_caught(shared_datasets, capfd, tmp_path, quantity, factor):
+    data = load_expected()
+    data["datasets"] = {"CSAIL": dict(data["datasets"]["CSAIL"])}
+    data["datasets"]["CSAIL"][quantity] *= factor
+    f = tmp_path / "expected.json"
+    f.write_text(json.dumps(data))
+    rc = main(["regress", "--expected", str(f), "--format", "json"])
+    out, err = capfd.readouterr()
+    assert rc == 1
+    rows = json.loads(out)
+    assert [r["quantity"] for r in rows] == [quantity]
+    assert f"CSAIL.{quantity}" in err
+
+
+def test_changed_input_checksum_is_reported():
+    diffs = compare("x", {"sha256": "aa", "lb": 1.0}, {"sha256": "bb", "lb": 1.0})
+    assert len(diffs) == 1 and diffs[0].quantity == "sha256" and not diffs[0].ok
+
+
+def test_tolerances():
+    ok = compare("x", {"lb": 100.0, "objective": 10.0}, {"lb": 100.0 * (1 + 5e-10), "objective": 10.0 * (1 + 5e-7)})
+    assert all(d.ok for d in ok)
+    bad = compare("x", {"lb": 100.0}, {"lb": 100.0 * (1 + 2e-9)})
+    assert not bad[0].ok
+
+
+def test_default_expected_path_exists():
+    assert default_expected_path().is_file()

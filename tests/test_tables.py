@@ -1,0 +1,100 @@
+"""`posecrb tables`: formats parse back, statuses, run record, paper comparison."""
+import csv
+import io
+import json
+
+import pytest
+
+from posecrb.cli import main
+from posecrb.tables import _tex_number, failed, table_rows
+
+SUBSET = "CSAIL,tinyGrid3D"
+
+
+def _run(capfd, *args):
+    rc = main(["tables", "--datasets", SUBSET, "--repeat", "1", *args])
+    out, err = capfd.readouterr()
+    return rc, out, err
+
+
+def test_json_and_csv_parse_back(shared_datasets, capfd):
+    rc, out, _ = _run(capfd, "--format", "json")
+    assert rc == 0
+    data = json.loads(out)
+    rows = {r["dataset"]: r for r in data["rows"]}
+    assert rows["CSAIL"]["poses"] == 1045 and rows["tinyGrid3D"]["dim"] == 3
+    assert rows["CSAIL"]["lb"] < rows["CSAIL"]["fim_logdet"] < rows["CSAIL"]["ub"]
+    assert [r["dataset"] for r in data["tables"]["I"]] == ["CSAIL"]
+    assert [r["dataset"] for r in data["tables"]["IV"]] == ["tinyGrid3D"]
+    rc, out, _ = _run(capfd, "--format", "csv")
+    parsed = list(csv.DictReader(io.StringIO(out)))
+    assert [r["dataset"] for r in parsed] == ["CSAIL", "tinyGrid3D"]
+    assert float(parsed[0]["lb"]) == pytest.approx(rows["CSAIL"]["lb"], rel=1e-12)
+
+
+def test_markdown_and_latex_structure(shared_datasets, capfd):
+    rc, out, _ = _run(capfd, "--format", "markdown", "--table", "1", "--table", "3")
+    assert rc == 0
+    tables = [blk for blk in out.split("### ") if blk.strip()]
+    assert len(tables) == 2
+    lines = [ln for ln in tables[0].splitlines() if ln.startswith("|")]
+    assert len(lines) == 3  # header, rule, CSAIL
+    assert len({ln.count("|") for ln in lines}) == 1
+    rc, out, _ = _run(capfd, "--format", "latex", "--table", "2")
+    assert out.count(r"\begin{tabular}") == 1 and out.count(r"\\") >= 2
+    assert "tinyGrid3D" in out and "(59)" in out  # Table II footnote
+
+
+def test_compare_paper_and_table2_fit_labelled(shared_datasets, capfd):
+    rc, out, _ = _run(capfd, "--format", "json", "--compare-paper", "--rotation-weight", "table2")
+    data = json.loads(out)
+    csail = data["tables"]["I"][0]
+    assert csail["paper_fim_logdet"] == 1.9860e4
+    assert abs(csail["rel_diff_fim_logdet"]) < 1e-4  # FIM at the certified optimum matches Table I
+    tiny = data["tables"]["II"][0]
+    assert abs(tiny["rel_diff_lb"]) < 1e-3  # the empirical fit reproduces Table II's lb
+    rc, out, _ = _run(capfd, "--format", "markdown", "--table", "2", "--rotation-weight", "table2")
+    assert "EMPIRICAL" in out
+
+
+def test_out_dir_has_every_format_and_run_record(shared_datasets, capfd, tmp_path):
+    rc, _, _ = _run(capfd, "--format", "csv", "--out", str(tmp_path))
+    assert rc == 0
+    for t in (1, 2, 3, 4):
+        for ext in ("md", "csv", "json", "tex"):
+            assert (tmp_path / f"table{t}.{ext}").is_file()
+    run = json.loads((tmp_path / "run.json").read_text())
+    assert run["datasets"]["CSAIL"]["sha256"] == "66d99ac857a9849d814d214a9ebd0d4876d5d40f0a37be9330c1ff6e6e9daaa6"
+    assert run["settings"]["repeat"] == 1 and "numpy" in run["versions"]
+
+
+def test_requested_missing_dataset_is_a_row_and_exit_one(shared_datasets, capfd):
+    rc = main(["tables", "--datasets", "CSAIL,nosuchdataset", "--repeat", "1", "--format", "json"])
+    out, err = capfd.readouterr()
+    assert rc == 1
+    rows = {r["dataset"]: r for r in json.loads(out)["rows"]}
+    assert rows["nosuchdataset"]["status"] == "not found"
+    assert "posecrb datasets fetch nosuchdataset" in rows["nosuchdataset"]["hint"]
+    assert rows["CSAIL"]["status"] == "ok"
+
+
+def test_failed_rows_policy():
+    rows = [{"dataset": "a", "status": "ok"}, {"dataset": "grid3D", "status": "not found"},
+            {"dataset": "b", "status": "not positive definite"}, {"dataset": "c", "status": "uncertified"}]
+    assert [r["dataset"] for r in failed(rows, None)] == ["b", "c"]
+    assert [r["dataset"] for r in failed(rows, ["grid3D"])] == ["grid3D", "b", "c"]
+
+
+def test_views_split_by_dimension():
+    rows = [{"dataset": "CSAIL", "dim": 2, "status": "ok", "fim_build_time": 2.0, "laplacians_build_time": 0.5},
+            {"dataset": "sphere2500", "dim": 3, "status": "ok"}]
+    t1, cols = table_rows(rows, 1)
+    t3, _ = table_rows(rows, 3)
+    assert [r["dataset"] for r in t1] == ["CSAIL"] and "fim_logdet" in cols
+    assert t3[0]["build_ratio"] == 4.0
+
+
+def test_tex_number():
+    assert _tex_number(19860.0) == r"$1.9860\times10^{4}$"
+    assert _tex_number(9.99996e-3) == r"$1.0000\times10^{-2}$"
+    assert _tex_number(None) == "--" and _tex_number("a_b") == r"a\_b"
