@@ -1,0 +1,219 @@
+"""fetch against a local HTTP server on 127.0.0.1 (no external network).
+
+The server serves copies of real files from ../shared/datasets placed in tmp_path;
+special path prefixes make it misbehave: ``/cut/`` announces the full
+Content-Length and closes after half the bytes, ``/cut-nolength/`` does the same
+without a Content-Length, ``/missing`` answers 404.
+"""
+from __future__ import annotations
+
+import hashlib
+import http.server
+import shutil
+import threading
+from pathlib import Path
+
+import pytest
+
+from posecrb.cli import main
+from posecrb.fetch import FetchError, fetch, fetch_many, target_path
+from posecrb.manifest import load_manifest
+
+
+class _Handler(http.server.BaseHTTPRequestHandler):
+    root: Path
+    requests: list
+
+    def log_message(self, *args) -> None:  # keep pytest output clean
+        pass
+
+    def do_GET(self) -> None:
+        self.requests.append(self.path)
+        mode, _, name = self.path.lstrip("/").rpartition("/")
+        f = self.root / name
+        if not f.is_file():
+            self.send_error(404, "no such file")
+            return
+        data = f.read_bytes()
+        self.send_response(200)
+        self.send_header("Content-Type", "application/octet-stream")
+        if mode != "cut-nolength":
+            self.send_header("Content-Length", str(len(data)))
+        self.end_headers()
+        if mode.startswith("cut"):
+            self.wfile.write(data[: len(data) // 2])
+            self.wfile.flush()
+            self.close_connection = True
+            return
+        self.wfile.write(data)
+
+
+@pytest.fixture
+def server(tmp_path, shared_datasets):
+    root = tmp_path / "srv"
+    root.mkdir()
+    for name in ("tinyGrid3D.g2o", "intel.g2o"):
+        shutil.copy(shared_datasets / name, root / name)
+    shutil.copy(shared_datasets / "toro" / "w100.graph", root / "w100.graph")
+    bad = bytearray((root / "tinyGrid3D.g2o").read_bytes())
+    bad[10] ^= 1
+    (root / "bad").mkdir()
+    (root / "bad" / "tinyGrid3D.g2o").write_bytes(bytes(bad))
+    handler = type("H", (_Handler,), {"root": root, "requests": []})
+
+    class Routed(handler):
+        def do_GET(self):
+            if self.path.startswith("/bad/"):
+                self.root = root / "bad"
+                self.path = "/" + self.path.rsplit("/", 1)[1]
+            super().do_GET()
+
+    httpd = http.server.ThreadingHTTPServer(("127.0.0.1", 0), Routed)
+    thread = threading.Thread(target=httpd.serve_forever, kwargs={"poll_interval": 0.05}, daemon=True)
+    thread.start()
+    try:
+        yield f"http://127.0.0.1:{httpd.server_address[1]}", handler.requests, root
+    finally:
+        httpd.shutdown()
+        httpd.server_close()
+        thread.join(5)
+
+
+@pytest.fixture(autouse=True)
+def isolated_cache(tmp_path, monkeypatch):
+    monkeypatch.setenv("XDG_CACHE_HOME", str(tmp_path / "xdg"))
+    monkeypatch.delenv("POSECRB_DATA", raising=False)
+
+
+def files_in(d: Path) -> list[str]:
+    return sorted(str(p.relative_to(d)) for p in d.rglob("*") if p.is_file()) if d.exists() else []
+
+
+def test_download_verifies_and_lands_atomically(server, tmp_path, shared_datasets):
+    url, requests, root = server
+    dest = tmp_path / "dest"
+    seen = []
+    res = fetch("intel", url=f"{url}/intel.g2o", dest=dest, progress=lambda done, total: seen.append((done, total)))
+    original = (shared_datasets / "intel.g2o").read_bytes()
+    assert res.status == "downloaded" and res.path == dest / "intel.g2o" and res.nbytes == len(original)
+    assert res.path.read_bytes() == original
+    assert files_in(dest) == ["intel.g2o"]                      # no temporary file left
+    assert seen[0] == (0, len(original)) and seen[-1] == (len(original), len(original)) and len(seen) > 2
+    assert res.path.stat().st_mode & 0o044                      # readable by others, not mkstemp's 0600
+
+
+def test_toro_file_goes_to_toro_subdir(server, tmp_path):
+    url, _, _ = server
+    res = fetch("w100", url=f"{url}/w100.graph", dest=tmp_path / "dest")
+    assert res.path == tmp_path / "dest" / "toro" / "w100.graph"
+    assert hashlib.sha256(res.path.read_bytes()).hexdigest() == load_manifest().get("w100").sha256
+
+
+def test_default_destination_is_the_user_cache(server, tmp_path, monkeypatch):
+    url, _, _ = server
+    monkeypatch.chdir(tmp_path)   # ./datasets and ../shared relative to cwd do not exist here
+    entry = load_manifest().get("tinyGrid3D")
+    res = fetch(entry, url=f"{url}/tinyGrid3D.g2o", data_dir=tmp_path / "nothing")
+    # A verified copy may be found on the search path (the workplace's shared datasets);
+    # otherwise the file lands in $XDG_CACHE_HOME/posecrb.
+    if res.status == "downloaded":
+        assert res.path == tmp_path / "xdg" / "posecrb" / "tinyGrid3D.g2o"
+    else:
+        assert res.status == "present" and res.path.name == "tinyGrid3D.g2o"
+    assert target_path(entry) == tmp_path / "xdg" / "posecrb" / "tinyGrid3D.g2o"
+
+
+def test_bad_checksum_is_rejected_and_leaves_no_file(server, tmp_path):
+    url, _, _ = server
+    dest = tmp_path / "dest"
+    with pytest.raises(FetchError, match="checksum mismatch.*discarded"):
+        fetch("tinyGrid3D", url=f"{url}/bad/tinyGrid3D.g2o", dest=dest)
+    assert files_in(dest) == []
+
+
+@pytest.mark.parametrize("mode", ["cut", "cut-nolength"])
+def test_interrupted_download_leaves_no_file(server, tmp_path, mode):
+    url, _, _ = server
+    dest = tmp_path / "dest"
+    with pytest.raises(FetchError, match="interrupted|checksum mismatch"):
+        fetch("intel", url=f"{url}/{mode}/intel.g2o", dest=dest)
+    assert files_in(dest) == []
+
+
+def test_interrupted_with_length_says_interrupted(server, tmp_path):
+    url, _, _ = server
+    with pytest.raises(FetchError, match=r"interrupted: got \d+ of \d+ bytes"):
+        fetch("intel", url=f"{url}/cut/intel.g2o", dest=tmp_path / "dest")
+
+
+def test_http_error_leaves_no_file(server, tmp_path):
+    url, _, _ = server
+    with pytest.raises(FetchError, match="HTTP 404"):
+        fetch("intel", url=f"{url}/nothing/here.g2o", dest=tmp_path / "dest")
+    assert files_in(tmp_path / "dest") == []
+
+
+def test_verified_file_is_never_overwritten_nor_downloaded(server, tmp_path, shared_datasets):
+    url, requests, _ = server
+    dest = tmp_path / "dest"
+    dest.mkdir()
+    shutil.copy(shared_datasets / "tinyGrid3D.g2o", dest / "tinyGrid3D.g2o")
+    before = (dest / "tinyGrid3D.g2o").stat()
+    res = fetch("tinyGrid3D", url=f"{url}/bad/tinyGrid3D.g2o", dest=dest)
+    after = (dest / "tinyGrid3D.g2o").stat()
+    assert res.status == "present" and requests == []
+    assert (before.st_ino, before.st_mtime_ns) == (after.st_ino, after.st_mtime_ns)
+
+
+def test_corrupt_existing_file_is_replaced_by_a_verified_download(server, tmp_path, shared_datasets):
+    url, _, _ = server
+    dest = tmp_path / "dest"
+    dest.mkdir()
+    (dest / "tinyGrid3D.g2o").write_text("garbage\n")
+    res = fetch("tinyGrid3D", url=f"{url}/tinyGrid3D.g2o", dest=dest)
+    assert res.status == "downloaded"
+    assert (dest / "tinyGrid3D.g2o").read_bytes() == (shared_datasets / "tinyGrid3D.g2o").read_bytes()
+
+
+def test_corrupt_existing_file_is_kept_when_the_download_is_bad(server, tmp_path):
+    url, _, _ = server
+    dest = tmp_path / "dest"
+    dest.mkdir()
+    (dest / "tinyGrid3D.g2o").write_text("garbage\n")
+    with pytest.raises(FetchError):
+        fetch("tinyGrid3D", url=f"{url}/bad/tinyGrid3D.g2o", dest=dest)
+    assert files_in(dest) == ["tinyGrid3D.g2o"] and (dest / "tinyGrid3D.g2o").read_text() == "garbage\n"
+
+
+def test_only_https_or_explicit_http(tmp_path):
+    with pytest.raises(FetchError, match="only https"):
+        fetch("tinyGrid3D", url="ftp://127.0.0.1/tinyGrid3D.g2o", dest=tmp_path / "dest")
+    assert all(e.url.startswith("https://") for e in load_manifest())
+
+
+def test_fetch_many_continues_after_a_failure(server, tmp_path, monkeypatch):
+    url, _, _ = server
+    man = load_manifest()
+    good, bad = man.get("tinyGrid3D"), man.get("intel")
+    from dataclasses import replace
+
+    entries = [replace(bad, url="https://127.0.0.1:1/never"), good]
+    monkeypatch.setattr("posecrb.fetch._check_url", lambda u, allow_http: None)
+    entries[1] = replace(good, url=f"{url}/tinyGrid3D.g2o")
+    res = fetch_many(entries, dest=tmp_path / "dest", manifest=man, timeout=5)
+    assert [r.status for r in res] == ["failed", "downloaded"] and res[0].error
+    assert files_in(tmp_path / "dest") == ["tinyGrid3D.g2o"]
+
+
+def test_cli_fetch_success_and_failure(server, tmp_path, capsys):
+    url, _, _ = server
+    dest = tmp_path / "dest"
+    assert main(["-q", "datasets", "fetch", "tinyGrid3D", "--url", f"{url}/tinyGrid3D.g2o",
+                 "--dest", str(dest), "--format", "csv"]) == 0
+    out = capsys.readouterr().out.splitlines()
+    assert out[0] == "name,status,bytes,path" and out[1].startswith("tinyGrid3D,downloaded,4106,")
+    assert main(["-q", "datasets", "fetch", "intel", "--url", f"{url}/cut/intel.g2o", "--dest", str(dest)]) == 1
+    assert "interrupted" in capsys.readouterr().err
+    assert files_in(dest) == ["tinyGrid3D.g2o"]
+    assert main(["datasets", "fetch", "--dest", str(dest)]) == 2          # neither NAME nor --all
+    assert main(["datasets", "fetch", "--all", "--url", url]) == 2        # --url needs one NAME
