@@ -1,0 +1,133 @@
+"""`posecrb crlb FILE`: Cramér-Rao lower bounds at an estimate, paper or thesis model."""
+from __future__ import annotations
+
+import click
+import numpy as np
+
+from ..errors import UsageError
+from ..report import print_rows
+from ._common import data_dir_option, format_option
+from .fim import estimate_option, load_with_estimate, model_option, rotation_weight_option, sed_coordinate_names
+
+
+def parse_pose_ids(text: str | None) -> bool | list[int]:
+    """``--poses``: ``all`` or a comma-separated list of ids and ranges (``3,7,10-12``)."""
+    if text is None:
+        return False
+    text = text.strip()
+    if text.lower() == "all":
+        return True
+    out: list[int] = []
+    for part in text.split(","):
+        part = part.strip()
+        try:
+            if "-" in part[1:]:
+                lo, hi = part.split("-", 1) if not part.startswith("-") else (part, "")
+                lo_i, hi_i = int(lo), int(hi)
+                if hi_i < lo_i:
+                    raise ValueError
+                out.extend(range(lo_i, hi_i + 1))
+            else:
+                out.append(int(part))
+        except ValueError:
+            raise UsageError(f"--poses: {part!r} is not a pose id or an id range a-b") from None
+    return out
+
+
+def crlb_result(file: str, data_dir: str | None, model: str, source: str, anchor_ids: tuple[int, ...],
+                quotient: bool, poses: bool | list[int], rotation_model: str) -> tuple[dict, list[dict]]:
+    """The JSON-ready result and, when per-pose blocks were asked, one row per pose."""
+    graph, est, est_info, times = load_with_estimate(file, data_dir, source)
+    row: dict = {"dataset": graph.name, "model": model, "dim": graph.dim, "poses": graph.n,
+                 "edges": graph.m, "components": graph.n_components}
+    if model == "paper":
+        from ..crlb import paper_crlb
+
+        if quotient:
+            raise UsageError("--quotient applies to --model sed (the paper model is anchored)")
+        if len(anchor_ids) > 1:
+            raise UsageError("--model paper takes a single --anchor (its graph must be connected)")
+        anchor = graph.anchor_index(anchor_ids[0] if anchor_ids else None)
+        res = paper_crlb(graph, est.rot, est.trans, anchor=anchor, per_pose=poses, rotation_model=rotation_model)
+        times.update(res.times)
+        row.update({"kind": "anchored", "anchors": [res.anchor_id], "nullity": 0,
+                    "trace_crlb": res.trace_crlb, "mse_bound": res.mse_bound,
+                    "trace_translation": res.trace_translation, "trace_rotation": res.trace_rotation})
+        if graph.dim == 3:
+            row.update({"trace_crlb_curvature": res.trace_crlb_curvature,
+                        "mse_bound_curvature": res.mse_bound_curvature})
+        row["coordinates"] = res.coordinates
+        blocks, curv = res.per_pose, res.per_pose_curvature
+    else:
+        from ..sed import sed_crb
+
+        anchors = None if not anchor_ids else [graph.index_of(a) for a in anchor_ids]
+        if poses is True:
+            want: bool | list[int] = True
+        elif poses:
+            want = [graph.index_of(p) for p in poses]
+        else:
+            want = False
+        res = sed_crb(graph, est.rot, est.trans, anchors=anchors, quotient=quotient, per_pose=want)
+        times.update(res.times)
+        row.update({"kind": res.kind, "anchors": [int(graph.ids[a]) for a in res.anchors],
+                    "nullity": res.nullity, "trace_crlb": res.trace_crlb, "mse_bound": res.mse_bound,
+                    "coordinates": sed_coordinate_names(graph.dim)})
+        blocks = None if res.per_pose is None else {int(graph.ids[k]): v for k, v in res.per_pose.items()}
+        curv = None
+    per_rows: list[dict] = []
+    if blocks is not None:
+        row["per_pose"] = {str(k): v for k, v in blocks.items()}
+        if curv is not None:
+            row["per_pose_curvature"] = {str(k): v for k, v in curv.items()}
+        names = row["coordinates"]
+        for k, v in blocks.items():
+            r = {"id": k, **{f"var_{c}": float(x) for c, x in zip(names, np.diag(v))}, "trace": float(np.trace(v))}
+            if curv is not None:
+                r["trace_curvature"] = float(np.trace(curv[k]))
+            per_rows.append(r)
+    row["estimate"] = est_info
+    row["times"] = times
+    return row, per_rows
+
+
+@click.command("crlb")
+@click.argument("file")
+@model_option
+@click.option("--quotient", is_flag=True, help="sed: quotient CRB F^+ (thesis 5.5) instead of the anchored one (5.1).")
+@click.option("--anchor", "anchors", type=int, multiple=True,
+              help="Anchored pose id (repeatable; sed: one or more per component). "
+                   "Default: the smallest id (of each component).")
+@click.option("--poses", default=None, metavar="IDS",
+              help="Also report per-pose covariance blocks: 'all' or ids/ranges, e.g. 0,5,10-12.")
+@estimate_option
+@rotation_weight_option
+@data_dir_option
+@format_option()
+def command(file, model, quotient, anchors, poses, estimate_source, rotation_model, data_dir, fmt):
+    """Cramér-Rao lower bound of FILE at an estimate: exact trace, MSE bound, per-pose blocks.
+
+    paper: C >= F^{-1} (2D, eq. 67); 3D adds the curvature term of eq. (68)
+    (trace_crlb_curvature). trace_crlb = trace(F^{-1}), mse_bound = trace_crlb / n_p.
+    sed: the thesis' intrinsic CRB on SE(d)^n, anchored (5.1) or --quotient (5.5).
+    Traces and blocks are exact (selected inversion of the sparse Cholesky factor).
+    Per-pose blocks use the coordinates listed in `coordinates` (JSON: full matrices).
+    """
+    row, per_rows = crlb_result(file, data_dir, model, estimate_source, anchors, quotient,
+                                parse_pose_ids(poses), rotation_model)
+    if fmt == "json":
+        print_rows([row], "json")
+        return
+    summary = {k: (",".join(map(str, v)) if isinstance(v, list) else v)
+               for k, v in row.items() if k not in ("per_pose", "per_pose_curvature")}
+    if fmt == "table":
+        from ..report import flatten
+
+        kv = [{"field": k, "value": v} for k, v in flatten(summary).items()]
+        print_rows(kv, "table", title=f"CRLB ({model}) of {row['dataset']}")
+        if per_rows:
+            print_rows(per_rows, "table", title="per-pose bound (diagonal)")
+    else:
+        print_rows([summary], fmt)
+        if per_rows:
+            print_rows(per_rows, fmt)

@@ -1,0 +1,159 @@
+"""`posecrb fim FILE`: the Fisher information matrix at an estimate, paper or thesis model."""
+from __future__ import annotations
+
+import logging
+import time
+
+import click
+import numpy as np
+
+from ..errors import UsageError
+from ..noise import ROTATION_WEIGHT_MODELS
+from ..report import print_rows
+from ._common import data_dir_option, format_option, load_dataset
+
+log = logging.getLogger("posecrb")
+
+MODELS = ("paper", "sed")
+
+model_option = click.option(
+    "--model", type=click.Choice(MODELS), default="paper", show_default=True,
+    help="paper: Chen et al. on (R^d x SO(d))^n, isotropic noise, anchored (eq. 42/64); "
+         "sed: Bertini's right-invariant model on SE(d)^n with full information matrices.")
+
+estimate_option = click.option(
+    "--estimate", "estimate_source", default="solve", show_default=True, metavar="solve|vertices|FILE",
+    help="Where the poses come from: the certified solver (global optimum), the file's own "
+         "VERTEX lines, or another g2o/TORO FILE with the same ids.")
+
+rotation_weight_option = click.option(
+    "--rotation-weight", "rotation_model", type=click.Choice(ROTATION_WEIGHT_MODELS), default="eq59",
+    show_default=True, help="Paper model, 3D rotation weight: eq. (59), or the empirical Table II fit.")
+
+
+def sed_coordinate_names(dim: int) -> list[str]:
+    """Thesis model coordinates per pose: Lie algebra, rotation first (DESIGN.md section 5)."""
+    return ["omega", "vx", "vy"] if dim == 2 else ["omega1", "omega2", "omega3", "v1", "v2", "v3"]
+
+
+def load_with_estimate(file: str, data_dir: str | None, source: str):
+    """Graph, estimate and a JSON-ready description of the estimate plus parse/solve times."""
+    from ..estimate import get_estimate
+
+    graph, t_parse = load_dataset(file, data_dir)
+    est = get_estimate(graph, source)
+    if est.certified is False:
+        log.warning("%s: the solver's estimate is NOT certified globally optimal (%s)", graph.name, est.status)
+    info = {"source": est.source, "certified": est.certified, "objective": est.objective}
+    times = {"parse": t_parse}
+    if est.solve_time is not None:
+        times["solve"] = est.solve_time
+    return graph, est, info, times
+
+
+def anchored_logdet(matrix, q: int, anchors: list[int], name: str) -> float:
+    """log det of a pose-major (q per pose) FIM with the anchored poses' rows/columns removed."""
+    from ..linalg import logdet
+
+    n = matrix.shape[0] // q
+    keep = np.ones(n, bool)
+    keep[anchors] = False
+    dofs = (np.flatnonzero(keep)[:, None] * q + np.arange(q)).ravel()
+    return logdet(matrix[dofs][:, dofs].tocsc(), name=name)
+
+
+def save_npz(path: str, matrix, row_ids: np.ndarray, row_coord: np.ndarray, names: list[str],
+             model: str, anchors: list[int]) -> None:
+    """A scipy sparse .npz (``scipy.sparse.load_npz`` reads it) plus the index map:
+    ``row_pose_id[k]`` and ``row_coordinate[k]`` (into ``coordinate_names``) for row k."""
+    m = matrix.tocsc()
+    np.savez(path, data=m.data, indices=m.indices, indptr=m.indptr, format=np.array("csc"),
+             shape=np.array(m.shape), row_pose_id=np.asarray(row_ids, np.int64),
+             row_coordinate=np.asarray(row_coord, np.int64), coordinate_names=np.array(names),
+             model=np.array(model), anchor_ids=np.asarray(anchors, np.int64))
+
+
+def fim_row(file: str, data_dir: str | None, model: str, source: str, anchor_id: int | None,
+            rotation_model: str, save: str | None) -> dict:
+    graph, est, est_info, times = load_with_estimate(file, data_dir, source)
+    row: dict = {"dataset": graph.name, "model": model, "dim": graph.dim, "poses": graph.n,
+                 "edges": graph.m, "components": graph.n_components}
+    if model == "paper":
+        from ..fim import fim_logdet, paper_fim, t_opt_approx, trace_fim
+
+        anchor = graph.anchor_index(anchor_id)
+        fim = paper_fim(graph, est.rot, est.trans, anchor=anchor, rotation_model=rotation_model)
+        times["fim_build"] = fim.build_time
+        t0 = time.perf_counter()
+        ld = fim_logdet(fim)
+        times["fim_logdet"] = time.perf_counter() - t0
+        row.update({"anchors": [fim.anchor_id], "layout": fim.layout, "size": fim.size, "nnz": fim.nnz,
+                    "logdet": ld, "trace": trace_fim(fim), "t_opt_approx": t_opt_approx(graph, anchor, rotation_model),
+                    "rank": fim.size, "nullity": 0, "rotation_weight": rotation_model})
+        if save:
+            ids, coord = fim.index_map()
+            save_npz(save, fim.matrix, ids, coord, fim.coordinate_names(), "paper", [fim.anchor_id])
+    else:
+        from ..sed import sed_fim
+
+        fim = sed_fim(graph, est.rot, est.trans)
+        times.update(fim.times)
+        if anchor_id is not None:
+            if graph.n_components > 1:
+                raise UsageError("--anchor with --model sed needs a connected graph "
+                                 "(`posecrb crlb --anchor` takes one anchor per component)")
+            anchors = [graph.anchor_index(anchor_id)]
+            t0 = time.perf_counter()
+            ld = anchored_logdet(fim.matrix, fim.q, anchors, "SE(d) FIM on the free poses")
+            times["fim_logdet"] = time.perf_counter() - t0
+        else:
+            anchors, ld = list(fim.anchors), fim.logdet_anchored
+        row.update({"anchors": [int(graph.ids[a]) for a in anchors], "layout": "poses (rotation first)",
+                    "size": int(fim.matrix.shape[0]), "nnz": int(fim.matrix.nnz), "logdet": ld,
+                    "trace": fim.trace, "rank": fim.rank, "nullity": fim.nullity,
+                    "expected_nullity": fim.q * fim.components})
+        if save:
+            save_npz(save, fim.matrix, np.repeat(graph.ids, fim.q), np.tile(np.arange(fim.q), graph.n),
+                     sed_coordinate_names(graph.dim), "sed", row["anchors"])
+    if save:
+        row["saved"] = save
+    row["estimate"] = est_info
+    row["times"] = times
+    return row
+
+
+@click.command("fim")
+@click.argument("file")
+@model_option
+@estimate_option
+@click.option("--anchor", type=int, default=None,
+              help="Pose id anchored for the log-det; default: the smallest id (of each component, sed).")
+@rotation_weight_option
+@click.option("--save", type=click.Path(dir_okay=False, writable=True), default=None,
+              help="Write the FIM as a scipy sparse .npz with its index map "
+                   "(row_pose_id, row_coordinate, coordinate_names).")
+@data_dir_option
+@format_option()
+def command(file, model, estimate_source, anchor, rotation_model, save, data_dir, fmt):
+    """Fisher information matrix of FILE at an estimate: size, nnz, log-det, trace, rank.
+
+    paper: anchored FIM of eq. (42) (2D) / (64) (3D), rows [translations; rotations]
+    (rotation coordinates: angle in 2D, along G_k/sqrt(2) in 3D); logdet = D-optimality,
+    trace = T-optimality (eq. 69/70), t_opt_approx = eq. (72). sed: thesis FIM on SE(d)^n
+    (size n q, pose-major, rotation first), rank and nullity (nullity = q x components,
+    Th. 4.8.1) and the log-det with one anchor per component.
+    """
+    row = fim_row(file, data_dir, model, estimate_source, anchor, rotation_model, save)
+    if fmt != "json":
+        row = {k: (",".join(map(str, v)) if isinstance(v, list) else v) for k, v in row.items()}
+    if fmt == "table":
+        kv = [{"field": k, "value": v} for k, v in _flat(row).items()]
+        print_rows(kv, "table", title=f"FIM ({model}) of {row['dataset']}")
+    else:
+        print_rows([row], fmt)
+
+
+def _flat(row: dict) -> dict:
+    from ..report import flatten
+
+    return flatten(row)

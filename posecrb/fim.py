@@ -1,0 +1,245 @@
+"""The paper's anchored Fisher information matrix on (R^d x SO(d))^{n_p} at an estimate.
+
+2D: eq. (42); 3D: eq. (64) (Chen et al., sections IV-V), in the coordinates of
+DESIGN.md sections 3-4. The FIM is the Gauss-Newton information of the translation
+residuals
+
+    r_ij = R_i^T (x_j - x_i) - p_ij,      weight tau_ij I_d,
+
+plus the rotation Laplacian ``L_w (x) I_{d_r}`` (eq. 41 / 63 without Psi), with the
+Jacobians (right perturbation ``R_i Exp(delta)`` along the paper's basis ``R_i E``)
+
+    dr/dx_i = -R_i^T,   dr/dx_j = R_i^T,
+    dr/dtheta_i = -E u                     (2D, E = [[0, -1], [1, 0]], u = R_i^T (x_j - x_i)),
+    dr/dphi_i  = (1/sqrt 2) [u]_x          (3D, basis E_k = G_k / sqrt 2).
+
+``J^T tau J`` reproduces the blocks of the paper: the translation block is
+``L_tau (x) I_d`` (eq. 19/45), the cross block is Delta_w (eq. 33/54) and the rotation
+diagonal gains ``psi_i = sum tau ||x_j - x_i||^2`` (eq. 41) or
+``Psi_i = sum tau/2 (||u||^2 I - u u^T)`` (eq. 63), summed over edges whose SOURCE is i.
+
+Everything is assembled vectorised from the edge arrays (COO), anchor removed.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+import scipy.sparse as sp
+
+from .graph import PoseGraph
+from .laplacian import reduced_index
+from .linalg import SymbolicCholesky
+from .noise import rotation_weight as _rotation_weight
+
+_E2 = np.array([[0.0, -1.0], [1.0, 0.0]])
+LAYOUTS = ("blocks", "poses")
+
+
+@dataclass(frozen=True, eq=False)
+class PaperFim:
+    """The anchored paper FIM.
+
+    ``layout == "blocks"`` (eq. 42 / 64): rows ``[x_1; ...; x_np; theta_1; ...; theta_np]``,
+    translations first (d per free pose, pose-major), then rotations (d_r per free pose).
+    ``layout == "poses"``: pose-interleaved ``[x_1, theta_1, x_2, theta_2, ...]``, q = d + d_r
+    rows per free pose, so that per-pose blocks are contiguous ``q x q`` diagonal blocks.
+    Free poses are the graph's poses in increasing id order without the anchor
+    (``pose_ids``); rotation coordinates are the angle (2D) or along ``E_k = G_k/sqrt 2`` (3D).
+    """
+
+    matrix: sp.csc_matrix
+    dim: int
+    anchor: int                  # internal index of the anchored pose
+    anchor_id: int               # its id in the file
+    pose_ids: np.ndarray         # (n_p,) ids of the free poses, in row order
+    layout: str
+    rotation_model: str
+    build_time: float = field(default=0.0)
+
+    @property
+    def rot_dim(self) -> int:
+        return 1 if self.dim == 2 else 3
+
+    @property
+    def q(self) -> int:
+        return self.dim + self.rot_dim
+
+    @property
+    def n_free(self) -> int:
+        return int(self.pose_ids.shape[0])
+
+    @property
+    def size(self) -> int:
+        return int(self.matrix.shape[0])
+
+    @property
+    def nnz(self) -> int:
+        return int(self.matrix.nnz)
+
+    def coordinate_names(self) -> list[str]:
+        return coordinate_names(self.dim)
+
+    def index_map(self) -> tuple[np.ndarray, np.ndarray]:
+        """For each row: (pose id, coordinate number within the pose, 0..q-1)."""
+        d, dr, npf = self.dim, self.rot_dim, self.n_free
+        if self.layout == "poses":
+            return np.repeat(self.pose_ids, self.q), np.tile(np.arange(self.q), npf)
+        ids = np.concatenate([np.repeat(self.pose_ids, d), np.repeat(self.pose_ids, dr)])
+        coord = np.concatenate([np.tile(np.arange(d), npf), d + np.tile(np.arange(dr), npf)])
+        return ids, coord
+
+    def to_layout(self, layout: str) -> "PaperFim":
+        """The same FIM with rows and columns permuted to ``layout``."""
+        if layout == self.layout:
+            return self
+        perm = _layout_permutation(self.n_free, self.dim, self.rot_dim, layout)
+        mat = self.matrix[perm][:, perm].tocsc()
+        mat.sort_indices()
+        from dataclasses import replace
+
+        return replace(self, matrix=mat, layout=layout)
+
+    def rotation_block(self) -> sp.csc_matrix:
+        """``I^{SO(d)} = L_w (x) I_{d_r} + diag(Psi)``: the rotation-rotation block (eq. 41 / 63),
+        rows ordered pose-major (d_r per free pose)."""
+        f = self.to_layout("blocks").matrix
+        k = self.n_free * self.dim
+        return f[k:, k:].tocsc()
+
+
+def coordinate_names(dim: int) -> list[str]:
+    return ["x", "y", "theta"] if dim == 2 else ["x", "y", "z", "phi1", "phi2", "phi3"]
+
+
+def _layout_permutation(n_free: int, d: int, dr: int, layout: str) -> np.ndarray:
+    """Row k of the ``layout`` matrix is row perm[k] of the "blocks" matrix."""
+    if layout == "blocks":
+        return np.arange(n_free * (d + dr))
+    if layout != "poses":
+        raise ValueError(f"layout must be one of {LAYOUTS}, got {layout!r}")
+    pose = np.arange(n_free)[:, None]
+    trans = pose * d + np.arange(d)[None, :]
+    rot = n_free * d + pose * dr + np.arange(dr)[None, :]
+    return np.hstack([trans, rot]).ravel()
+
+
+def _check_estimate(graph: PoseGraph, rot: np.ndarray, trans: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    d, n = graph.dim, graph.n
+    rot = np.asarray(rot, dtype=float)
+    trans = np.asarray(trans, dtype=float)
+    if rot.shape != (n, d, d) or trans.shape != (n, d):
+        raise ValueError(f"estimate shapes {rot.shape}, {trans.shape} do not match the graph "
+                         f"({n} poses, {d}D): expected ({n}, {d}, {d}) and ({n}, {d})")
+    if not (np.isfinite(rot).all() and np.isfinite(trans).all()):
+        raise ValueError("the estimate has non-finite values")
+    return rot, trans
+
+
+def rotation_jacobians(graph: PoseGraph, rot: np.ndarray, trans: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Per edge: ``R_i`` (m, d, d) and ``D = dr_ij/dtheta_i`` (m, d, d_r) in the paper's coordinates."""
+    ri = rot[graph.src]
+    u = np.einsum("mba,mb->ma", ri, trans[graph.dst] - trans[graph.src])  # R_i^T (x_j - x_i)
+    if graph.dim == 2:
+        dmat = -(u @ _E2.T)[:, :, None]
+    else:
+        s = 1.0 / np.sqrt(2.0)
+        z = np.zeros(u.shape[0])
+        dmat = s * np.stack([
+            np.stack([z, -u[:, 2], u[:, 1]], axis=1),
+            np.stack([u[:, 2], z, -u[:, 0]], axis=1),
+            np.stack([-u[:, 1], u[:, 0], z], axis=1),
+        ], axis=1)  # [u]_x
+    return ri, dmat
+
+
+def paper_fim(graph: PoseGraph, rot: np.ndarray, trans: np.ndarray, anchor: int = 0,
+              rotation_model: str = "eq59", layout: str = "blocks") -> PaperFim:
+    """Anchored paper FIM (eq. 42 in 2D, eq. 64 in 3D) at the estimate ``(rot, trans)``.
+
+    ``rot`` (n, d, d) and ``trans`` (n, d) are world poses ``X_i = (R_i, x_i)`` in the graph's
+    internal order; ``anchor`` is an internal index (``graph.anchor_index(id)``).
+    ``rotation_model`` picks the rotation weight: ``"eq59"`` (default, eq. 39-41 / 59) or
+    ``"table2"`` (the empirical fit that reproduces Table II, see DESIGN.md section 4).
+    Raises DisconnectedGraph when the graph is not connected (the anchored FIM is singular).
+    """
+    import time
+
+    t0 = time.perf_counter()
+    graph.require_connected()
+    rot, trans = _check_estimate(graph, rot, trans)
+    if not 0 <= anchor < graph.n:
+        raise ValueError(f"anchor index {anchor} out of range 0..{graph.n - 1}")
+    d, dr, n = graph.dim, graph.rot_dim, graph.n
+    npf = n - 1
+    tau = graph.tau
+    w = graph.rotation_weight if rotation_model == "eq59" else _rotation_weight(graph.kappa, d, rotation_model)
+    red = reduced_index(n, anchor)
+    ri, rj = red[graph.src], red[graph.dst]
+    _, dmat = rotation_jacobians(graph, rot, trans)
+
+    # Jacobian rows of r_ij (d per edge) in "blocks" column numbering; anchored columns -1.
+    # Column blocks: x_i (d), x_j (d), theta_i (d_r).
+    def cols(base, r, k):
+        return np.where(r[:, None] >= 0, base + r[:, None] * k + np.arange(k)[None, :], -1)
+
+    cxi, cxj, cth = cols(0, ri, d), cols(0, rj, d), cols(npf * d, ri, dr)
+    ctr = np.concatenate([cxi, cxj, cth], axis=1)                       # (m, 2d + dr)
+    jac = np.concatenate([-np.transpose(rot[graph.src], (0, 2, 1)),       # -R_i^T
+                          np.transpose(rot[graph.src], (0, 2, 1)), dmat], axis=2)   # (m, d, 2d+dr)
+    local = tau[:, None, None] * np.einsum("mka,mkb->mab", jac, jac)      # J^T tau J per edge
+    k = ctr.shape[1]
+    rows = np.repeat(ctr, k, axis=1).ravel()
+    cols_ = np.tile(ctr, (1, k)).ravel()
+    vals = local.ravel()
+
+    # rotation Laplacian L_w (x) I_dr (eq. 41 / 63)
+    ci, cj = cols(npf * d, ri, dr), cols(npf * d, rj, dr)
+    wr = np.repeat(w, dr)
+    lrows = np.concatenate([ci.ravel(), cj.ravel(), ci.ravel(), cj.ravel()])
+    lcols = np.concatenate([ci.ravel(), cj.ravel(), cj.ravel(), ci.ravel()])
+    lvals = np.concatenate([wr, wr, -wr, -wr])
+
+    rows = np.concatenate([rows, lrows])
+    cols_ = np.concatenate([cols_, lcols])
+    vals = np.concatenate([vals, lvals])
+    keep = (rows >= 0) & (cols_ >= 0)
+    size = npf * (d + dr)
+    mat = sp.csc_matrix((vals[keep], (rows[keep], cols_[keep])), shape=(size, size))
+    mat.sum_duplicates()
+    pose_ids = np.delete(graph.ids, anchor)
+    fim = PaperFim(mat, d, int(anchor), int(graph.ids[anchor]), pose_ids, "blocks", rotation_model,
+                   time.perf_counter() - t0)
+    if layout != "blocks":
+        fim = fim.to_layout(layout)
+    return fim
+
+
+def fim_symbolic(fim: PaperFim) -> SymbolicCholesky:
+    """One CHOLMOD analysis of the FIM's pattern, reusable for every FIM of the same graph,
+    anchor and layout (the pattern does not depend on the estimate)."""
+    return SymbolicCholesky(fim.matrix)
+
+
+def fim_logdet(fim: PaperFim, symbolic: SymbolicCholesky | None = None) -> float:
+    """log det F by sparse Cholesky (CHOLMOD), reusing ``symbolic`` when given.
+    Raises NotPositiveDefinite when F is singular or indefinite."""
+    symbolic = symbolic or fim_symbolic(fim)
+    return float(symbolic.factor(fim.matrix, name="paper FIM").logdet())
+
+
+def trace_fim(fim: PaperFim) -> float:
+    """T-optimality: exact trace(F) (eq. 69 / 70)."""
+    return float(fim.matrix.diagonal().sum())
+
+
+def t_opt_approx(graph: PoseGraph, anchor: int = 0, rotation_model: str = "eq59") -> float:
+    """Eq. (72): trace(F) with ``x_j - x_i`` replaced by the measured ``p_ij`` (eq. 71):
+    ``trace(L_tau (x) I_d) + trace(L_w (x) I_dr) + sum_{i != anchor} sum_{j in V_i^+} tau_ij ||p_ij||^2``
+    (in 3D ``trace(Psi_(i,j)) = tau ||p||^2`` too, Appendix D)."""
+    d, dr = graph.dim, graph.rot_dim
+    w = graph.rotation_weight if rotation_model == "eq59" else _rotation_weight(graph.kappa, d, rotation_model)
+    ends = (graph.src != anchor).astype(float) + (graph.dst != anchor)
+    tau = graph.tau
+    psi = tau * np.einsum("ma,ma->m", graph.trans, graph.trans) * (graph.src != anchor)
+    return float(d * np.dot(tau, ends) + dr * np.dot(w, ends) + psi.sum())

@@ -1,0 +1,252 @@
+"""The paper FIM (posecrb.fim) against dense references: finite-difference Jacobians of the
+translation residuals, dense loops for the rotation Laplacian and Psi (eq. 41 / 63)."""
+from __future__ import annotations
+
+from dataclasses import replace
+
+import numpy as np
+import pytest
+
+from posecrb.errors import DisconnectedGraph, NotPositiveDefinite
+from posecrb.fim import fim_logdet, fim_symbolic, paper_fim, t_opt_approx, trace_fim
+from posecrb.lie import exp_so3, rot2
+from posecrb.noise import rotation_weight
+
+from .conftest import make_random_graph
+
+
+def perturbed(rot: np.ndarray, dim: int, delta: np.ndarray) -> np.ndarray:
+    """R Exp(delta) along the paper's basis: angle in 2D, E_k = G_k / sqrt 2 in 3D."""
+    if dim == 2:
+        return rot @ rot2(np.array(delta[0]))
+    return rot @ exp_so3(np.asarray(delta) / np.sqrt(2.0))
+
+
+def residuals(graph, rot, trans) -> np.ndarray:
+    """Stacked translation residuals r_ij = R_i^T (x_j - x_i) - p_ij, one edge at a time."""
+    out = []
+    for e in range(graph.m):
+        i, j = graph.src[e], graph.dst[e]
+        out.append(rot[i].T @ (trans[j] - trans[i]) - graph.trans[e])
+    return np.concatenate(out)
+
+
+def dense_reference(graph, rot, trans, anchor: int, h: float = 1e-6) -> np.ndarray:
+    """J^T W J from central differences over the free variables ([translations; rotations],
+    eq. 42/64 order) + the reduced rotation Laplacian (x) I_dr from a loop over edges."""
+    d = graph.dim
+    dr = 1 if d == 2 else 3
+    free = [k for k in range(graph.n) if k != anchor]
+    npf = len(free)
+    cols = []
+    for k in free:  # translation columns
+        for a in range(d):
+            tp, tm = trans.copy(), trans.copy()
+            tp[k, a] += h
+            tm[k, a] -= h
+            cols.append((residuals(graph, rot, tp) - residuals(graph, rot, tm)) / (2 * h))
+    for k in free:  # rotation columns
+        for a in range(dr):
+            delta = np.zeros(dr)
+            delta[a] = h
+            rp, rm = rot.copy(), rot.copy()
+            rp[k] = perturbed(rot[k], d, delta)
+            rm[k] = perturbed(rot[k], d, -delta)
+            cols.append((residuals(graph, rp, trans) - residuals(graph, rm, trans)) / (2 * h))
+    jac = np.stack(cols, axis=1)
+    wdiag = np.repeat(graph.tau, d)
+    f = jac.T @ (wdiag[:, None] * jac)
+    w = rotation_weight(graph.kappa, d)
+    pos = {k: t for t, k in enumerate(free)}
+    for e in range(graph.m):
+        i, j = graph.src[e], graph.dst[e]
+        for a in range(dr):
+            ri = npf * d + pos[i] * dr + a if i in pos else None
+            rj = npf * d + pos[j] * dr + a if j in pos else None
+            if ri is not None:
+                f[ri, ri] += w[e]
+            if rj is not None:
+                f[rj, rj] += w[e]
+            if ri is not None and rj is not None:
+                f[ri, rj] -= w[e]
+                f[rj, ri] -= w[e]
+    return f
+
+
+@pytest.mark.parametrize("dim", [2, 3])
+@pytest.mark.parametrize("seed", [0, 1, 2])
+def test_fim_matches_finite_difference_jacobians(dim, seed):
+    rng = np.random.default_rng(seed)
+    g = make_random_graph(rng, n=7, extra=5, dim=dim, parallel=2)
+    anchor = int(rng.integers(0, g.n))
+    fim = paper_fim(g, g.vertex_rot, g.vertex_trans, anchor=anchor)
+    ref = dense_reference(g, g.vertex_rot, g.vertex_trans, anchor)
+    got = fim.matrix.toarray()
+    np.testing.assert_allclose(got, got.T, atol=0)
+    np.testing.assert_allclose(got, ref, rtol=1e-6, atol=1e-6 * np.abs(ref).max())
+    assert fim.anchor_id == g.ids[anchor]
+    np.testing.assert_array_equal(fim.pose_ids, np.delete(g.ids, anchor))
+
+
+def test_psi_blocks_3d_match_eq63():
+    """Rotation diagonal block minus the Laplacian part = Psi_i = sum_{j in V_i^+} tau/2 (|u|^2 I - u u^T)."""
+    rng = np.random.default_rng(11)
+    g = make_random_graph(rng, n=6, extra=4, dim=3, parallel=1)
+    rot, trans = g.vertex_rot, g.vertex_trans
+    fim = paper_fim(g, rot, trans, anchor=0)
+    rb = fim.rotation_block().toarray()
+    w = rotation_weight(g.kappa, 3)
+    for k in range(1, g.n):
+        psi = np.zeros((3, 3))
+        lap = 0.0
+        for e in range(g.m):
+            if g.src[e] == k:
+                u = rot[k].T @ (trans[g.dst[e]] - trans[k])
+                psi += g.tau[e] / 2 * (u @ u * np.eye(3) - np.outer(u, u))
+            if k in (g.src[e], g.dst[e]):
+                lap += w[e]
+        blk = rb[3 * (k - 1):3 * k, 3 * (k - 1):3 * k]
+        np.testing.assert_allclose(blk, psi + lap * np.eye(3), rtol=1e-12, atol=1e-12)
+
+
+@pytest.mark.parametrize("dim", [2, 3])
+def test_pose_layout_is_a_permutation_with_a_consistent_index_map(dim):
+    g = make_random_graph(np.random.default_rng(4), n=6, dim=dim)
+    fb = paper_fim(g, g.vertex_rot, g.vertex_trans, anchor=2)
+    fp = fb.to_layout("poses")
+    ids_b, c_b = fb.index_map()
+    ids_p, c_p = fp.index_map()
+    # locate each "poses" row in the "blocks" layout through the index maps
+    key_b = {(i, c): r for r, (i, c) in enumerate(zip(ids_b, c_b))}
+    perm = np.array([key_b[(i, c)] for i, c in zip(ids_p, c_p)])
+    np.testing.assert_array_equal(fp.matrix.toarray(), fb.matrix.toarray()[np.ix_(perm, perm)])
+    assert len(fp.coordinate_names()) == fp.q
+
+
+@pytest.mark.parametrize("dim", [2, 3])
+def test_logdet_and_trace_match_dense(dim):
+    g = make_random_graph(np.random.default_rng(7), n=9, dim=dim)
+    fim = paper_fim(g, g.vertex_rot, g.vertex_trans)
+    dense = fim.matrix.toarray()
+    sign, ref = np.linalg.slogdet(dense)
+    assert sign > 0
+    sym = fim_symbolic(fim)
+    assert fim_logdet(fim, sym) == pytest.approx(ref, rel=1e-10)
+    # the symbolic analysis depends only on the pattern: reuse it at another estimate
+    other = paper_fim(g, g.vertex_rot, g.vertex_trans * 1.5)
+    assert fim_logdet(other, sym) == pytest.approx(np.linalg.slogdet(other.matrix.toarray())[1], rel=1e-10)
+    assert trace_fim(fim) == pytest.approx(np.trace(dense), rel=1e-12)
+
+
+@pytest.mark.parametrize("dim", [2, 3])
+def test_t_opt_approx_equals_trace_at_a_noise_free_estimate(dim):
+    """Eq. (72) replaces x_j - x_i by p_ij; with noise-free measurements they coincide."""
+    g = make_random_graph(np.random.default_rng(8), n=8, dim=dim)
+    rot, trans = g.vertex_rot, g.vertex_trans
+    p = np.einsum("mba,mb->ma", rot[g.src], trans[g.dst] - trans[g.src])
+    g = replace(g, trans=p)
+    for anchor in (0, 3):
+        fim = paper_fim(g, rot, trans, anchor=anchor)
+        assert t_opt_approx(g, anchor) == pytest.approx(np.trace(fim.matrix.toarray()), rel=1e-12)
+
+
+def test_intel_table1_logdet(shared_datasets):
+    from posecrb.io import load
+
+    g = load(shared_datasets / "intel.g2o")
+    fim = paper_fim(g, g.vertex_rot, g.vertex_trans)
+    assert f"{fim_logdet(fim):.4e}" == "3.0194e+04"
+
+
+def test_disconnected_graph_is_rejected():
+    g = make_random_graph(np.random.default_rng(1), n=6, extra=0, parallel=0, dim=2)
+    # drop the spanning-tree edge into pose 5: pose 5 becomes isolated
+    keep = g.dst != 5
+    g2 = replace(g, src=g.src[keep], dst=g.dst[keep], rot=g.rot[keep], trans=g.trans[keep], info=g.info[keep])
+    with pytest.raises(DisconnectedGraph):
+        paper_fim(g2, g.vertex_rot, g.vertex_trans)
+
+
+def test_singular_fim_is_reported_not_positive_definite():
+    g = make_random_graph(np.random.default_rng(2), n=5, dim=2)
+    info = g.info.copy()
+    info[:, :2, :2] = np.array([[1.0, 1.0], [1.0, 1.0]])  # tau = 0: no translation information
+    info[:, :2, 2:] = 0
+    info[:, 2:, :2] = 0
+    g2 = replace(g, info=info)
+    fim = paper_fim(g2, g.vertex_rot, g.vertex_trans)
+    with pytest.raises(NotPositiveDefinite):
+        fim_logdet(fim)
+
+
+def test_bad_estimate_shape():
+    g = make_random_graph(np.random.default_rng(3), n=5, dim=3)
+    with pytest.raises(ValueError):
+        paper_fim(g, g.vertex_rot[:-1], g.vertex_trans[:-1])
+
+
+# ---------------------------------------------------------------- CLI `posecrb fim`
+def run_cli(argv, capsys):
+    from posecrb.cli import main
+
+    code = main(argv)
+    out = capsys.readouterr()
+    return code, out.out, out.err
+
+
+@pytest.fixture
+def g2o_file(tmp_path):
+    from posecrb.io import write_g2o
+
+    def make(dim: int, seed: int = 0, **kw):
+        g = make_random_graph(np.random.default_rng(seed), n=8, dim=dim, **kw)
+        path = tmp_path / f"g{dim}_{seed}.g2o"
+        write_g2o(g, path)
+        return path
+
+    return make
+
+
+@pytest.mark.parametrize("dim", [2, 3])
+def test_cli_fim_paper_json_and_npz(dim, g2o_file, tmp_path, capsys):
+    import json
+
+    import scipy.sparse as sp
+
+    from posecrb.io import load
+
+    path = g2o_file(dim)
+    npz = tmp_path / "f.npz"
+    ids = load(path).ids
+    code, out, _ = run_cli(["fim", str(path), "--estimate", "vertices", "--anchor", str(ids[2]),
+                            "--save", str(npz), "--format", "json"], capsys)
+    assert code == 0
+    row = json.loads(out)
+    g = load(path)
+    fim = paper_fim(g, g.vertex_rot, g.vertex_trans, anchor=2)
+    dense = fim.matrix.toarray()
+    assert row["size"] == dense.shape[0] and row["anchors"] == [int(ids[2])]
+    assert row["logdet"] == pytest.approx(np.linalg.slogdet(dense)[1], rel=1e-9)
+    assert row["trace"] == pytest.approx(np.trace(dense), rel=1e-12)
+    assert row["estimate"]["source"] == "vertices"
+    saved = sp.load_npz(npz)
+    np.testing.assert_allclose(saved.toarray(), dense)
+    z = np.load(npz)
+    assert z["row_pose_id"].size == dense.shape[0] and int(ids[2]) not in set(z["row_pose_id"].tolist())
+    assert list(z["coordinate_names"]) == (["x", "y", "theta"] if dim == 2 else
+                                           ["x", "y", "z", "phi1", "phi2", "phi3"])
+
+
+def test_cli_fim_sed_reports_rank_and_nullity(g2o_file, capsys):
+    import json
+
+    code, out, _ = run_cli(["fim", str(g2o_file(2, seed=3)), "--model", "sed", "--estimate", "vertices",
+                            "--format", "json"], capsys)
+    assert code == 0
+    row = json.loads(out)
+    assert row["nullity"] == 3 and row["rank"] == row["size"] - 3
+
+
+def test_cli_fim_unknown_anchor_is_a_usage_error(g2o_file, capsys):
+    code, _, err = run_cli(["fim", str(g2o_file(2)), "--estimate", "vertices", "--anchor", "999999"], capsys)
+    assert code == 2 and "999999" in err
