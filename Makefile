@@ -1,5 +1,5 @@
 # Set-up and main jobs. `make run` and `make test` install what is missing first:
-# libsuitesparse-dev (apt-get; sudo only when not root) and this package with its dev extras.
+# libsuitesparse-dev and libopenblas0-serial (apt-get; sudo only when not root) and this package with its dev extras.
 PYTHON ?= python3
 SUDO := $(shell [ "$$(id -u)" = 0 ] || echo sudo)
 PYTEST_ARGS ?=
@@ -7,12 +7,16 @@ PYTEST_ARGS ?=
 .PHONY: install run test regress bench clean
 
 install:
-	@if ! [ -f /usr/include/suitesparse/cholmod.h ]; then \
-	  echo "installing libsuitesparse-dev (CHOLMOD headers and libraries)"; \
-	  $(SUDO) env DEBIAN_FRONTEND=noninteractive apt-get update -q && \
-	  $(SUDO) env DEBIAN_FRONTEND=noninteractive apt-get install -y -q libsuitesparse-dev; \
-	fi
-	@$(PYTHON) -c "import sksparse.cholmod, posecrb" 2>/dev/null && \
+	@missing=""; \
+	  [ -f /usr/include/suitesparse/cholmod.h ] || missing="$$missing libsuitesparse-dev"; \
+	  dpkg-query -W -f='$${Status}' libopenblas0-serial 2>/dev/null | grep -q "ok installed" || \
+	    missing="$$missing libopenblas0-serial"; \
+	  if [ -n "$$missing" ]; then \
+	    echo "installing$$missing (CHOLMOD; an optimised BLAS for its supernodal factorizations)"; \
+	    $(SUDO) env DEBIAN_FRONTEND=noninteractive apt-get update -q && \
+	    $(SUDO) env DEBIAN_FRONTEND=noninteractive apt-get install -y -q $$missing; \
+	  fi
+	@$(PYTHON) -c "import sksparse.cholmod, posecrb, numba, threadpoolctl" 2>/dev/null && \
 	  $(PYTHON) -m pip show -q posecrb >/dev/null 2>&1 && \
 	  $(PYTHON) -c "import pytest, hypothesis, mpmath" 2>/dev/null || \
 	  $(PYTHON) -m pip install -q -e '.[dev]'

@@ -29,7 +29,6 @@ class _StderrHandler(logging.Handler):
 def _configure_logging(verbose: int, quiet: bool) -> None:
     logger = logging.getLogger("posecrb")
     logger.handlers[:] = [_StderrHandler()]
-    logger.propagate = False
     logger.setLevel(logging.ERROR if quiet else logging.DEBUG if verbose > 1 else
                     logging.INFO if verbose else logging.WARNING)
 
