@@ -1,0 +1,54 @@
+"""``posecrb solve``: certified maximum-likelihood estimate (SE-Sync style), DESIGN.md section 6."""
+from __future__ import annotations
+
+import click
+
+from ..errors import SolverError
+from ..io import write_g2o
+from ..report import print_rows
+from ..sesync import solve
+from ._common import data_dir_option, format_option, load_dataset
+
+COLUMNS = ["dataset", "dim", "poses", "edges", "objective", "relaxation_value", "duality_gap", "lambda_min",
+           "certified", "rank", "iterations", "hessian_vector_products", "times"]
+
+
+@click.command("solve")
+@click.argument("file")
+@click.option("--out", type=click.Path(dir_okay=False, writable=True), default=None,
+              help="Write the estimate as g2o: original ids and edges, vertices replaced by the estimate, "
+                   "anchored so that the anchor pose is the identity.")
+@format_option()
+@click.option("--r0", type=click.IntRange(2, 100), default=None,
+              help="First rank of the Riemannian staircase [default: d+1].")
+@click.option("--rmax", type=click.IntRange(2, 100), default=10, show_default=True,
+              help="Last rank of the Riemannian staircase.")
+@click.option("--init", "init", type=click.Choice(["chordal", "vertices"]), default="chordal", show_default=True,
+              help="Initial rotations: chordal relaxation, or the file's own vertices.")
+@click.option("--anchor", type=int, default=None,
+              help="Pose id (as in the file) put at the identity in the output; default: the smallest id.")
+@click.option("--certificate-tol", type=float, default=1e-3, show_default=True,
+              help="Accept lambda_min(Q - Lambda) >= -TOL as a certificate of global optimality.")
+@data_dir_option
+def command(file, out, fmt, r0, rmax, init, anchor, certificate_tol, data_dir):
+    """Certifiably correct pose-graph optimisation of FILE (SE-Sync's Riemannian staircase).
+
+    Prints the objective F = sum kappa||R_j - R_i R~||_F^2 + tau||t_j - t_i - R_i t~||^2 at the
+    rounded estimate, the relaxation value, lambda_min of the certificate matrix and phase
+    times. Exit code 1 when the result is not certified (the estimate is still written).
+    """
+    graph, parse_time = load_dataset(file, data_dir)
+    anchor_idx = graph.anchor_index(anchor)
+    res = solve(graph, r0=r0, rmax=rmax, init=init, anchor=anchor_idx, certificate_tol=certificate_tol)
+    if out:
+        write_g2o(graph, out, res.rot, res.trans)
+    times = {"parse": parse_time, **{k: res.times[k] for k in ("init", "optimize", "verify", "round")},
+             "total": parse_time + res.times["total"]}
+    row = {"dataset": graph.name, "dim": graph.dim, "poses": graph.n, "edges": graph.m,
+           "objective": res.objective, "relaxation_value": res.relaxation_value,
+           "duality_gap": res.duality_gap, "lambda_min": res.lambda_min, "certified": res.certified,
+           "rank": res.rank, "iterations": res.iterations,
+           "hessian_vector_products": res.hessian_vector_products, "times": times}
+    print_rows([row], fmt, columns=None if fmt == "json" else None)
+    if not res.certified:
+        raise SolverError(f"{graph.name}: {res.status}: {res.reason}")

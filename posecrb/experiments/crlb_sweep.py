@@ -1,0 +1,267 @@
+"""Monte Carlo validation of the CRLB (paper section IX-C, Fig. 6 and 7).
+
+Ground truth: the certified SE-Sync estimate of the dataset (anchored so that the
+anchor pose is the identity). For each noise level k_c, every trial regenerates
+all measurements from the truth by eq. (80) (``posecrb.noise.perturb_measurements``:
+Langevin rotation noise with concentration ``k_c kappa``, Gaussian translation
+noise with precision ``k_c tau`` for ``scale="both"`` or ``tau`` for
+``scale="rotation"``), solves the perturbed graph with the certified solver (the
+MLE of that model, since the information matrices encode exactly the sampled
+precisions), and measures the error in the FIM's own tangent coordinates:
+
+* both estimate and truth have the anchor pose at the identity, so the anchored
+  coordinates agree (the MLE is gauge invariant; fixing the anchor to its true
+  value is the constrained MLE of the anchored FIM);
+* translation error ``x_est - x_true`` (the FIM's ``dr/dx`` coordinates);
+* rotation error along the FIM's right perturbation ``R_est = R_true Exp(delta)``:
+  2D ``delta = angle(R_true^T R_est)`` (basis ``R_i E``, eq. 28), 3D
+  ``delta = sqrt 2 * vee(Log(R_true^T R_est))`` (basis ``R_i E_k``, ``E_k = G_k / sqrt 2``,
+  eq. 44). Then ``||delta||^2 = dist^2(R_est, R_true)`` of eq. (81).
+
+MSE per pose = mean over trials of the squared error summed over poses, divided
+by n_p; it is compared to ``trace(CRLB) / n_p`` with the FIM of the *scaled* noise
+model evaluated at the truth (3D: with and without the curvature term of eq. 68),
+both the paper's FIM (eq. 42 / 64, ``ratio``) and the frame-consistent FIM of the
+simulated model (``ratio_model``; see ``model_fim`` for why they differ in 3D).
+"""
+from __future__ import annotations
+
+import math
+import re
+import time
+from dataclasses import dataclass, field
+from typing import Callable, Sequence
+
+import numpy as np
+
+from ..errors import UsageError
+from ..graph import PoseGraph
+from ..montecarlo import Task, level_key, make_tasks, mean_and_stderr, run_tasks
+
+MAX_LEVELS = 1000
+
+
+def parse_levels(spec: str) -> list[float]:
+    """k_c levels from ``20``, ``1,5,20``, ``1:20`` (integers 1..20) or ``1:20:0.5`` (start:stop:step).
+
+    Ranges include the stop value; levels must be > 0. Duplicates are dropped,
+    order is increasing.
+    """
+    out: list[float] = []
+    for part in str(spec).split(","):
+        part = part.strip()
+        if not part:
+            continue
+        if ":" in part:
+            bits = part.split(":")
+            if len(bits) not in (2, 3):
+                raise UsageError(f"bad --kc range {part!r}; use START:STOP or START:STOP:STEP")
+            try:
+                start, stop = float(bits[0]), float(bits[1])
+                step = float(bits[2]) if len(bits) == 3 else 1.0
+            except ValueError as exc:
+                raise UsageError(f"bad --kc range {part!r}: {exc}") from exc
+            if step <= 0 or stop < start:
+                raise UsageError(f"bad --kc range {part!r}: need STOP >= START and STEP > 0")
+            count = int(math.floor((stop - start) / step + 1e-9)) + 1
+            if count > MAX_LEVELS:
+                raise UsageError(f"--kc {part!r} gives {count} levels (max {MAX_LEVELS})")
+            out.extend(round(start + k * step, 12) for k in range(count))
+        else:
+            if not re.fullmatch(r"[0-9.eE+-]+", part):
+                raise UsageError(f"bad --kc value {part!r}")
+            try:
+                out.append(float(part))
+            except ValueError as exc:
+                raise UsageError(f"bad --kc value {part!r}") from exc
+    if not out:
+        raise UsageError("--kc needs at least one level")
+    if any(not (np.isfinite(v) and v > 0) for v in out):
+        raise UsageError("--kc levels must be > 0")
+    return sorted(set(out))
+
+
+# ---------------------------------------------------------------- errors in the FIM's coordinates
+def anchor_poses(rot: np.ndarray, trans: np.ndarray, anchor: int) -> tuple[np.ndarray, np.ndarray]:
+    """Apply the global transformation that puts pose ``anchor`` at the identity: ``X_a^{-1} X_i``."""
+    ra_t = np.asarray(rot[anchor]).T
+    return ra_t @ rot, (np.asarray(trans) - trans[anchor]) @ ra_t.T
+
+
+def rotation_errors(rot_true: np.ndarray, rot_est: np.ndarray) -> np.ndarray:
+    """(n, d_r) rotation errors in the paper FIM's coordinates (right perturbation of the truth).
+
+    2D: the angle of ``R_true^T R_est``; 3D: ``sqrt 2 * vee(Log(R_true^T R_est))``.
+    """
+    rel = np.swapaxes(rot_true, -1, -2) @ rot_est
+    if rot_true.shape[-1] == 2:
+        from ..lie import angle2
+
+        return angle2(rel)[:, None]
+    from ..se_lie import so3_log
+
+    return np.sqrt(2.0) * so3_log(rel)
+
+
+def pose_errors(rot_true, trans_true, rot_est, trans_est, anchor: int) -> tuple[np.ndarray, np.ndarray]:
+    """(translation errors (n, d), rotation errors (n, d_r)) after anchoring both at ``anchor``."""
+    rt, tt = anchor_poses(rot_true, trans_true, anchor)
+    re_, te = anchor_poses(rot_est, trans_est, anchor)
+    return te - tt, rotation_errors(rt, re_)
+
+
+# ---------------------------------------------------------------- results
+@dataclass(frozen=True)
+class CrlbLevel:
+    kc: float
+    trials: int
+    mse: float                          # mean over trials of the squared error per free pose
+    mse_stderr: float
+    mse_trans: float
+    mse_rot: float
+    mse_bound: float                    # paper CRLB: trace(F^{-1}) / n_p, F of eq. (42) / (64)
+    mse_bound_trans: float
+    mse_bound_rot: float
+    mse_bound_curvature: float | None   # 3D: eq. (68) trace / n_p
+    ratio: float                        # mse / mse_bound
+    ratio_curvature: float | None
+    mse_bound_model: float              # frame-consistent FIM of the simulated model (= paper in 2D)
+    mse_bound_model_curvature: float | None
+    ratio_model: float
+    uncertified: int                    # trials whose solve was not certified (still counted)
+
+    def row(self) -> dict:
+        return dict(vars(self))
+
+
+@dataclass
+class CrlbSweepResult:
+    dataset: str
+    dim: int
+    n: int
+    m: int
+    anchor_id: int
+    scale: str
+    tau: float | None                   # override of the base precisions (None: the file's)
+    kappa: float | None
+    trials: int
+    seed: int
+    truth_certified: bool
+    truth_objective: float | None
+    levels: list[CrlbLevel]
+    trial_data: dict[float, dict[str, np.ndarray]] = field(default_factory=dict, repr=False)
+    seeds: list[dict] = field(default_factory=list)
+    elapsed: float = 0.0
+
+    def rows(self) -> list[dict]:
+        rows = []
+        for lv in self.levels:
+            r = lv.row()
+            if self.dim == 2:     # flat space, and the consistent FIM is the paper's
+                for k in ("mse_bound_curvature", "ratio_curvature", "mse_bound_model",
+                          "mse_bound_model_curvature", "ratio_model"):
+                    r.pop(k)
+            rows.append(r)
+        return rows
+
+
+# ---------------------------------------------------------------- the trial
+def _crlb_trial(context: dict, task: Task) -> dict:
+    from ..noise import perturb_measurements
+    from ..sesync import solve
+
+    rng = task.rng()
+    graph = context["graph"]
+    noisy = perturb_measurements(graph, context["rot"], context["trans"], rng, kc=context["kc"],
+                                 scale=context["scale"], tau=context["tau"], kappa=context["kappa"])
+    res = solve(noisy, anchor=context["anchor"], **context["solver_options"])
+    et, er = pose_errors(context["rot"], context["trans"], res.rot, res.trans, context["anchor"])
+    return {"sq_trans": float(np.sum(et * et)), "sq_rot": float(np.sum(er * er)),
+            "certified": bool(res.certified), "objective": float(res.objective)}
+
+
+def _bounds(graph: PoseGraph, rot, trans, anchor: int, kc: float, scale: str, tau, kappa) -> dict:
+    """Bounds per pose of the scaled noise model at the truth.
+
+    ``mse_bound*``: the paper's CRLB (``posecrb.crlb.paper_crlb``: eq. 67, 3D eq. 68 from
+    eq. 64); ``mse_bound_model*``: the same from the frame-consistent FIM of the simulated
+    model (``model_fim``), which differs from the paper's in 3D only.
+    """
+    from ..crlb import paper_crlb
+    from ..noise import noise_model_graph
+    from .model_fim import model_crlb
+
+    model = noise_model_graph(graph, kc, scale, tau, kappa)
+    n_p = graph.n - 1
+    out = {}
+    for prefix, res in (("mse_bound", paper_crlb(model, rot, trans, anchor=anchor)),
+                        ("mse_bound_model", model_crlb(model, rot, trans, anchor=anchor))):
+        out[prefix] = float(res.trace_crlb) / n_p
+        out[prefix + "_trans"] = float(res.trace_translation) / n_p
+        out[prefix + "_rot"] = float(res.trace_rotation) / n_p
+        curv = res.trace_crlb_curvature if graph.dim == 3 else None
+        out[prefix + "_curvature"] = None if curv is None else float(curv) / n_p
+    return out
+
+
+def crlb_sweep(graph: PoseGraph, kcs: Sequence[float], trials: int = 100, seed: int = 0, *,
+               scale: str = "both", tau: float | None = None, kappa: float | None = None,
+               anchor: int | None = None, truth: tuple[np.ndarray, np.ndarray] | None = None,
+               solver_options: dict | None = None, executor: str = "serial", jobs: int = 1,
+               scheduler: str | None = None, client=None,
+               progress: Callable[[int], None] | None = None) -> CrlbSweepResult:
+    """Fig. 6/7: MSE of the certified MLE vs trace(CRLB)/n_p for each k_c in ``kcs``.
+
+    ``anchor`` is an internal index (default 0, the smallest id). ``truth`` defaults
+    to the certified solution of ``graph`` itself. Trials of level k_c are seeded by
+    ``SeedSequence(seed, spawn_key=(level_key(k_c),)).spawn(trials)``, so a level's
+    numbers do not depend on the other levels requested nor on the executor.
+    """
+    from ..noise import NOISE_SCALES
+    from ..sesync import solve
+
+    t0 = time.perf_counter()
+    if scale not in NOISE_SCALES:
+        raise UsageError(f"--scale must be one of {', '.join(NOISE_SCALES)}")
+    if trials < 2:
+        raise UsageError("--trials must be >= 2 (the MSE needs a standard error)")
+    graph.require_connected()
+    anchor = 0 if anchor is None else int(anchor)
+    solver_options = dict(solver_options or {})
+    truth_certified, truth_objective = True, None
+    if truth is None:
+        res = solve(graph, anchor=anchor, **solver_options)
+        truth = (res.rot, res.trans)
+        truth_certified, truth_objective = bool(res.certified), float(res.objective)
+    rot, trans = anchor_poses(np.asarray(truth[0], float), np.asarray(truth[1], float), anchor)
+    kcs = sorted(set(float(k) for k in kcs))
+    tasks = make_tasks(seed, trials, [(level_key(k),) for k in kcs])
+    contexts = [{"graph": graph, "rot": rot, "trans": trans, "anchor": anchor, "kc": k, "scale": scale,
+                 "tau": tau, "kappa": kappa, "solver_options": solver_options} for k in kcs]
+    results = run_tasks(_crlb_trial, contexts, tasks, executor=executor, jobs=jobs, scheduler=scheduler,
+                        client=client, progress=progress)
+    n_p = graph.n - 1
+    levels, data = [], {}
+    for g, kc in enumerate(kcs):
+        rs = [r for r, t in zip(results, tasks) if t.group == g]
+        sq_t = np.array([r["sq_trans"] for r in rs])
+        sq_r = np.array([r["sq_rot"] for r in rs])
+        cert = np.array([r["certified"] for r in rs])
+        data[kc] = {"sq_trans": sq_t, "sq_rot": sq_r, "certified": cert,
+                    "objective": np.array([r["objective"] for r in rs])}
+        mse, se = mean_and_stderr((sq_t + sq_r) / n_p)
+        b = _bounds(graph, rot, trans, anchor, kc, scale, tau, kappa)
+        curv = b["mse_bound_curvature"]
+        levels.append(CrlbLevel(
+            kc=kc, trials=len(rs), mse=mse, mse_stderr=se, mse_trans=float(sq_t.mean() / n_p),
+            mse_rot=float(sq_r.mean() / n_p), mse_bound=b["mse_bound"], mse_bound_trans=b["mse_bound_trans"],
+            mse_bound_rot=b["mse_bound_rot"], mse_bound_curvature=curv, ratio=mse / b["mse_bound"],
+            ratio_curvature=None if curv is None else mse / curv, mse_bound_model=b["mse_bound_model"],
+            mse_bound_model_curvature=b["mse_bound_model_curvature"], ratio_model=mse / b["mse_bound_model"],
+            uncertified=int((~cert).sum())))
+    return CrlbSweepResult(
+        dataset=graph.name, dim=graph.dim, n=graph.n, m=graph.m, anchor_id=int(graph.ids[anchor]),
+        scale=scale, tau=tau, kappa=kappa, trials=trials, seed=seed, truth_certified=truth_certified,
+        truth_objective=truth_objective, levels=levels, trial_data=data,
+        seeds=[{"kc": k, "entropy": int(seed), "spawn_key": [level_key(k)], "children": trials} for k in kcs],
+        elapsed=time.perf_counter() - t0)

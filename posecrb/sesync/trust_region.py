@@ -1,0 +1,165 @@
+"""Riemannian truncated-Newton trust region with preconditioned Steihaug-Toint CG.
+
+Absil, Baker & Gallivan, "Trust-region methods on Riemannian manifolds" (2007), with
+the tCG of Steihaug (1983) / Toint (1981) as in Manopt's ``trustregions``/``tCG``: the
+trust region is measured in the norm induced by the inverse preconditioner, which
+is tracked through the recurrences (no extra operator applications). SE-Sync runs
+this method at every level of the Riemannian staircase (Rosen et al., Algorithm 1).
+"""
+from __future__ import annotations
+
+import logging
+import math
+from dataclasses import dataclass
+from typing import Protocol
+
+import numpy as np
+
+from .stiefel import inner, project, retract
+
+log = logging.getLogger("posecrb")
+
+
+class Model(Protocol):
+    """What the trust region needs from a problem on St(d, r)^n."""
+
+    def evaluate(self, Z: np.ndarray) -> "State": ...
+
+    def hvp(self, state: "State", V: np.ndarray) -> np.ndarray: ...
+
+    def precondition(self, state: "State", R: np.ndarray) -> np.ndarray: ...
+
+
+@dataclass
+class State:
+    Z: np.ndarray          # (n, d, r) point
+    f: float               # objective
+    QZ: np.ndarray         # (n, d, r) Q Z (Euclidean gradient / 2)
+    lam: np.ndarray        # (n, d, d) Lambda blocks sym(QZ_i Z_i^T)
+    grad: np.ndarray       # (n, d, r) Riemannian gradient
+
+
+@dataclass
+class TROptions:
+    max_iterations: int = 500
+    max_inner: int = 1000
+    kappa: float = 0.1           # tCG linear convergence target
+    theta: float = 1.0           # tCG superlinear exponent: ||r|| <= ||r0|| min(kappa, ||r0||^theta)
+    rho_accept: float = 0.1
+    grad_tol: float = 0.0        # absolute Riemannian gradient norm
+    decrement_tol: float = 1e-11  # stop when 0.5 <g, P g> <= decrement_tol * max(|f|, 1)
+    rel_decrease_tol: float = 1e-12
+    step_tol: float = 0.0
+    delta0: float | None = None
+
+
+@dataclass
+class TRResult:
+    state: State
+    iterations: int
+    hvps: int
+    status: str
+
+
+def _tcg(model: Model, state: State, delta: float, opt: TROptions):
+    """Steihaug-Toint truncated CG on the trust-region subproblem; returns (eta, Heta, hvps, reason, boundary)."""
+    grad = state.grad
+    eta = np.zeros_like(grad)
+    Heta = np.zeros_like(grad)
+    r = grad
+    r_r = inner(r, r)
+    norm_r0 = math.sqrt(r_r)
+    z = model.precondition(state, r)
+    z_r = inner(z, r)
+    d_Pd = z_r
+    delta_dir = -z
+    e_Pd = 0.0
+    e_Pe = 0.0
+    model_value = 0.0
+    hvps = 0
+    stop = norm_r0 * min(opt.kappa, norm_r0 ** opt.theta)
+    for j in range(opt.max_inner):
+        Hd = model.hvp(state, delta_dir)
+        hvps += 1
+        d_Hd = inner(delta_dir, Hd)
+        alpha = z_r / d_Hd if d_Hd != 0 else math.inf
+        e_Pe_new = e_Pe + 2.0 * alpha * e_Pd + alpha * alpha * d_Pd
+        if d_Hd <= 0 or e_Pe_new >= delta * delta:
+            tau = (-e_Pd + math.sqrt(max(e_Pd * e_Pd + d_Pd * (delta * delta - e_Pe), 0.0))) / d_Pd
+            eta = eta + tau * delta_dir
+            Heta = Heta + tau * Hd
+            return eta, Heta, hvps, ("negative curvature" if d_Hd <= 0 else "exceeded radius"), True
+        new_eta = eta + alpha * delta_dir
+        new_Heta = Heta + alpha * Hd
+        new_model = inner(new_eta, grad) + 0.5 * inner(new_eta, new_Heta)
+        if new_model >= model_value:
+            return eta, Heta, hvps, "model increased", False
+        eta, Heta, e_Pe, model_value = new_eta, new_Heta, e_Pe_new, new_model
+        r = r + alpha * Hd
+        r_r = inner(r, r)
+        if math.sqrt(r_r) <= stop:
+            return eta, Heta, hvps, "converged", False
+        z = model.precondition(state, r)
+        zold_rold = z_r
+        z_r = inner(z, r)
+        beta = z_r / zold_rold
+        delta_dir = project(state.Z, -z + beta * delta_dir)
+        e_Pd = beta * (e_Pd + alpha * d_Pd)
+        d_Pd = z_r + beta * beta * d_Pd
+    return eta, Heta, hvps, "max inner", False
+
+
+def trust_region(model: Model, Z0: np.ndarray, opt: TROptions, state: State | None = None) -> TRResult:
+    """Minimise the model's objective on St(d, r)^n from Z0 (or a given evaluated state)."""
+    x = state or model.evaluate(Z0)
+    hvps = 0
+    prepare = getattr(model, "prepare", None)
+    if prepare is not None:
+        prepare(x)
+    pg = model.precondition(x, x.grad)
+    decrement = 0.5 * inner(pg, x.grad)
+    delta = opt.delta0 if opt.delta0 is not None else max(math.sqrt(2.0 * max(decrement, 1e-300)), 1e-12)
+    delta_max = 1e6 * delta
+    status = "iteration limit"
+    it = 0
+    for it in range(1, opt.max_iterations + 1):
+        gnorm = math.sqrt(inner(x.grad, x.grad))
+        if gnorm <= opt.grad_tol:
+            status = "gradient norm"
+            it -= 1
+            break
+        if decrement <= opt.decrement_tol * max(abs(x.f), 1.0):
+            status = "Newton decrement"
+            it -= 1
+            break
+        eta, Heta, k, reason, boundary = _tcg(model, x, delta, opt)
+        hvps += k
+        model_decrease = -(inner(x.grad, eta) + 0.5 * inner(eta, Heta))
+        cand = model.evaluate(retract(x.Z, eta))
+        reg = max(1.0, abs(x.f)) * np.finfo(float).eps * 1e3
+        rho = (x.f - cand.f + reg) / (model_decrease + reg)
+        step = math.sqrt(inner(eta, eta))
+        accepted = rho > opt.rho_accept and cand.f <= x.f
+        if rho < 0.25 or not accepted:
+            delta *= 0.25
+        elif rho > 0.75 and boundary:
+            delta = min(2.0 * delta, delta_max)
+        log.debug("TR it %d f=%.12g |g|=%.3e dec=%.3e rho=%.3f delta=%.3e tCG %d (%s)%s", it, x.f, gnorm,
+                  decrement, rho, delta, k, reason, "" if accepted else " rejected")
+        if accepted:
+            rel = (x.f - cand.f) / max(abs(x.f), 1e-300)
+            x = cand
+            if prepare is not None:
+                prepare(x)
+            pg = model.precondition(x, x.grad)
+            decrement = 0.5 * inner(pg, x.grad)
+            if rel <= opt.rel_decrease_tol:
+                status = "relative decrease"
+                break
+        if model_decrease <= 1e-15 * max(abs(x.f), 1e-300):
+            status = "model decrease below machine precision"
+            break
+        if step <= opt.step_tol or delta < 1e-14 * max(1.0, math.sqrt(2 * max(abs(x.f), 1e-300))):
+            status = "step size"
+            break
+    return TRResult(x, it, hvps, status)

@@ -1,0 +1,127 @@
+"""Riemannian geometry of the relaxed problem vs independent references.
+
+References: dense numpy data matrices built from their definitions (SE-Sync section 4.1),
+finite differences along the retraction, and a direct least-squares solve for translations.
+"""
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from posecrb.sesync.problem import Problem
+from posecrb.sesync.staircase import RelaxedModel
+from posecrb.sesync.stiefel import project, random_point, remove_vertical, retract
+from posecrb.sesync.synthetic import random_pose_graph
+
+
+def dense_M(graph):
+    """M = sum_e [tau z z^T (translation rows) ; kappa (rotation residual)] built edge by edge (loops on purpose)."""
+    n, d = graph.n, graph.dim
+    N = n + d * n
+    M = np.zeros((N, N))
+    for e in range(graph.m):
+        i, j = graph.src[e], graph.dst[e]
+        tau, kap = graph.tau[e], graph.kappa[e]
+        # translation residual t_j - t_i - R_i t~ = X z with X = [t R]
+        z = np.zeros(N)
+        z[j] += 1
+        z[i] -= 1
+        z[n + d * i: n + d * i + d] -= graph.trans[e]
+        M += tau * np.outer(z, z)
+        # rotation residual R_j - R_i R~ = X Z with Z: (N x d)
+        Zr = np.zeros((N, d))
+        Zr[n + d * j: n + d * j + d] = np.eye(d)
+        Zr[n + d * i: n + d * i + d] -= graph.rot[e]
+        M += kap * Zr @ Zr.T
+    return M
+
+
+def dense_Q(graph):
+    n = graph.n
+    M = dense_M(graph)
+    Lt, V, C = M[:n, :n], M[:n, n:], M[n:, n:]
+    return C - V.T @ np.linalg.pinv(Lt) @ V
+
+
+@pytest.mark.parametrize("dim", [2, 3])
+def test_Q_product_and_objective_match_dense(dim):
+    rng = np.random.default_rng(10 + dim)
+    g, _, _ = random_pose_graph(12, dim, rng, rot_noise=0.3, trans_noise=0.5)
+    p = Problem.from_graph(g)
+    Q = dense_Q(g)
+    Z = random_point(g.n, dim, dim + 2, rng)
+    Zf = Z.reshape(-1, dim + 2)
+    np.testing.assert_allclose(p.Q_product(Zf), Q @ Zf, rtol=1e-9, atol=1e-9 * np.abs(Q).max())
+    assert p.objective(Zf) == pytest.approx(np.trace(Zf.T @ Q @ Zf), rel=1e-10)
+
+
+@pytest.mark.parametrize("dim", [2, 3])
+def test_gradient_and_hessian_vs_finite_differences(dim):
+    rng = np.random.default_rng(20 + dim)
+    g, _, _ = random_pose_graph(10, dim, rng, rot_noise=0.2, trans_noise=0.3)
+    p = Problem.from_graph(g)
+    model = RelaxedModel(p)
+    r = dim + 1
+    Z = random_point(g.n, dim, r, rng)
+    s = model.evaluate(Z)
+    V = project(Z, rng.standard_normal(Z.shape))
+    V /= np.linalg.norm(V)
+    h = 1e-5
+    fp = model.evaluate(retract(Z, h * V)).f
+    fm = model.evaluate(retract(Z, -h * V)).f
+    # directional derivative
+    assert (fp - fm) / (2 * h) == pytest.approx(np.sum(s.grad * V), rel=1e-6)
+    # second derivative along the (second-order) polar retraction = <V, Hess V>
+    HV = model.hvp(s, V)
+    h2 = 1e-4
+    fpp = model.evaluate(retract(Z, h2 * V)).f
+    fmm = model.evaluate(retract(Z, -h2 * V)).f
+    assert (fpp - 2 * s.f + fmm) / h2 ** 2 == pytest.approx(np.sum(V * HV), rel=1e-4)
+    # Hessian as the derivative of the gradient field (projected back to T_Z)
+    gp = model.evaluate(retract(Z, h * V)).grad
+    gm = model.evaluate(retract(Z, -h * V)).grad
+    fd = project(Z, (gp - gm) / (2 * h))
+    np.testing.assert_allclose(fd, HV, rtol=0, atol=1e-5 * np.abs(HV).max())
+    # symmetry of the Hessian
+    W = project(Z, rng.standard_normal(Z.shape))
+    assert np.sum(W * model.hvp(s, V)) == pytest.approx(np.sum(V * model.hvp(s, W)), rel=1e-9)
+
+
+def test_retraction_and_projection():
+    rng = np.random.default_rng(3)
+    Z = random_point(7, 3, 5, rng)
+    ZZt = Z @ np.swapaxes(Z, 1, 2)
+    np.testing.assert_allclose(ZZt, np.broadcast_to(np.eye(3), ZZt.shape), atol=1e-12)
+    V = project(Z, rng.standard_normal(Z.shape))
+    sym = V @ np.swapaxes(Z, 1, 2)
+    np.testing.assert_allclose(sym + np.swapaxes(sym, 1, 2), 0, atol=1e-12)
+    Y = retract(Z, V)
+    np.testing.assert_allclose(Y @ np.swapaxes(Y, 1, 2), np.broadcast_to(np.eye(3), ZZt.shape), atol=1e-12)
+    H = remove_vertical(Z, V)
+    for _ in range(3):
+        A = rng.standard_normal((5, 5))
+        assert abs(np.sum(H * (Z @ (A - A.T)))) < 1e-10
+
+
+def test_translations_match_least_squares():
+    rng = np.random.default_rng(5)
+    g, _, _ = random_pose_graph(9, 3, rng, rot_noise=0.1, trans_noise=0.2)
+    p = Problem.from_graph(g)
+    Z = random_point(g.n, 3, 3, rng)   # blocks act as "rotations" R_i = Z_i^T
+    T = p.translations(Z.reshape(-1, 3))
+    # dense least squares with t_0 = 0: rows sqrt(tau)(t_j - t_i) = sqrt(tau) R_i t~
+    n, d = g.n, 3
+    A = np.zeros((g.m * d, (n - 1) * d))
+    b = np.zeros(g.m * d)
+    for e in range(g.m):
+        i, j = g.src[e], g.dst[e]
+        w = np.sqrt(g.tau[e])
+        rows = slice(e * d, e * d + d)
+        if j > 0:
+            A[rows, (j - 1) * d:(j - 1) * d + d] += w * np.eye(d)
+        if i > 0:
+            A[rows, (i - 1) * d:(i - 1) * d + d] -= w * np.eye(d)
+        b[rows] = w * Z[i].T @ g.trans[e]
+    x = np.linalg.lstsq(A, b, rcond=None)[0].reshape(n - 1, d)
+    np.testing.assert_allclose(T[1:], x, atol=1e-10)
+    np.testing.assert_allclose(T[0], 0)
