@@ -41,7 +41,6 @@ def connection_laplacian(n: int, d: int, src: np.ndarray, dst: np.ndarray, rot: 
 
     ``tr(L(G^rho) Z Z^T) = sum kappa ||R_j - R_i R~_ij||_F^2`` for ``Z_i = R_i^T``.
     """
-    m = src.shape[0]
     a, b = np.meshgrid(np.arange(d), np.arange(d), indexing="ij")           # (d, d) row/col offsets
     off_r = (src[:, None, None] * d + a).ravel()
     off_c = (dst[:, None, None] * d + b).ravel()
@@ -52,7 +51,6 @@ def connection_laplacian(n: int, d: int, src: np.ndarray, dst: np.ndarray, rot: 
     rows = np.concatenate([off_r, off_c, diag_r])
     cols = np.concatenate([off_c, off_r, diag_r])
     vals = np.concatenate([off_v, off_v, diag_v])
-    del m
     return sp.csr_matrix((vals, (rows, cols)), shape=(n * d, n * d))
 
 

@@ -61,14 +61,18 @@ def solve(graph: PoseGraph, **kwargs) -> SolveResult:
 def _solve(graph: PoseGraph, *, r0: int | None = None, rmax: int = 10, init: str = "chordal",
           anchor: int | None = None, max_iterations: int = 500, certificate_tol: float = 1e-3,
           verbose: bool = False, seed: int = 0, precondition: bool = True,
-          precond_max_cond: float = 1e6, adaptive_precond: float | None = 1e-8, **tuning) -> SolveResult:
+          precond_max_cond: float = 1e6, adaptive_precond: float | None = 1e-10, **tuning) -> SolveResult:
     """Certifiably correct maximum-likelihood estimate of a pose graph.
 
     ``r0`` is the first staircase rank (default d + 1), ``rmax`` the last. ``init`` is
     "chordal" (default) or "vertices" (the file's own estimate), or an (n, d, d)
     array of rotations. ``anchor`` is the internal index of the pose put at the
-    identity (default 0). ``tuning`` goes to :class:`TROptions`. Raises
-    DisconnectedGraph for a disconnected graph.
+    identity (default 0). ``certificate_tol``: accept lambda_min(Q - Lambda) >= -tol
+    (SE-Sync's 1e-3). ``precond_max_cond`` caps the condition number of the base
+    preconditioner (Q + delta I)^{-1}; ``adaptive_precond`` (relative shift s / ||C||) turns
+    on the per-iteration (Q - Lambda + s I)^{-1} preconditioner, None disables it.
+    ``tuning`` goes to :class:`TROptions` (e.g. decrement_tol, max_inner). Raises
+    DisconnectedGraph for a disconnected graph, UsageError for bad ranks/anchor/init.
     """
     t_start = time.perf_counter()
     graph.require_connected()

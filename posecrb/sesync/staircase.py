@@ -137,7 +137,7 @@ def verify(problem: Problem, state: State, tol: float, rng: np.random.Generator,
         return Certificate(True, lm, None, 1, solves)
     # Not PSD within tol: find a positive-definite shift, then shift-invert at it.
     scale = problem.gershgorin_max() + float(np.max(np.abs(lam)))
-    sigma = 10.0 * tol
+    sigma = max(10.0 * abs(tol), 1e-9 * scale)
     facs = 1
     while True:
         try:
