@@ -4,6 +4,9 @@
 3D (eq. 68): ``C >= F^{-1} - (1/12) (ddiag(L~) F^{-1} + F^{-1} ddiag(L~))`` with
 ``L~ = blkdiag(0, (I^{SO(3)})^{-1})``, ``I^{SO(3)} = L_w^{SO(3)} + diag(Psi)`` the
 rotation-rotation block of F (eq. 63-65), and ddiag keeping the 3 x 3 diagonal blocks.
+F is eq. (64) as printed (``variant="eq64"``) or the frame-consistent Fisher information
+of the same model (``variant="consistent"``, see ``posecrb.fim``); the curvature term
+uses the rotation-rotation block of whichever F is chosen. 2D: both variants coincide.
 
 Everything is exact and sparse: the per-pose diagonal blocks of ``F^{-1}`` and the
 3 x 3 diagonal blocks of ``(I^{SO(3)})^{-1}`` come from selected inversion on the
@@ -37,7 +40,8 @@ class CrlbResult:
     ``mse_bound_curvature`` are the same for the curvature-corrected bound eq. (68).
     ``per_pose`` maps a pose id to its q x q block of ``F^{-1}`` and ``per_pose_curvature``
     (3D) to its block of eq. (68); coordinates per pose are ``coordinates`` (translation
-    first, then rotation; the anchor's block is zero).
+    first, then rotation; the anchor's block is zero). ``fim_variant`` is the FIM variant
+    the bound was computed from (``posecrb.fim.FIM_VARIANTS``).
     """
 
     model: str
@@ -55,6 +59,7 @@ class CrlbResult:
     per_pose: dict[int, np.ndarray] | None = None
     per_pose_curvature: dict[int, np.ndarray] | None = None
     times: dict[str, float] = field(default_factory=dict)
+    fim_variant: str = "eq64"
 
 
 def _requested_ids(graph: PoseGraph, per_pose: bool | Sequence[int]) -> np.ndarray | None:
@@ -106,16 +111,21 @@ def crlb_from_fim(fim: PaperFim, graph: PoseGraph, per_pose: bool | Sequence[int
         if curv_blocks is not None:
             ppc = {int(i): (curv_blocks[r] if f else zero) for i, r, f in zip(ids, row, free)}
     return CrlbResult("paper", d, graph.n, npf, fim.anchor_id, trace, trace / npf if npf else 0.0, tr_t, tr_r,
-                      trace_curv, mse_curv, coordinate_names(d), pp, ppc, times)
+                      trace_curv, mse_curv, coordinate_names(d), pp, ppc, times, fim_variant=fim.variant)
 
 
 def paper_crlb(graph: PoseGraph, rot: np.ndarray, trans: np.ndarray, anchor: int = 0,
-               per_pose: bool | Sequence[int] = False, rotation_model: str = "eq59") -> CrlbResult:
+               per_pose: bool | Sequence[int] = False, rotation_model: str = "eq59",
+               variant: str = "eq64") -> CrlbResult:
     """CRLB of the paper model at the estimate ``(rot, trans)`` with pose ``anchor``
     (internal index) fixed: 2D eq. (67), 3D eq. (68). ``per_pose``: True for every pose,
-    or a sequence of pose ids (as in the file). Raises DisconnectedGraph / NotPositiveDefinite."""
+    or a sequence of pose ids (as in the file). ``variant``: the FIM it inverts,
+    ``"eq64"`` (as printed, the default) or ``"consistent"`` (the Fisher information of the
+    model, the bound the Monte Carlo MSE reaches in 3D); see ``posecrb.fim.paper_fim``.
+    Raises DisconnectedGraph / NotPositiveDefinite."""
     t0 = time.perf_counter()
-    fim = paper_fim(graph, rot, trans, anchor=anchor, rotation_model=rotation_model, layout="blocks")
+    fim = paper_fim(graph, rot, trans, anchor=anchor, rotation_model=rotation_model, layout="blocks",
+                    variant=variant)
     t_build = time.perf_counter() - t0
     res = crlb_from_fim(fim, graph, per_pose)
     res.times["fim_build"] = t_build

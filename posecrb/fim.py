@@ -6,8 +6,8 @@ residuals
 
     r_ij = R_i^T (x_j - x_i) - p_ij,      weight tau_ij I_d,
 
-plus the rotation Laplacian ``L_w (x) I_{d_r}`` (eq. 41 / 63 without Psi), with the
-Jacobians (right perturbation ``R_i Exp(delta)`` along the paper's basis ``R_i E``)
+plus a rotation Laplacian (eq. 41 / 58-63 without Psi), with the Jacobians (right,
+body-frame perturbation ``R_i Exp(delta)`` along the paper's basis ``R_i E``)
 
     dr/dx_i = -R_i^T,   dr/dx_j = R_i^T,
     dr/dtheta_i = -E u                     (2D, E = [[0, -1], [1, 0]], u = R_i^T (x_j - x_i)),
@@ -17,6 +17,26 @@ Jacobians (right perturbation ``R_i Exp(delta)`` along the paper's basis ``R_i E
 ``L_tau (x) I_d`` (eq. 19/45), the cross block is Delta_w (eq. 33/54) and the rotation
 diagonal gains ``psi_i = sum tau ||x_j - x_i||^2`` (eq. 41) or
 ``Psi_i = sum tau/2 (||u||^2 I - u u^T)`` (eq. 63), summed over edges whose SOURCE is i.
+
+Two variants of the rotation Laplacian (``FIM_VARIANTS``), identical in 2D:
+
+* ``"eq64"`` (default): eq. (64) exactly as printed, ``L_w (x) I_{d_r}``: the diagonal
+  blocks ``sum w I`` (eq. 58) and the off-diagonal blocks ``-w I`` of eq. (61)-(62).
+  It reproduces the paper's tables.
+* ``"consistent"``: the Fisher information of the same noise model with every pose
+  perturbed on the right, as in Delta (eq. 54) and Psi (eq. 56-60, 63). Under
+  ``R_i Exp(a_i)``, ``R_j Exp(a_j)`` the relative rotation moves as
+  ``R_ij Exp(a_j - R_ij^T a_i)`` with ``R_ij = R_i^T R_j`` (the estimate's), so the
+  off-diagonal rotation block of edge (i, j) is ``-w R_i^T R_j`` (its transpose at (j, i)),
+  not ``-w I``. Eq. (61)-(62) pair the tangent noise of ``Z_ij`` and ``Z_ji`` as if both
+  were expressed in the same frame; ``-w I`` is the coupling for world-frame (left)
+  perturbations, which does not match the body-frame Delta and Psi. In 2D rotations
+  commute, ``R_ij`` acts on the angle as 1 and both variants are the same matrix.
+  With ``T = blkdiag(R_i^T)`` on the rotations, ``T (L_w (x) I_3) T^T`` is the consistent
+  Laplacian, so the two have the same trace and the same Laplacian-only log det, but
+  their inverses (the CRLB) differ once the poses are rotated relative to each other:
+  the Monte Carlo MSE of the certified MLE (``posecrb experiment crlb``) reaches the
+  bound of the consistent variant, not that of eq. (64) in 3D.
 
 Everything is assembled vectorised from the edge arrays (COO), anchor removed.
 """
@@ -34,6 +54,7 @@ from .noise import rotation_weight as _rotation_weight
 
 _E2 = np.array([[0.0, -1.0], [1.0, 0.0]])
 LAYOUTS = ("blocks", "poses")
+FIM_VARIANTS = ("eq64", "consistent")
 
 
 @dataclass(frozen=True, eq=False)
@@ -46,6 +67,8 @@ class PaperFim:
     rows per free pose, so that per-pose blocks are contiguous ``q x q`` diagonal blocks.
     Free poses are the graph's poses in increasing id order without the anchor
     (``pose_ids``); rotation coordinates are the angle (2D) or along ``E_k = G_k/sqrt 2`` (3D).
+    ``variant`` is the rotation Laplacian used (``FIM_VARIANTS``, see the module docstring):
+    ``"eq64"`` as printed in the paper or ``"consistent"`` (the model's Fisher information).
     """
 
     matrix: sp.csc_matrix
@@ -55,6 +78,7 @@ class PaperFim:
     pose_ids: np.ndarray         # (n_p,) ids of the free poses, in row order
     layout: str
     rotation_model: str
+    variant: str = "eq64"
     build_time: float = field(default=0.0)
 
     @property
@@ -102,7 +126,8 @@ class PaperFim:
 
     def rotation_block(self) -> sp.csc_matrix:
         """``I^{SO(d)} = L_w (x) I_{d_r} + diag(Psi)``: the rotation-rotation block (eq. 41 / 63),
-        rows ordered pose-major (d_r per free pose)."""
+        rows ordered pose-major (d_r per free pose). With ``variant == "consistent"`` the
+        Laplacian part has the off-diagonal blocks ``-w R_i^T R_j`` instead of ``-w I``."""
         f = self.to_layout("blocks").matrix
         k = self.n_free * self.dim
         return f[k:, k:].tocsc()
@@ -154,18 +179,25 @@ def rotation_jacobians(graph: PoseGraph, rot: np.ndarray, trans: np.ndarray) -> 
 
 
 def paper_fim(graph: PoseGraph, rot: np.ndarray, trans: np.ndarray, anchor: int = 0,
-              rotation_model: str = "eq59", layout: str = "blocks") -> PaperFim:
+              rotation_model: str = "eq59", layout: str = "blocks", variant: str = "eq64") -> PaperFim:
     """Anchored paper FIM (eq. 42 in 2D, eq. 64 in 3D) at the estimate ``(rot, trans)``.
 
     ``rot`` (n, d, d) and ``trans`` (n, d) are world poses ``X_i = (R_i, x_i)`` in the graph's
     internal order; ``anchor`` is an internal index (``graph.anchor_index(id)``).
     ``rotation_model`` picks the rotation weight: ``"eq59"`` (default, eq. 39-41 / 59) or
     ``"table2"`` (the empirical fit that reproduces Table II, see DESIGN.md section 4).
+    ``variant`` picks the rotation Laplacian (module docstring): ``"eq64"`` (default) is
+    eq. (64) as printed, off-diagonal rotation blocks ``-w I`` (eq. 61-62);
+    ``"consistent"`` is the Fisher information of the same noise model in the body-frame
+    coordinates that eq. (54) and (63) use, off-diagonal blocks ``-w R_i^T R_j`` for an
+    edge i -> j. Both give the same matrix in 2D.
     Raises DisconnectedGraph when the graph is not connected (the anchored FIM is singular).
     """
     import time
 
     t0 = time.perf_counter()
+    if variant not in FIM_VARIANTS:
+        raise ValueError(f"variant must be one of {FIM_VARIANTS}, got {variant!r}")
     graph.require_connected()
     rot, trans = _check_estimate(graph, rot, trans)
     if not 0 <= anchor < graph.n:
@@ -193,12 +225,22 @@ def paper_fim(graph: PoseGraph, rot: np.ndarray, trans: np.ndarray, anchor: int 
     cols_ = np.tile(ctr, (1, k)).ravel()
     vals = local.ravel()
 
-    # rotation Laplacian L_w (x) I_dr (eq. 41 / 63)
+    # rotation Laplacian (eq. 41 / 58-63): diagonal blocks sum w I
     ci, cj = cols(npf * d, ri, dr), cols(npf * d, rj, dr)
     wr = np.repeat(w, dr)
-    lrows = np.concatenate([ci.ravel(), cj.ravel(), ci.ravel(), cj.ravel()])
-    lcols = np.concatenate([ci.ravel(), cj.ravel(), cj.ravel(), ci.ravel()])
-    lvals = np.concatenate([wr, wr, -wr, -wr])
+    if variant == "eq64" or d == 2:
+        # off-diagonal blocks -w I (eq. 61-62); in 2D also the consistent coupling
+        lrows = np.concatenate([ci.ravel(), cj.ravel(), ci.ravel(), cj.ravel()])
+        lcols = np.concatenate([ci.ravel(), cj.ravel(), cj.ravel(), ci.ravel()])
+        lvals = np.concatenate([wr, wr, -wr, -wr])
+    else:
+        # body-frame coupling: block (i, j) = -w R_i^T R_j, block (j, i) its transpose
+        rel = -w[:, None, None] * (np.transpose(rot[graph.src], (0, 2, 1)) @ rot[graph.dst])
+        lrows = np.concatenate([ci.ravel(), cj.ravel(), np.repeat(ci, dr, axis=1).ravel(),
+                                np.repeat(cj, dr, axis=1).ravel()])
+        lcols = np.concatenate([ci.ravel(), cj.ravel(), np.tile(cj, (1, dr)).ravel(),
+                                np.tile(ci, (1, dr)).ravel()])
+        lvals = np.concatenate([wr, wr, rel.ravel(), np.transpose(rel, (0, 2, 1)).ravel()])
 
     rows = np.concatenate([rows, lrows])
     cols_ = np.concatenate([cols_, lcols])
@@ -209,7 +251,7 @@ def paper_fim(graph: PoseGraph, rot: np.ndarray, trans: np.ndarray, anchor: int 
     mat.sum_duplicates()
     pose_ids = np.delete(graph.ids, anchor)
     fim = PaperFim(mat, d, int(anchor), int(graph.ids[anchor]), pose_ids, "blocks", rotation_model,
-                   time.perf_counter() - t0)
+                   variant=variant, build_time=time.perf_counter() - t0)
     if layout != "blocks":
         fim = fim.to_layout(layout)
     return fim

@@ -1,4 +1,5 @@
-"""Paper-model CRLB (posecrb.crlb) against dense evaluations of eq. (67) and eq. (68)."""
+"""Paper-model CRLB (posecrb.crlb) against dense evaluations of eq. (67) and eq. (68), for both FIM
+variants (the consistent one also against the finite-difference Fisher information of the model)."""
 from __future__ import annotations
 
 from dataclasses import replace
@@ -8,9 +9,10 @@ import pytest
 
 from posecrb.crlb import paper_crlb
 from posecrb.errors import DisconnectedGraph, UsageError
-from posecrb.fim import paper_fim
+from posecrb.fim import FIM_VARIANTS, paper_fim
 
 from .conftest import make_random_graph
+from .test_fim import dense_model_fisher
 
 
 def dense_eq68(f: np.ndarray, npf: int) -> np.ndarray:
@@ -52,15 +54,17 @@ def test_2d_crlb_is_dense_inverse(seed):
     np.testing.assert_array_equal(res.per_pose[int(g.ids[anchor])], np.zeros((3, 3)))
 
 
+@pytest.mark.parametrize("variant", FIM_VARIANTS)
 @pytest.mark.parametrize("seed", [0, 1, 2])
-def test_3d_curvature_term_matches_dense_eq68(seed):
+def test_3d_curvature_term_matches_dense_eq68(seed, variant):
     rng = np.random.default_rng(seed)
     g = make_random_graph(rng, n=7, extra=5, dim=3)
     # small rotation information makes the curvature term visible
     scale = np.where(np.arange(6) >= 3, 0.2, 1.0)
     g = replace(g, info=g.info * scale[None, :, None] * scale[None, None, :])
-    res = paper_crlb(g, g.vertex_rot, g.vertex_trans, anchor=0, per_pose=True)
-    f = paper_fim(g, g.vertex_rot, g.vertex_trans, anchor=0).matrix.toarray()
+    res = paper_crlb(g, g.vertex_rot, g.vertex_trans, anchor=0, per_pose=True, variant=variant)
+    assert res.fim_variant == variant
+    f = paper_fim(g, g.vertex_rot, g.vertex_trans, anchor=0, variant=variant).matrix.toarray()
     npf = g.n - 1
     bound = dense_eq68(f, npf)
     finv = np.linalg.inv(f)
@@ -70,9 +74,33 @@ def test_3d_curvature_term_matches_dense_eq68(seed):
     assert abs(res.trace_crlb - res.trace_crlb_curvature) > 1e-8 * res.trace_crlb
     for t in range(npf):
         pid = int(g.ids[t + 1])
-        np.testing.assert_allclose(res.per_pose[pid], pose_block(finv, npf, 3, 3, t), rtol=1e-9, atol=1e-14)
-        np.testing.assert_allclose(res.per_pose_curvature[pid], pose_block(bound, npf, 3, 3, t),
-                                   rtol=1e-9, atol=1e-14)
+        ref, ref_c = pose_block(finv, npf, 3, 3, t), pose_block(bound, npf, 3, 3, t)
+        # atol relative to the block: small off-diagonal entries carry its rounding
+        np.testing.assert_allclose(res.per_pose[pid], ref, rtol=1e-9, atol=1e-12 * np.abs(ref).max())
+        np.testing.assert_allclose(res.per_pose_curvature[pid], ref_c, rtol=1e-9, atol=1e-12 * np.abs(ref_c).max())
+
+
+@pytest.mark.parametrize("dim", [2, 3])
+def test_consistent_crlb_inverts_the_models_fisher_information(dim):
+    """trace / curvature bound from the finite-difference Fisher information of the model (dense
+    numpy inverse), anchor in the middle; in 2D the two variants give the same bound."""
+    rng = np.random.default_rng(20 + dim)
+    g = make_random_graph(rng, n=8, extra=6, dim=dim)
+    anchor = 4
+    res = paper_crlb(g, g.vertex_rot, g.vertex_trans, anchor=anchor, variant="consistent")
+    f = dense_model_fisher(g, g.vertex_rot, g.vertex_trans, anchor)
+    f = (f + f.T) / 2
+    npf = g.n - 1
+    finv = np.linalg.inv(f)
+    assert res.trace_crlb == pytest.approx(np.trace(finv), rel=1e-6)
+    assert res.mse_bound == pytest.approx(np.trace(finv) / npf, rel=1e-6)
+    if dim == 3:
+        assert res.trace_crlb_curvature == pytest.approx(np.trace(dense_eq68(f, npf)), rel=1e-6)
+        eq64 = paper_crlb(g, g.vertex_rot, g.vertex_trans, anchor=anchor)
+        assert abs(eq64.trace_crlb / res.trace_crlb - 1) > 1e-3
+    else:
+        eq64 = paper_crlb(g, g.vertex_rot, g.vertex_trans, anchor=anchor)
+        assert eq64.trace_crlb == res.trace_crlb and eq64.fim_variant == "eq64"
 
 
 def test_per_pose_subset_and_unknown_id():
@@ -111,19 +139,26 @@ def write_graph(tmp_path, dim: int, seed: int = 0):
     return path, load(path)
 
 
+@pytest.mark.parametrize("variant", [None, "eq64", "consistent"])
 @pytest.mark.parametrize("dim", [2, 3])
-def test_cli_crlb_paper_json(dim, tmp_path, capsys):
+def test_cli_crlb_paper_json(dim, variant, tmp_path, capsys):
     import json
 
     path, g = write_graph(tmp_path, dim)
     pid = int(g.ids[3])
-    code, out, _ = run_cli(["crlb", str(path), "--estimate", "vertices", "--poses", str(pid), "--format", "json"],
-                           capsys)
+    extra = [] if variant is None else ["--fim-variant", variant]
+    code, out, err = run_cli(["crlb", str(path), "--estimate", "vertices", "--poses", str(pid), "--format", "json",
+                              *extra], capsys)
     assert code == 0
     row = json.loads(out)
-    for key in ("model", "dim", "poses", "components", "nullity", "trace_crlb", "mse_bound", "per_pose", "times"):
+    for key in ("model", "dim", "poses", "components", "nullity", "trace_crlb", "mse_bound", "per_pose", "times",
+                "fim_variant"):
         assert key in row
-    f = paper_fim(g, g.vertex_rot, g.vertex_trans).matrix.toarray()
+    assert row["fim_variant"] == (variant or "eq64")
+    # one warning, only for the implicit eq. (64) in 3D
+    warned = [line for line in err.splitlines() if "warning" in line and "--fim-variant consistent" in line]
+    assert len(warned) == (1 if dim == 3 and variant is None else 0), err
+    f = paper_fim(g, g.vertex_rot, g.vertex_trans, variant=variant or "eq64").matrix.toarray()
     finv = np.linalg.inv(f)
     assert row["trace_crlb"] == pytest.approx(np.trace(finv), rel=1e-9)
     assert row["mse_bound"] == pytest.approx(np.trace(finv) / (g.n - 1), rel=1e-9)
@@ -148,7 +183,8 @@ def test_cli_crlb_sed_quotient_and_anchors(tmp_path, capsys):
     assert json.loads(out)["anchors"] == [int(g.ids[0]), int(g.ids[5])]
 
 
-@pytest.mark.parametrize("extra", [["--quotient"], ["--anchor", "0", "--anchor", "1"], ["--poses", "a-b"]])
+@pytest.mark.parametrize("extra", [["--quotient"], ["--anchor", "0", "--anchor", "1"], ["--poses", "a-b"],
+                                   ["--model", "sed", "--fim-variant", "eq64"], ["--fim-variant", "world"]])
 def test_cli_crlb_usage_errors(extra, tmp_path, capsys):
     path, g = write_graph(tmp_path, 2)
     if "--anchor" in extra:

@@ -14,7 +14,6 @@ from click.testing import CliRunner
 from posecrb import synth
 from posecrb.errors import UsageError
 from posecrb.experiments.crlb_sweep import anchor_poses, crlb_sweep, parse_levels, pose_errors, rotation_errors
-from posecrb.experiments.model_fim import frame_consistent_fim
 from posecrb.fim import paper_fim
 from posecrb.lie import exp_so3, hat3, rot2
 
@@ -68,20 +67,39 @@ def _dense_model_fim(g, rot, trans, anchor):
     return f[np.ix_(keep, keep)]
 
 
-def test_frame_consistent_fim_against_dense_reference():
+def test_consistent_fim_is_the_simulated_models_fim():
+    """The sweep's model bound comes from paper_fim(variant="consistent"): against the
+    analytic dense reference above (the FD reference is in test_fim.py)."""
     g = synth.random_graph(np.random.default_rng(1), 7, 12, 3, info="isotropic")
     rng = np.random.default_rng(2)
     rot, trans = exp_so3(rng.normal(size=(g.n, 3))), rng.normal(size=(g.n, 3))
     for anchor in (0, 3):
-        fc = frame_consistent_fim(g, rot, trans, anchor).to_layout("poses").matrix.toarray()
+        fc = paper_fim(g, rot, trans, anchor, variant="consistent").to_layout("poses").matrix.toarray()
         assert np.allclose(fc, _dense_model_fim(g, rot, trans, anchor), atol=1e-9 * np.abs(fc).max())
-    # same trace as the paper's FIM (T-optimality unaffected); 2D is the paper's FIM itself
-    assert np.isclose(frame_consistent_fim(g, rot, trans).matrix.diagonal().sum(),
+    # same trace as eq. (64) as printed (T-optimality unaffected); 2D is the same matrix
+    assert np.isclose(paper_fim(g, rot, trans, variant="consistent").matrix.diagonal().sum(),
                       paper_fim(g, rot, trans).matrix.diagonal().sum())
     g2 = synth.octagon([(1, 3), (2, 6)], radius=0.5)
-    a = frame_consistent_fim(g2, g2.vertex_rot, g2.vertex_trans).matrix
+    a = paper_fim(g2, g2.vertex_rot, g2.vertex_trans, variant="consistent").matrix
     b = paper_fim(g2, g2.vertex_rot, g2.vertex_trans).matrix
     assert abs(a - b).max() == 0
+
+
+def test_sweep_bounds_use_both_variants():
+    """mse_bound = eq. (64) as printed, mse_bound_model = the consistent variant, from posecrb.crlb."""
+    from posecrb.crlb import paper_crlb
+    from posecrb.experiments.crlb_sweep import _bounds
+    from posecrb.noise import noise_model_graph
+
+    g = synth.grid(3, 2, tau=100.0, kappa=200.0, orientation="random", rng=3)
+    rot, trans = anchor_poses(g.vertex_rot, g.vertex_trans, 0)
+    b = _bounds(g, rot, trans, 0, 5.0, "both", None, None)
+    model = noise_model_graph(g, 5.0, "both", None, None)
+    for prefix, variant in (("mse_bound", "eq64"), ("mse_bound_model", "consistent")):
+        res = paper_crlb(model, rot, trans, anchor=0, variant=variant)
+        assert b[prefix] == res.trace_crlb / (g.n - 1)
+        assert b[prefix + "_curvature"] == res.trace_crlb_curvature / (g.n - 1)
+    assert abs(b["mse_bound_model"] / b["mse_bound"] - 1) > 1e-2     # the variants differ in 3D
 
 
 @pytest.mark.parametrize("dim", [2, 3])

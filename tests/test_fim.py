@@ -1,5 +1,7 @@
 """The paper FIM (posecrb.fim) against dense references: finite-difference Jacobians of the
-translation residuals, dense loops for the rotation Laplacian and Psi (eq. 41 / 63)."""
+translation residuals, dense loops for the rotation Laplacian and Psi (eq. 41 / 63) for eq. (64)
+as printed; finite-difference Jacobians of the translation AND relative-rotation residuals (scipy's
+rotation vectors, not posecrb.lie) for the frame-consistent Fisher information."""
 from __future__ import annotations
 
 from dataclasses import replace
@@ -8,7 +10,9 @@ import numpy as np
 import pytest
 
 from posecrb.errors import DisconnectedGraph, NotPositiveDefinite
-from posecrb.fim import fim_logdet, fim_symbolic, paper_fim, t_opt_approx, trace_fim
+from scipy.spatial.transform import Rotation
+
+from posecrb.fim import FIM_VARIANTS, fim_logdet, fim_symbolic, paper_fim, t_opt_approx, trace_fim
 from posecrb.lie import exp_so3, rot2
 from posecrb.noise import rotation_weight
 
@@ -73,6 +77,61 @@ def dense_reference(graph, rot, trans, anchor: int, h: float = 1e-6) -> np.ndarr
     return f
 
 
+def _body_perturbed(rot: np.ndarray, dim: int, delta: np.ndarray) -> np.ndarray:
+    """R Exp(delta) along R E (2D angle; 3D E_k = G_k / sqrt 2), through scipy only."""
+    if dim == 2:
+        c, s = np.cos(delta[0]), np.sin(delta[0])
+        return rot @ np.array([[c, -s], [s, c]])
+    return rot @ Rotation.from_rotvec(np.asarray(delta) / np.sqrt(2.0)).as_matrix()
+
+
+def _rotation_coords(mat: np.ndarray, dim: int) -> np.ndarray:
+    """Coordinates of Log(mat) in the FIM's basis: the angle (2D), sqrt 2 * rotation vector (3D)."""
+    if dim == 2:
+        return np.array([np.arctan2(mat[1, 0], mat[0, 0])])
+    return np.sqrt(2.0) * Rotation.from_matrix(mat).as_rotvec()
+
+
+def dense_model_fisher(graph, rot, trans, anchor: int, h: float = 1e-6) -> np.ndarray:
+    """Fisher information J^T W J of the model's mean function, from central differences,
+    every pose perturbed in its body frame (x_k + dx, R_k Exp(delta)), order [translations;
+    rotations]. Per edge: translation residual R_i^T (x_j - x_i) - p_ij (weight tau I_d) and
+    rotation residual Log(Rbar_ij^T R_i^T R_j) in the E_k coordinates (weight w I_dr, eq. 39-41 /
+    59), with Rbar_ij = R_i^T R_j at the estimate itself: the noise-free measurement, where the
+    Jacobian of the residual is that of the mean function, as the Fisher information needs."""
+    d = graph.dim
+    dr = 1 if d == 2 else 3
+    rbar = [rot[i].T @ rot[j] for i, j in zip(graph.src, graph.dst)]
+
+    def residual(r, t):
+        out = []
+        for e, (i, j) in enumerate(zip(graph.src, graph.dst)):
+            out.append(r[i].T @ (t[j] - t[i]) - graph.trans[e])
+            out.append(_rotation_coords(rbar[e].T @ r[i].T @ r[j], d))
+        return np.concatenate(out)
+
+    cols = []
+    free = [k for k in range(graph.n) if k != anchor]
+    for k in free:
+        for a in range(d):
+            tp, tm = trans.copy(), trans.copy()
+            tp[k, a] += h
+            tm[k, a] -= h
+            cols.append((residual(rot, tp) - residual(rot, tm)) / (2 * h))
+    for k in free:
+        for a in range(dr):
+            delta = np.zeros(dr)
+            delta[a] = h
+            rp, rm = rot.copy(), rot.copy()
+            rp[k] = _body_perturbed(rot[k], d, delta)
+            rm[k] = _body_perturbed(rot[k], d, -delta)
+            cols.append((residual(rp, trans) - residual(rm, trans)) / (2 * h))
+    jac = np.stack(cols, axis=1)
+    w = rotation_weight(graph.kappa, d)
+    weights = np.concatenate([np.concatenate([np.full(d, t), np.full(dr, v)]) for t, v in zip(graph.tau, w)])
+    return jac.T @ (weights[:, None] * jac)
+
+
 @pytest.mark.parametrize("dim", [2, 3])
 @pytest.mark.parametrize("seed", [0, 1, 2])
 def test_fim_matches_finite_difference_jacobians(dim, seed):
@@ -80,12 +139,59 @@ def test_fim_matches_finite_difference_jacobians(dim, seed):
     g = make_random_graph(rng, n=7, extra=5, dim=dim, parallel=2)
     anchor = int(rng.integers(0, g.n))
     fim = paper_fim(g, g.vertex_rot, g.vertex_trans, anchor=anchor)
+    assert fim.variant == "eq64"
     ref = dense_reference(g, g.vertex_rot, g.vertex_trans, anchor)
     got = fim.matrix.toarray()
     np.testing.assert_allclose(got, got.T, atol=0)
     np.testing.assert_allclose(got, ref, rtol=1e-6, atol=1e-6 * np.abs(ref).max())
     assert fim.anchor_id == g.ids[anchor]
     np.testing.assert_array_equal(fim.pose_ids, np.delete(g.ids, anchor))
+
+
+@pytest.mark.parametrize("dim", [2, 3])
+@pytest.mark.parametrize("seed", [0, 1, 2])
+def test_consistent_variant_is_the_fisher_information_of_the_model(dim, seed):
+    """variant="consistent" == J^T W J of translation + relative-rotation residuals (finite
+    differences) at random poses (non-trivial relative rotations), random anchor."""
+    rng = np.random.default_rng(100 + seed)
+    g = make_random_graph(rng, n=7, extra=5, dim=dim, parallel=2)
+    anchor = int(rng.integers(0, g.n))
+    fim = paper_fim(g, g.vertex_rot, g.vertex_trans, anchor=anchor, variant="consistent")
+    assert fim.variant == "consistent"
+    ref = dense_model_fisher(g, g.vertex_rot, g.vertex_trans, anchor)
+    got = fim.matrix.toarray()
+    np.testing.assert_allclose(got, got.T, atol=0)
+    np.testing.assert_allclose(got, ref, rtol=1e-6, atol=1e-6 * np.abs(ref).max())
+    eq64 = paper_fim(g, g.vertex_rot, g.vertex_trans, anchor=anchor).matrix.toarray()
+    if dim == 3:
+        # eq. (64) as printed is NOT the model's information once poses are rotated relative to
+        # each other; the variants differ in the rotation coupling only (same trace)
+        # (the off-diagonal difference is w (R_i^T R_j - I), on the scale of the rotation weights)
+        assert np.abs(eq64 - ref).max() > 0.1 * rotation_weight(g.kappa, 3).max()
+        assert np.abs(eq64 - ref).max() > 1e3 * 1e-6 * np.abs(ref).max()
+        k = (g.n - 1) * 3
+        np.testing.assert_array_equal(got[:, :k], eq64[:, :k])
+        assert np.trace(got) == pytest.approx(np.trace(eq64), rel=1e-13)
+
+
+@pytest.mark.parametrize("seed", [0, 1])
+def test_2d_variants_are_identical(seed):
+    g = make_random_graph(np.random.default_rng(seed), n=9, dim=2)
+    for anchor in (0, 4):
+        a = paper_fim(g, g.vertex_rot, g.vertex_trans, anchor=anchor)
+        b = paper_fim(g, g.vertex_rot, g.vertex_trans, anchor=anchor, variant="consistent")
+        assert (a.variant, b.variant) == ("eq64", "consistent")
+        np.testing.assert_array_equal(a.matrix.indptr, b.matrix.indptr)
+        np.testing.assert_array_equal(a.matrix.indices, b.matrix.indices)
+        np.testing.assert_array_equal(a.matrix.data, b.matrix.data)
+        assert fim_logdet(a) == fim_logdet(b)
+
+
+def test_unknown_variant_is_rejected():
+    g = make_random_graph(np.random.default_rng(3), n=5, dim=3)
+    assert FIM_VARIANTS == ("eq64", "consistent")
+    with pytest.raises(ValueError, match="variant"):
+        paper_fim(g, g.vertex_rot, g.vertex_trans, variant="world")
 
 
 def test_psi_blocks_3d_match_eq63():
@@ -123,17 +229,21 @@ def test_pose_layout_is_a_permutation_with_a_consistent_index_map(dim):
     assert len(fp.coordinate_names()) == fp.q
 
 
+@pytest.mark.parametrize("variant", FIM_VARIANTS)
 @pytest.mark.parametrize("dim", [2, 3])
-def test_logdet_and_trace_match_dense(dim):
+def test_logdet_and_trace_match_dense(dim, variant):
     g = make_random_graph(np.random.default_rng(7), n=9, dim=dim)
-    fim = paper_fim(g, g.vertex_rot, g.vertex_trans)
+    fim = paper_fim(g, g.vertex_rot, g.vertex_trans, variant=variant)
     dense = fim.matrix.toarray()
+    if variant == "consistent":   # the reference matrix itself from finite differences of the model
+        np.testing.assert_allclose(dense, dense_model_fisher(g, g.vertex_rot, g.vertex_trans, 0),
+                                   rtol=1e-6, atol=1e-6 * np.abs(dense).max())
     sign, ref = np.linalg.slogdet(dense)
     assert sign > 0
     sym = fim_symbolic(fim)
     assert fim_logdet(fim, sym) == pytest.approx(ref, rel=1e-10)
     # the symbolic analysis depends only on the pattern: reuse it at another estimate
-    other = paper_fim(g, g.vertex_rot, g.vertex_trans * 1.5)
+    other = paper_fim(g, g.vertex_rot, g.vertex_trans * 1.5, variant=variant)
     assert fim_logdet(other, sym) == pytest.approx(np.linalg.slogdet(other.matrix.toarray())[1], rel=1e-10)
     assert trace_fim(fim) == pytest.approx(np.trace(dense), rel=1e-12)
 
@@ -207,8 +317,9 @@ def g2o_file(tmp_path):
     return make
 
 
+@pytest.mark.parametrize("variant", [None, "eq64", "consistent"])
 @pytest.mark.parametrize("dim", [2, 3])
-def test_cli_fim_paper_json_and_npz(dim, g2o_file, tmp_path, capsys):
+def test_cli_fim_paper_json_and_npz(dim, variant, g2o_file, tmp_path, capsys):
     import json
 
     import scipy.sparse as sp
@@ -218,19 +329,24 @@ def test_cli_fim_paper_json_and_npz(dim, g2o_file, tmp_path, capsys):
     path = g2o_file(dim)
     npz = tmp_path / "f.npz"
     ids = load(path).ids
+    extra = [] if variant is None else ["--fim-variant", variant]
     code, out, _ = run_cli(["fim", str(path), "--estimate", "vertices", "--anchor", str(ids[2]),
-                            "--save", str(npz), "--format", "json"], capsys)
+                            "--save", str(npz), "--format", "json", *extra], capsys)
     assert code == 0
     row = json.loads(out)
     g = load(path)
-    fim = paper_fim(g, g.vertex_rot, g.vertex_trans, anchor=2)
-    dense = fim.matrix.toarray()
+    assert row["fim_variant"] == (variant or "eq64")
+    if variant == "consistent":
+        dense = dense_model_fisher(g, g.vertex_rot, g.vertex_trans, 2)
+        dense = (dense + dense.T) / 2
+    else:
+        dense = dense_reference(g, g.vertex_rot, g.vertex_trans, 2)
     assert row["size"] == dense.shape[0] and row["anchors"] == [int(ids[2])]
-    assert row["logdet"] == pytest.approx(np.linalg.slogdet(dense)[1], rel=1e-9)
-    assert row["trace"] == pytest.approx(np.trace(dense), rel=1e-12)
+    assert row["logdet"] == pytest.approx(np.linalg.slogdet(dense)[1], rel=1e-7)
+    assert row["trace"] == pytest.approx(np.trace(dense), rel=1e-7)
     assert row["estimate"]["source"] == "vertices"
     saved = sp.load_npz(npz)
-    np.testing.assert_allclose(saved.toarray(), dense)
+    np.testing.assert_allclose(saved.toarray(), dense, rtol=1e-6, atol=1e-6 * np.abs(dense).max())
     z = np.load(npz)
     assert z["row_pose_id"].size == dense.shape[0] and int(ids[2]) not in set(z["row_pose_id"].tolist())
     assert list(z["coordinate_names"]) == (["x", "y", "theta"] if dim == 2 else
@@ -245,6 +361,12 @@ def test_cli_fim_sed_reports_rank_and_nullity(g2o_file, capsys):
     assert code == 0
     row = json.loads(out)
     assert row["nullity"] == 3 and row["rank"] == row["size"] - 3
+
+
+def test_cli_fim_variant_with_sed_is_a_usage_error(g2o_file, capsys):
+    code, _, err = run_cli(["fim", str(g2o_file(2)), "--model", "sed", "--estimate", "vertices",
+                            "--fim-variant", "consistent"], capsys)
+    assert code == 2 and "--fim-variant" in err
 
 
 def test_cli_fim_unknown_anchor_is_a_usage_error(g2o_file, capsys):

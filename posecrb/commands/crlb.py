@@ -1,13 +1,18 @@
 """`posecrb crlb FILE`: Cramér-Rao lower bounds at an estimate, paper or thesis model."""
 from __future__ import annotations
 
+import logging
+
 import click
 import numpy as np
 
 from ..errors import UsageError
 from ..report import print_rows
 from ._common import data_dir_option, format_option
-from .fim import estimate_option, load_with_estimate, model_option, rotation_weight_option, sed_coordinate_names
+from .fim import (estimate_option, fim_variant_option, load_with_estimate, model_option, resolve_fim_variant,
+                  rotation_weight_option, sed_coordinate_names)
+
+log = logging.getLogger("posecrb")
 
 
 def parse_pose_ids(text: str | None) -> bool | list[int]:
@@ -35,8 +40,11 @@ def parse_pose_ids(text: str | None) -> bool | list[int]:
 
 
 def crlb_result(file: str, data_dir: str | None, model: str, source: str, anchor_ids: tuple[int, ...],
-                quotient: bool, poses: bool | list[int], rotation_model: str) -> tuple[dict, list[dict]]:
-    """The JSON-ready result and, when per-pose blocks were asked, one row per pose."""
+                quotient: bool, poses: bool | list[int], rotation_model: str,
+                fim_variant: str | None = None) -> tuple[dict, list[dict]]:
+    """The JSON-ready result and, when per-pose blocks were asked, one row per pose.
+    ``fim_variant``: None (default eq64, with a warning in 3D), "eq64" or "consistent"."""
+    variant = resolve_fim_variant(model, fim_variant)
     graph, est, est_info, times = load_with_estimate(file, data_dir, source)
     row: dict = {"dataset": graph.name, "model": model, "dim": graph.dim, "poses": graph.n,
                  "edges": graph.m, "components": graph.n_components}
@@ -48,9 +56,14 @@ def crlb_result(file: str, data_dir: str | None, model: str, source: str, anchor
         if len(anchor_ids) > 1:
             raise UsageError("--model paper takes a single --anchor (its graph must be connected)")
         anchor = graph.anchor_index(anchor_ids[0] if anchor_ids else None)
-        res = paper_crlb(graph, est.rot, est.trans, anchor=anchor, per_pose=poses, rotation_model=rotation_model)
+        if graph.dim == 3 and fim_variant is None:
+            log.warning("eq. (64) as printed mixes rotation frames in 3D (world-frame rotation coupling, "
+                        "body-frame cross terms); --fim-variant consistent gives the Fisher information of "
+                        "the model (the bound the Monte Carlo experiment reaches)")
+        res = paper_crlb(graph, est.rot, est.trans, anchor=anchor, per_pose=poses, rotation_model=rotation_model,
+                         variant=variant)
         times.update(res.times)
-        row.update({"kind": "anchored", "anchors": [res.anchor_id], "nullity": 0,
+        row.update({"kind": "anchored", "fim_variant": res.fim_variant, "anchors": [res.anchor_id], "nullity": 0,
                     "trace_crlb": res.trace_crlb, "mse_bound": res.mse_bound,
                     "trace_translation": res.trace_translation, "trace_rotation": res.trace_rotation})
         if graph.dim == 3:
@@ -102,19 +115,22 @@ def crlb_result(file: str, data_dir: str | None, model: str, source: str, anchor
               help="Also report per-pose covariance blocks: 'all' or ids/ranges, e.g. 0,5,10-12.")
 @estimate_option
 @rotation_weight_option
+@fim_variant_option
 @data_dir_option
 @format_option()
-def command(file, model, quotient, anchors, poses, estimate_source, rotation_model, data_dir, fmt):
+def command(file, model, quotient, anchors, poses, estimate_source, rotation_model, fim_variant, data_dir, fmt):
     """Cramér-Rao lower bound of FILE at an estimate: exact trace, MSE bound, per-pose blocks.
 
     paper: C >= F^{-1} (2D, eq. 67); 3D adds the curvature term of eq. (68)
     (trace_crlb_curvature). trace_crlb = trace(F^{-1}), mse_bound = trace_crlb / n_p.
+    F is eq. (64) as printed unless --fim-variant consistent (the model's Fisher information;
+    in 3D the two differ, see `posecrb fim --help`).
     sed: the thesis' intrinsic CRB on SE(d)^n, anchored (5.1) or --quotient (5.5).
     Traces and blocks are exact (selected inversion of the sparse Cholesky factor).
     Per-pose blocks use the coordinates listed in `coordinates` (JSON: full matrices).
     """
     row, per_rows = crlb_result(file, data_dir, model, estimate_source, anchors, quotient,
-                                parse_pose_ids(poses), rotation_model)
+                                parse_pose_ids(poses), rotation_model, fim_variant)
     if fmt == "json":
         print_rows([row], "json")
         return

@@ -129,7 +129,7 @@ CRLB_HEADERS = {"mse_stderr": "± s.e.", "mse_bound": "CRLB/n_p", "mse_bound_cur
                 "ratio": "MSE/CRLB", "ratio_model": "MSE/CRLB model"}
 
 
-@command.command("crlb")
+@command.command("crlb", short_help="Monte Carlo MSE vs CRLB over noise levels (paper Fig. 6/7).")
 @click.argument("file")
 @click.option("--kc", "kc_spec", default=None,
               help="Noise levels k_c: one value (20), a list (1,5,20) or a range (1:20, 1:20:0.5). "
@@ -151,7 +151,8 @@ def crlb_cmd(file, kc_spec, scale, kappa, tau, anchor, data_dir, trials, seed, j
     Ground truth is the certified solution of FILE. Each trial regenerates every measurement by
     eq. (80) at the level k_c, solves it, and measures the error in the FIM's coordinates
     (anchor aligned; 2D angle, 3D sqrt2*Log). Columns: ratio = MSE / paper CRLB (eq. 67 / 68);
-    in 3D also ratio_model = MSE / CRLB of the frame-consistent FIM of the simulated model.
+    in 3D also ratio_model = MSE / CRLB of the frame-consistent Fisher information of the simulated
+    model (`posecrb crlb --fim-variant consistent`).
     """
     from ..experiments.crlb_sweep import crlb_sweep, parse_levels
 
@@ -195,7 +196,7 @@ THESIS_HEADERS = {"frob": "‖Cov−CRB‖_F", "frob_rel": "relative", "frob_rel
                   "eig_min": "λmin Sym(Cov−CRB)", "eig_max": "λmax", "not_converged": "not conv."}
 
 
-@command.command("thesis")
+@command.command("thesis", short_help="Thesis ch. 6: MLE covariance vs anchored and quotient CRB.")
 @click.option("--m", "m_spec", default=None,
               help="Measurements per arc, a list (default 1,2,5,10,20,50,100,150; --quick: 1,10,100).")
 @_run_options("default 200; --quick: 100")
@@ -238,7 +239,7 @@ OCTAGON_HEADERS = {"extra_edges": "extra", "m": "edges", "total_degree": "degree
                    "best_fewer_logdet": "best logdet, fewer edges", "flagged": "worse than fewer"}
 
 
-@command.command("octagon")
+@command.command("octagon", short_help="T- vs D-optimality vs node degree (paper Fig. 4/5).")
 @click.option("--radius", type=click.FloatRange(min=0, min_open=True), default=0.1, show_default=True,
               help="Circumradius of the octagon. The paper gives no size; 0.1 keeps sum tau||p||^2 small, as it states.")
 @_run_options("random graphs per number of extra edges; default 50; --quick: 5")

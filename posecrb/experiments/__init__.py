@@ -3,7 +3,6 @@
 * ``crlb_sweep``: Monte Carlo MSE of the certified MLE vs the CRLB (paper sec. IX-C, Fig. 6/7);
 * ``thesis``: empirical covariance of the intrinsic MLE vs anchored / quotient CRBs (thesis ch. 6);
 * ``octagon``: T- vs D-optimality on the 8-pose octagon (paper sec. IX-A, Fig. 4/5);
-* ``model_fim``: the frame-consistent FIM of the simulated model (3D differs from eq. 64).
 """
 from .crlb_sweep import CrlbLevel, CrlbSweepResult, crlb_sweep, parse_levels
 from .octagon import OctagonResult, octagon_experiment

@@ -21,8 +21,9 @@ precisions), and measures the error in the FIM's own tangent coordinates:
 MSE per pose = mean over trials of the squared error summed over poses, divided
 by n_p; it is compared to ``trace(CRLB) / n_p`` with the FIM of the *scaled* noise
 model evaluated at the truth (3D: with and without the curvature term of eq. 68),
-both the paper's FIM (eq. 42 / 64, ``ratio``) and the frame-consistent FIM of the
-simulated model (``ratio_model``; see ``model_fim`` for why they differ in 3D).
+both the paper's FIM as printed (eq. 42 / 64, ``ratio``) and the frame-consistent Fisher
+information of the simulated model (``ratio_model``: ``posecrb.fim.paper_fim`` with
+``variant="consistent"``; the module docstring of ``posecrb.fim`` says why they differ in 3D).
 """
 from __future__ import annotations
 
@@ -125,7 +126,7 @@ class CrlbLevel:
     mse_bound_curvature: float | None   # 3D: eq. (68) trace / n_p
     ratio: float                        # mse / mse_bound
     ratio_curvature: float | None
-    mse_bound_model: float              # frame-consistent FIM of the simulated model (= paper in 2D)
+    mse_bound_model: float              # variant="consistent" FIM of the simulated model (= paper in 2D)
     mse_bound_model_curvature: float | None
     ratio_model: float
     uncertified: int                    # trials whose solve was not certified (still counted)
@@ -184,18 +185,18 @@ def _bounds(graph: PoseGraph, rot, trans, anchor: int, kc: float, scale: str, ta
     """Bounds per pose of the scaled noise model at the truth.
 
     ``mse_bound*``: the paper's CRLB (``posecrb.crlb.paper_crlb``: eq. 67, 3D eq. 68 from
-    eq. 64); ``mse_bound_model*``: the same from the frame-consistent FIM of the simulated
-    model (``model_fim``), which differs from the paper's in 3D only.
+    eq. 64 as printed, ``variant="eq64"``); ``mse_bound_model*``: the same from the
+    frame-consistent Fisher information of the simulated model (``variant="consistent"``),
+    which differs from the paper's in 3D only.
     """
     from ..crlb import paper_crlb
     from ..noise import noise_model_graph
-    from .model_fim import model_crlb
 
     model = noise_model_graph(graph, kc, scale, tau, kappa)
     n_p = graph.n - 1
     out = {}
-    for prefix, res in (("mse_bound", paper_crlb(model, rot, trans, anchor=anchor)),
-                        ("mse_bound_model", model_crlb(model, rot, trans, anchor=anchor))):
+    for prefix, variant in (("mse_bound", "eq64"), ("mse_bound_model", "consistent")):
+        res = paper_crlb(model, rot, trans, anchor=anchor, variant=variant)
         out[prefix] = float(res.trace_crlb) / n_p
         out[prefix + "_trans"] = float(res.trace_translation) / n_p
         out[prefix + "_rot"] = float(res.trace_rotation) / n_p
