@@ -9,35 +9,19 @@ Usage: python benchmarks/bounds.py [--repeat K] [NAME ...]
 """
 from __future__ import annotations
 
-import argparse
-import statistics
-import time
 
 from sksparse.cholmod import cholesky
 
-import logging
 
-from posecrb import datasets, load
+from _common import dataset_args, median_time
+from posecrb import load
 from posecrb.bounds import compute_bounds, weighted_laplacians
 
 
-def median_time(fn, repeat):
-    fn()
-    ts = []
-    for _ in range(repeat):
-        t0 = time.perf_counter()
-        fn()
-        ts.append(time.perf_counter() - t0)
-    return statistics.median(ts)
 
 
 def main() -> None:
-    logging.getLogger("posecrb").setLevel(logging.ERROR)
-    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("names", nargs="*")
-    ap.add_argument("--repeat", type=int, default=7)
-    args = ap.parse_args()
-    files = [datasets.resolve(n) for n in args.names] if args.names else datasets.discover()
+    args, files = dataset_args(__doc__.splitlines()[0], repeat=7)
     print(f"{'dataset':28s} {'n':>6s} {'m':>6s} {'parse':>8s} {'lb':>8s} {'bare':>8s} {'lb/bare':>7s} "
           f"{'ub':>8s} {'ub_lam':>8s}")
     for f in files:

@@ -15,15 +15,12 @@ Usage: python benchmarks/fim.py [--repeat K] [NAME ...]
 """
 from __future__ import annotations
 
-import argparse
-import logging
-import statistics
-import time
 from collections import deque
 
 import numpy as np
 
-from posecrb import datasets, load
+from _common import dataset_args, median_time
+from posecrb import load
 from posecrb.crlb import paper_crlb
 from posecrb.fim import fim_logdet, paper_fim
 from posecrb.selinv import inverse_block_diagonal
@@ -31,14 +28,6 @@ from posecrb.selinv import inverse_block_diagonal
 GTSAM = {"sphere2500": 7.0, "city10000": 7.9}
 
 
-def median_time(fn, repeat):
-    fn()
-    ts = []
-    for _ in range(repeat):
-        t0 = time.perf_counter()
-        fn()
-        ts.append(time.perf_counter() - t0)
-    return statistics.median(ts)
 
 
 def odometry_estimate(g):
@@ -69,12 +58,7 @@ def odometry_estimate(g):
 
 
 def main() -> None:
-    logging.getLogger("posecrb").setLevel(logging.ERROR)
-    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("names", nargs="*")
-    ap.add_argument("--repeat", type=int, default=5)
-    args = ap.parse_args()
-    files = [datasets.resolve(n) for n in args.names] if args.names else datasets.discover()
+    args, files = dataset_args(__doc__.splitlines()[0], repeat=5)
     print(f"{'dataset':26s} {'n':>6s} {'size':>6s} {'build':>7s} {'logdet':>7s} {'b+ld':>7s} "
           f"{'blocks':>7s} {'crlb':>7s} {'GTSAM':>6s} {'speedup':>7s}")
     for f in files:

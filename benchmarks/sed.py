@@ -10,32 +10,19 @@ Usage: python benchmarks/sed.py [--repeat K] [NAME ...]
 """
 from __future__ import annotations
 
-import argparse
-import logging
 import statistics
-import time
 
-from posecrb import datasets, load
+
+from _common import dataset_args, median_time
+from posecrb import load
 from posecrb.sed import sed_crb, sed_fim
 
 
-def median_time(fn, repeat):
-    fn()
-    ts = []
-    for _ in range(repeat):
-        t0 = time.perf_counter()
-        fn()
-        ts.append(time.perf_counter() - t0)
-    return statistics.median(ts)
 
 
 def main() -> None:
-    ap = argparse.ArgumentParser()
-    ap.add_argument("names", nargs="*")
-    ap.add_argument("--repeat", type=int, default=3)
-    args = ap.parse_args()
-    logging.basicConfig(level=logging.ERROR)
-    paths = [datasets.resolve(n) for n in args.names] if args.names else sorted(datasets.discover())
+    args, paths = dataset_args(__doc__.splitlines()[0], repeat=3)
+    paths = sorted(paths)
     print(f"{'dataset':24s} {'n':>6s} {'nq':>6s} {'null':>4s} {'build':>7s} {'rank':>7s} "
           f"{'anchored':>8s} {'quotient':>8s}  trace(anchored)  trace(quotient)")
     for path in paths:
