@@ -36,6 +36,10 @@ class SymbolicCholesky:
 
     def factor(self, a: sp.spmatrix, name: str = "matrix", beta: float = 0.0) -> Factor:
         """Numeric factorization of ``a + beta I`` with this analysis; raises NotPositiveDefinite."""
+        return self.factor_logdet(a, name, beta)[0]
+
+    def factor_logdet(self, a: sp.spmatrix, name: str = "matrix", beta: float = 0.0) -> tuple[Factor, float]:
+        """``factor`` and the log-determinant it already checked (no second pass over the factor)."""
         if a.shape != self.shape:
             raise ValueError(f"{name}: shape {a.shape} does not match the analysed pattern {self.shape}")
         a = _as_csc(a)
@@ -43,17 +47,16 @@ class SymbolicCholesky:
             f = self._symbolic.cholesky(a, beta=beta)
         except CholmodNotPositiveDefiniteError as exc:
             raise NotPositiveDefinite(name, str(exc).split(": ", 1)[-1]) from None
-        _check_positive(f, name)
-        return f
+        return f, _checked_logdet(f, name)
 
 
-def _check_positive(f: Factor, name: str) -> None:
+def _checked_logdet(f: Factor, name: str) -> float:
     # CHOLMOD's simplicial mode does not raise on a failed pivot; it stops and
     # leaves a non-positive diagonal, so inspect the factor's diagonal.
     with np.errstate(all="ignore"):
         ld = f.logdet()
     if np.isfinite(ld):
-        return
+        return float(ld)
     with np.errstate(all="ignore"):
         diag = f.D()
     bad = np.flatnonzero(~(diag > 0))
@@ -71,7 +74,7 @@ def cholesky(a: sp.spmatrix, name: str = "matrix", beta: float = 0.0,
 def logdet(a: sp.spmatrix, name: str = "matrix", beta: float = 0.0,
            symbolic: SymbolicCholesky | None = None) -> float:
     """log det(a + beta I) for a sparse symmetric positive definite matrix."""
-    return float(cholesky(a, name=name, beta=beta, symbolic=symbolic).logdet())
+    return (symbolic or SymbolicCholesky(a)).factor_logdet(a, name=name, beta=beta)[1]
 
 
 def lambda_min(a: sp.spmatrix, factor: Factor | None = None, name: str = "matrix") -> float:
