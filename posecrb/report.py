@@ -51,7 +51,7 @@ def fmt_value(v: Any, digits: int = 5) -> str:
         v = float(v)
         if v == 0 or not math.isfinite(v):
             return str(v)
-        if 1e-3 <= abs(v) < 1e6:
+        if 1e-3 <= abs(v) < 1e5:
             return f"{v:.{digits}g}"
         return f"{v:.{digits - 1}e}"
     if isinstance(v, (list, tuple)):
