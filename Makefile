@@ -16,10 +16,10 @@ install:
 	    $(SUDO) env DEBIAN_FRONTEND=noninteractive apt-get update -q && \
 	    $(SUDO) env DEBIAN_FRONTEND=noninteractive apt-get install -y -q $$missing; \
 	  fi
-	@$(PYTHON) -c "import sksparse.cholmod, posecrb, numba, threadpoolctl" 2>/dev/null && \
-	  $(PYTHON) -m pip show -q posecrb >/dev/null 2>&1 && \
-	  $(PYTHON) -c "import pytest, hypothesis, mpmath" 2>/dev/null || \
-	  $(PYTHON) -m pip install -q -e '.[dev]'
+	@# (re)install unless this very checkout is the installed posecrb and every dependency imports
+	@$(PYTHON) -I -c "import os, sys, posecrb, sksparse.cholmod, numba, threadpoolctl, pytest, hypothesis, mpmath; \
+	  sys.exit(os.path.dirname(os.path.dirname(os.path.realpath(posecrb.__file__))) != os.path.realpath('.'))" \
+	  2>/dev/null || $(PYTHON) -m pip install -q -e '.[dev]'
 
 run: install
 	$(PYTHON) -m posecrb tables --all
