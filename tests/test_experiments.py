@@ -254,3 +254,18 @@ def test_cli_crlb(tmp_path):
 
     assert main(["experiment", "crlb", str(path), "--kc", "0"]) == 2
     assert main(["experiment", "crlb", str(path), "--scheduler", "tcp://x:1"]) == 2
+
+
+# ---------------------------------------------------------------- quick modes (the CI run of issue 6)
+@pytest.mark.parametrize("args", [["crlb", "CSAIL"], ["crlb", "tinyGrid3D"], ["thesis"], ["octagon"]])
+def test_quick_mode_of_each_experiment(shared_datasets, args):
+    r = _run(["experiment", *args, "--quick", "--format", "json"])
+    assert r.exit_code == 0, r.output
+    rows = json.loads(r.output)
+    assert rows
+    if args[0] == "crlb":
+        assert [row["kc"] for row in rows] == [1.0, 20.0]
+        for row in rows:
+            assert row["uncertified"] == 0
+            # 20 trials: the MSE of an (asymptotically) efficient estimator is near the model's bound
+            assert 0.5 < row["ratio_model"] < 2.0
