@@ -134,3 +134,16 @@ def test_table2_fit_reproduces_published_lower_bounds(shared_datasets):
     for name, lb in published.items():
         b = compute_bounds(load(shared_datasets / f"{name}.g2o"), rotation_model="table2")
         assert b.lb == pytest.approx(lb, rel=3e-4), name
+
+
+def test_cli_disconnected_graph_lists_components(tmp_path, capfd):
+    from posecrb.cli import main
+
+    info = "10 0 0 10 0 5"
+    f = tmp_path / "two.g2o"
+    f.write_text("".join(f"EDGE_SE2 {i} {j} 1 0 0 {info}\n" for i, j in [(0, 1), (1, 2), (10, 11)]))
+    assert main(["bounds", str(f), "--estimate", "none"]) == 1
+    err = capfd.readouterr().err
+    assert "disconnected (2 components)" in err
+    assert "3 poses (ids 0, 1, 2)" in err and "2 poses (ids 10, 11)" in err
+    assert "Traceback" not in err
