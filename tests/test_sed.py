@@ -16,17 +16,10 @@ from posecrb.io import load
 from posecrb.sed import edge_residuals, kernel_basis, left_information, sed_crb, sed_fim
 
 from .conftest import make_random_graph
+from .test_se_lie import hat_ref
 
 
 # ------------------------------------------------------------------ independent references
-def hat_ref(xi: np.ndarray) -> np.ndarray:
-    if xi.size == 3:
-        w, x, y = xi
-        return np.array([[0, -w, x], [w, 0, y], [0, 0, 0]], float)
-    w1, w2, w3, v1, v2, v3 = xi
-    return np.array([[0, -w3, w2, v1], [w3, 0, -w1, v2], [-w2, w1, 0, v3], [0, 0, 0, 0]], float)
-
-
 def homog(r, t):
     d = r.shape[-1]
     out = np.eye(d + 1)
