@@ -181,7 +181,9 @@ def _run_dask(fn, contexts, chunks, jobs, scheduler, client, collect, out):
                     n_workers=jobs, threads_per_worker=1, processes=True, host="127.0.0.1",
                     dashboard_address=None))
                 client = stack.enter_context(Client(cluster))
-        payload = client.scatter((fn, list(contexts)), broadcast=True)
+        # A fresh key per run (hash=False): re-scattering identical data under the same key from a
+        # second client can leave workers replicating it forever (seen with distributed 2026.8).
+        payload = client.scatter((fn, list(contexts)), hash=False)
         futures = [client.submit(_run_chunk_dask, payload, chunk, pure=False) for chunk in chunks]
         for fut in dask_as_completed(futures):
             collect(fut.result())
