@@ -154,3 +154,55 @@ def test_real_files_with_pitfalls_load(shared_datasets, name):
     assert (g.n, g.m) == counts
     assert g.n_components == 1
     assert np.isfinite(g.tau).all() and np.isfinite(g.kappa).all()
+
+
+# ---- quaternions="raw": SE-Sync's reading of 3D edge quaternions ----------------------------
+
+def _eigen_rotation(qx, qy, qz, qw):
+    """Eigen's Quaternion<double>(qw, qx, qy, qz).toRotationMatrix(), transcribed term by term
+    (Eigen/src/Geometry/Quaternion.h); it never normalises."""
+    tx, ty, tz = 2.0 * qx, 2.0 * qy, 2.0 * qz
+    twx, twy, twz = tx * qw, ty * qw, tz * qw
+    txx, txy, txz = tx * qx, ty * qx, tz * qx
+    tyy, tyz, tzz = ty * qy, tz * qy, tz * qz
+    return np.array([[1.0 - (tyy + tzz), txy - twz, txz + twy],
+                     [txy + twz, 1.0 - (txx + tzz), tyz - twx],
+                     [txz - twy, tyz + twx, 1.0 - (txx + tyy)]])
+
+
+def test_raw_quaternions_follow_eigen_and_normalize_is_a_rotation(tmp_path):
+    q = (0.1, -0.25, 0.3, 0.93)            # |q|^2 = 1.0074: as unnormalised as 2-digit files get
+    text = (f"VERTEX_SE3:QUAT 0 0 0 0 {q[0]} {q[1]} {q[2]} {q[3]}\nVERTEX_SE3:QUAT 1 1 0 0 0 0 0 1\n"
+            f"EDGE_SE3:QUAT 0 1 1 2 3 {q[0]} {q[1]} {q[2]} {q[3]} {INFO3}\n")
+    f = tmp_path / "q.g2o"
+    f.write_text(text)
+    raw, norm = load(f, quaternions="raw"), load(f)
+    np.testing.assert_allclose(raw.rot[0], _eigen_rotation(*q), rtol=0, atol=1e-15)
+    nq = np.array(q) / np.linalg.norm(q)
+    np.testing.assert_allclose(norm.rot[0], _eigen_rotation(*nq), atol=1e-15)
+    np.testing.assert_allclose(norm.rot[0] @ norm.rot[0].T, np.eye(3), atol=1e-15)
+    # Eigen's matrix of an unnormalised q is s R(q/|q|) + (1 - s) I with s = |q|^2: not orthogonal.
+    s = float(np.dot(q, q))
+    np.testing.assert_allclose(raw.rot[0], s * norm.rot[0] + (1 - s) * np.eye(3), atol=1e-15)
+    assert np.abs(raw.rot[0] @ raw.rot[0].T - np.eye(3)).max() > 1e-3
+    # Vertices are estimates, not measurements (SE-Sync ignores them): normalised either way.
+    np.testing.assert_array_equal(raw.vertex_rot, norm.vertex_rot)
+    np.testing.assert_array_equal(raw.trans, norm.trans)
+    np.testing.assert_array_equal(raw.info, norm.info)
+    assert parse_text(text, "q.g2o", quaternions="raw").rot[0].tolist() == raw.rot[0].tolist()
+
+
+def test_raw_quaternions_leave_2d_and_toro_alone():
+    text2 = f"EDGE_SE2 0 1 1 2 0.5 {INFO2}\n"
+    np.testing.assert_array_equal(parse_text(text2, quaternions="raw").rot, parse_text(text2).rot)
+    text3 = f"EDGE3 0 1 1 2 3 0.1 -0.2 0.3 {INFO3}\n"
+    np.testing.assert_array_equal(parse_text(text3, quaternions="raw").rot, parse_text(text3).rot)
+
+
+def test_raw_quaternions_still_reject_zero_and_bad_mode():
+    from posecrb.errors import UsageError
+
+    with pytest.raises(ParseError, match="zero quaternion"):
+        parse_text(f"EDGE_SE3:QUAT 0 1 0 0 0 0 0 0 0 {INFO3}\n", "z.g2o", quaternions="raw")
+    with pytest.raises(UsageError, match="quaternions"):
+        parse_text(f"EDGE_SE2 0 1 1 2 0.5 {INFO2}\n", quaternions="normalise")

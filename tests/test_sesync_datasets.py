@@ -1,6 +1,30 @@
-"""All shared datasets against SE-Sync C++'s certified optima (issue 3). Slow: run with -m slow."""
+"""All shared datasets against SE-Sync C++'s certified optima (issue 3).
+
+Why the file is read twice. SE-Sync's g2o reader builds each 3D measurement rotation with
+Eigen's ``Quaternion(qw, qx, qy, qz).toRotationMatrix()`` WITHOUT normalising the quaternion,
+so its R~ is slightly non-orthogonal (files print 6-9 digits), and its data matrix puts
+``kappa I`` on the rotation diagonal blocks and ``-kappa R~`` off the diagonal. Its objective
+is therefore ``sum kappa (2d - 2 tr(R_j^T R_i R~)) + tau ||t_j - t_i - R_i t~||^2``, which is not
+``kappa ||R_j - R_i R~||_F^2`` when R~ is not orthogonal. The issue's reference values were
+computed that way. posecrb normalises quaternions by default (DESIGN.md section 2), so:
+
+- ``load(path, quaternions="raw")`` (SE-Sync's reading) reproduces the references: every
+  dataset certifies and matches to ~1e-8 relative or better, except parking-garage, whose
+  reference is 1.11e-6 ABOVE the certified optimum. That reference is not the minimum of its
+  own objective: the independent evaluation below, at posecrb's feasible estimate (rotations in
+  SO(3)), gives a lower value, so SE-Sync stopped early there (its trust region stops at a
+  1e-6 relative decrease and certifies with a 1e-3 tolerance).
+- the default normalised reading differs from the references by what the quaternion
+  normalisation changes: tinyGrid3D -1.1e-6, cubicle -1.1e-5, parking-garage +3.1e-5 (the
+  other datasets stay within 1e-6, 2D files are unaffected).
+
+The expected objective at an estimate is evaluated here independently of posecrb: the g2o
+text is split by hand, R~ comes from Eigen's formula written out, tau and kappa from the
+information blocks (DESIGN.md section 3), and the rotation term from SE-Sync's definition.
+"""
 from __future__ import annotations
 
+import numpy as np
 import pytest
 
 from posecrb.io import load
@@ -13,25 +37,85 @@ REFERENCE = {
     "parking-garage": 1.2624855350, "sphere2500": 1687.0056783, "sphere_bignoise_vertex3": 2961756.5055,
     "torus3D": 24227.041546, "cubicle": 717.13404328,
 }
-# Measured disagreements with the reference table, (low, high) relative bounds:
-# tinyGrid3D and cubicle: posecrb's certified value is LOWER than SE-Sync's (a feasible estimate,
-# objective re-checked edge by edge), i.e. the reference stopped early; parking-garage: posecrb's
-# value is 3.1e-5 higher while S + 1e-11 I factors (SDP optimum for these data to ~5e-8),
-# so the reference was computed from different data. See the issue-3 report.
-KNOWN = {"tinyGrid3D": (-2e-6, 1e-6), "cubicle": (-1.2e-5, 1e-6), "parking-garage": (-1e-6, 3.2e-5)}
+# SE-Sync reading: (low, high) relative error bounds where 1e-6 does not hold (see the docstring).
+KNOWN_RAW = {"parking-garage": (-1.2e-6, 0.0)}
+# Normalised reading: the datasets whose value moves by more than 1e-6 with the normalisation.
+KNOWN_NORMALIZED = {"tinyGrid3D": (-1.2e-6, -1.0e-6), "cubicle": (-1.2e-5, -1.0e-5),
+                    "parking-garage": (3.0e-5, 3.2e-5)}
 TORO = ["csail.toro", "w100.graph", "sphere_smallnoise.graph", "sphere_bignoise.graph", "w10000.graph"]
 
 
-@pytest.mark.slow
+def eigen_to_rotation_matrix(qx, qy, qz, qw):
+    """Eigen's Quaternion::toRotationMatrix() (Eigen/src/Geometry/Quaternion.h), no normalisation."""
+    tx, ty, tz = 2 * qx, 2 * qy, 2 * qz
+    twx, twy, twz = tx * qw, ty * qw, tz * qw
+    txx, txy, txz = tx * qx, ty * qx, tz * qx
+    tyy, tyz, tzz = ty * qy, tz * qy, tz * qz
+    return np.stack([np.stack([1 - (tyy + tzz), txy - twz, txz + twy], -1),
+                     np.stack([txy + twz, 1 - (txx + tzz), tyz - twx], -1),
+                     np.stack([txz - twy, tyz + twx, 1 - (txx + tyy)], -1)], -2)
+
+
+def sesync_objective(path, rot, trans, quaternions):
+    """SE-Sync's objective of the g2o file at the estimate (rot, trans), indexed by increasing id."""
+    rows = [ln.split() for ln in open(path) if ln.startswith("EDGE")]
+    vals = np.array([[float(x) for x in r[1:]] for r in rows])
+    ids = np.unique(vals[:, :2].astype(np.int64))
+    i, j = np.searchsorted(ids, vals[:, 0].astype(np.int64)), np.searchsorted(ids, vals[:, 1].astype(np.int64))
+    d = rot.shape[1]
+    if d == 2:
+        t, th, u = vals[:, 2:4], vals[:, 4], vals[:, 5:11]
+        Rm = np.stack([np.stack([np.cos(th), -np.sin(th)], -1), np.stack([np.sin(th), np.cos(th)], -1)], -2)
+        cov_t = np.linalg.inv(np.stack([np.stack([u[:, 0], u[:, 1]], -1), np.stack([u[:, 1], u[:, 3]], -1)], -2))
+        tau = 2 / np.trace(cov_t, axis1=1, axis2=2)
+        kappa = u[:, 5]
+    else:
+        t, q = vals[:, 2:5], vals[:, 5:9]
+        if quaternions == "normalize":
+            q = q / np.linalg.norm(q, axis=1, keepdims=True)
+        Rm = eigen_to_rotation_matrix(*q.T)
+        info = np.zeros((len(rows), 6, 6))
+        iu = np.triu_indices(6)
+        info[:, iu[0], iu[1]] = vals[:, 9:30]
+        info[:, iu[1], iu[0]] = vals[:, 9:30]
+        tau = 3 / np.trace(np.linalg.inv(info[:, :3, :3]), axis1=1, axis2=2)
+        kappa = 3 / (2 * np.trace(np.linalg.inv(info[:, 3:, 3:]), axis1=1, axis2=2))
+    # kappa I on both diagonal blocks, -kappa R~ off the diagonal: kappa (|R_i|^2 + |R_j|^2 - 2 tr(R_j^T R_i R~))
+    cross = np.einsum("eab,eab->e", rot[j], rot[i] @ Rm)
+    sq = np.einsum("eab,eab->e", rot[i], rot[i]) + np.einsum("eab,eab->e", rot[j], rot[j])
+    res = trans[j] - trans[i] - np.einsum("eab,eb->ea", rot[i], t)
+    return float(np.sum(kappa * (sq - 2 * cross)) + np.sum(tau * np.einsum("ea,ea->e", res, res)))
+
+
 @pytest.mark.parametrize("name", list(REFERENCE))
-def test_g2o_dataset_certified_and_optimal(shared_datasets, name):
-    res = solve(load(shared_datasets / f"{name}.g2o"))
+def test_g2o_dataset_sesync_reading_matches_reference(shared_datasets, name):
+    path = shared_datasets / f"{name}.g2o"
+    res = solve(load(path, quaternions="raw"))
     assert res.certified, res.reason
-    lo, hi = KNOWN.get(name, (-1e-6, 1e-6))
+    # The reference form |R_i|^2 + |R_j|^2 - 2 tr(...) loses ~eps * 2d * sum(kappa) to cancellation
+    # (2D kitti_*: sum kappa ~ 5e9, ~1e-9 relative); posecrb sums without cancelling.
+    expected = sesync_objective(path, res.rot, res.trans, "raw")
+    assert expected == pytest.approx(res.objective, rel=1e-8 if res.rot.shape[1] == 2 else 1e-11)
+    lo, hi = KNOWN_RAW.get(name, (-1e-6, 1e-6))
+    assert lo <= (res.objective - REFERENCE[name]) / REFERENCE[name] <= hi
+    if name in KNOWN_RAW:   # a feasible estimate below the reference: the reference is not the minimum
+        np.testing.assert_allclose(res.rot @ np.swapaxes(res.rot, 1, 2), np.broadcast_to(np.eye(3), res.rot.shape),
+                                   atol=1e-12)
+        np.testing.assert_allclose(np.linalg.det(res.rot), 1.0, atol=1e-12)
+        assert expected < REFERENCE[name]
+
+
+@pytest.mark.parametrize("name", list(KNOWN_NORMALIZED))
+def test_g2o_dataset_normalized_reading(shared_datasets, name):
+    """posecrb's default reading: certified, and off the reference by the normalisation alone."""
+    path = shared_datasets / f"{name}.g2o"
+    res = solve(load(path))
+    assert res.certified, res.reason
+    assert sesync_objective(path, res.rot, res.trans, "normalize") == pytest.approx(res.objective, rel=1e-11)
+    lo, hi = KNOWN_NORMALIZED[name]
     assert lo <= (res.objective - REFERENCE[name]) / REFERENCE[name] <= hi
 
 
-@pytest.mark.slow
 @pytest.mark.parametrize("name", TORO)
 def test_toro_dataset_certified(shared_datasets, name):
     res = solve(load(shared_datasets / "toro" / name))

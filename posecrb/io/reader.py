@@ -8,16 +8,34 @@ from itertools import chain
 
 import numpy as np
 
-from ..errors import ParseError
+from ..errors import ParseError, UsageError
 from ..graph import PoseGraph
 from ..lie import euler_to_rot, quat_to_rot, rot2
 from .formats import RECORDS, SKIPPED_TAGS, TORO2_INFO_ORDER, RecordKind
 
 log = logging.getLogger("posecrb")
 
+QUATERNION_MODES = ("normalize", "raw")
 
-def load(path: str | os.PathLike) -> PoseGraph:
-    """Read a g2o or TORO pose-graph file; the format is detected from its content."""
+
+def load(path: str | os.PathLike, quaternions: str = "normalize") -> PoseGraph:
+    """Read a g2o or TORO pose-graph file; the format is detected from its content.
+
+    ``quaternions`` says how the g2o 3D edge quaternions (qx, qy, qz, qw) become R~:
+
+    - ``"normalize"`` (default, DESIGN.md section 2): ``q / |q|`` then the rotation matrix;
+      every R~ is in SO(3).
+    - ``"raw"``: SE-Sync's g2o reader, i.e. Eigen's ``Quaternion(qw, qx, qy, qz).toRotationMatrix()``
+      applied to the quaternion AS WRITTEN (no normalisation). Files print quaternions with
+      6-9 digits, so R~ is then slightly non-orthogonal (``|I - R~ R~^T|`` up to ~1e-5 on
+      cubicle.g2o), and SE-Sync's objective (``posecrb.sesync``, whose data matrix carries
+      ``kappa I`` / ``-kappa R~`` blocks exactly as SE-Sync's) differs from the normalised
+      reading by up to ~3e-5 relative. This mode exists ONLY to reproduce SE-Sync's numbers;
+      the rest of posecrb (FIM, bounds, CRLB) assumes rotations and should get the default.
+
+    Either way a zero quaternion is an error, vertex quaternions (an estimate, which
+    SE-Sync's reader ignores) are always normalised, and 2D/TORO files are unaffected.
+    """
     path = os.fspath(path)
     try:
         with open(path, "rb") as fh:
@@ -29,7 +47,7 @@ def load(path: str | os.PathLike) -> PoseGraph:
     except UnicodeDecodeError as exc:
         line = data[: exc.start].count(b"\n") + 1
         raise ParseError(path, line, "not a text file (invalid UTF-8)") from None
-    return parse_text(text, path=path, sha256=hashlib.sha256(data).hexdigest())
+    return parse_text(text, path=path, sha256=hashlib.sha256(data).hexdigest(), quaternions=quaternions)
 
 
 def _numeric_block(path: str, rows: list[list[str]], lines: np.ndarray, rec: RecordKind) -> np.ndarray:
@@ -75,15 +93,17 @@ def _upper_to_full(vals: np.ndarray, q: int) -> np.ndarray:
     return out
 
 
-def _quaternions(path: str, q: np.ndarray, lines: np.ndarray, tag: str) -> np.ndarray:
+def _quaternions(path: str, q: np.ndarray, lines: np.ndarray, tag: str, normalize: bool = True) -> np.ndarray:
     norm = np.linalg.norm(q, axis=1)
     bad = np.flatnonzero(~(norm > 1e-12))
     if bad.size:
         raise ParseError(path, int(lines[bad[0]]), f"{tag}: zero quaternion")
-    return quat_to_rot(q / norm[:, None])
+    # quat_to_rot is Eigen's toRotationMatrix formula (1 - 2(y^2 + z^2), 2(xy - zw), ...),
+    # so the unnormalised input gives SE-Sync's R~ (load(..., quaternions="raw")).
+    return quat_to_rot(q / norm[:, None] if normalize else q)
 
 
-def _decode_edges(path: str, rec: RecordKind, vals: np.ndarray, lines: np.ndarray):
+def _decode_edges(path: str, rec: RecordKind, vals: np.ndarray, lines: np.ndarray, normalize: bool = True):
     i = _ids(path, vals[:, 0], lines, "edge endpoint")
     j = _ids(path, vals[:, 1], lines, "edge endpoint")
     loop = np.flatnonzero(i == j)
@@ -100,7 +120,7 @@ def _decode_edges(path: str, rec: RecordKind, vals: np.ndarray, lines: np.ndarra
     else:
         t = vals[:, 2:5]
         if rec.family == "g2o":
-            r = _quaternions(path, vals[:, 5:9], lines, rec.tag)
+            r = _quaternions(path, vals[:, 5:9], lines, rec.tag, normalize)
             info = _upper_to_full(vals[:, 9:30], 6)
         else:
             r = euler_to_rot(vals[:, 5], vals[:, 6], vals[:, 7])
@@ -129,8 +149,11 @@ def _decode_vertices(path: str, rec: RecordKind, vals: np.ndarray, lines: np.nda
     return ids, euler_to_rot(vals[:, 4], vals[:, 5], vals[:, 6]), vals[:, 1:4]
 
 
-def parse_text(text: str, path: str = "<string>", sha256: str | None = None) -> PoseGraph:
-    """Parse the content of a g2o/TORO file (see ``load``)."""
+def parse_text(text: str, path: str = "<string>", sha256: str | None = None,
+               quaternions: str = "normalize") -> PoseGraph:
+    """Parse the content of a g2o/TORO file (see ``load``, also for ``quaternions``)."""
+    if quaternions not in QUATERNION_MODES:
+        raise UsageError(f"quaternions must be one of {', '.join(QUATERNION_MODES)}, not {quaternions!r}")
     rows = [ln.split() for ln in text.splitlines()]
     groups: dict[str, list[int]] = {}
     for k, r in enumerate(rows):
@@ -167,7 +190,7 @@ def parse_text(text: str, path: str = "<string>", sha256: str | None = None) -> 
     e_idx = np.asarray(groups[erec.tag])
     e_lines = e_idx + 1
     evals = _numeric_block(path, [rows[k] for k in e_idx], e_lines, erec)
-    ei, ej, erot, etrans, einfo = _decode_edges(path, erec, evals, e_lines)
+    ei, ej, erot, etrans, einfo = _decode_edges(path, erec, evals, e_lines, quaternions == "normalize")
 
     vertex_rot = vertex_trans = None
     if vrec is not None:

@@ -31,12 +31,18 @@ def recover_translations(problem: Problem, rot: np.ndarray) -> np.ndarray:
 
 
 def se_objective(problem: Problem, rot: np.ndarray, trans: np.ndarray) -> float:
-    """F(R, t) = sum kappa ||R_j - R_i R~||_F^2 + tau ||t_j - t_i - R_i t~||^2 (edge by edge)."""
+    """F(R, t) = sum kappa (||R_i||^2 + ||R_j||^2 - 2 tr(R_j^T R_i R~)) + tau ||t_j - t_i - R_i t~||^2,
+    SE-Sync's data-matrix objective, summed edge by edge as
+    ``kappa ||R_j - R_i R~||_F^2 + kappa tr(R_i (I - R~ R~^T) R_i^T)`` (the second term only on
+    edges whose R~ is not orthogonal; see problem.py). Equal to
+    ``sum kappa ||R_j - R_i R~||_F^2 + tau ||...||^2`` for orthogonal measurements."""
     s, t = problem.src, problem.dst
     rr = rot[t] - rot[s] @ problem.rot
     tr = trans[t] - trans[s] - np.einsum("eab,eb->ea", rot[s], problem.trans)
-    return float(np.dot(problem.kappa, np.einsum("eab,eab->e", rr, rr))
-                 + np.dot(problem.tau, np.einsum("ea,ea->e", tr, tr)))
+    f = float(np.dot(problem.kappa, np.einsum("eab,eab->e", rr, rr))
+              + np.dot(problem.tau, np.einsum("ea,ea->e", tr, tr)))
+    # Z_i = R_i^T in the row layout of problem.py
+    return f + problem.defect_term(np.swapaxes(rot[s[problem.defect_edges]], 1, 2))
 
 
 def anchor_estimate(rot: np.ndarray, trans: np.ndarray, anchor: int) -> tuple[np.ndarray, np.ndarray]:

@@ -23,7 +23,7 @@ from scipy.sparse.linalg import ArpackNoConvergence, LinearOperator, eigsh
 
 from ..errors import NotPositiveDefinite
 from .problem import Problem
-from .stiefel import lift, project, remove_vertical, retract, sym_block_diag_product
+from .stiefel import gram_eigh, lift, project, remove_vertical, retract, sym_block_diag_product
 from .trust_region import State
 
 log = logging.getLogger("posecrb")
@@ -39,6 +39,7 @@ class RelaxedModel:
         self.adaptive_shift = adaptive_shift
         self.hvps = 0
         self.factorizations = 0
+        self._gram: tuple[np.ndarray, tuple[np.ndarray, np.ndarray]] | None = None   # (Z, gram_eigh(Z))
 
     def prepare(self, state: State) -> None:
         """Refactor the preconditioner as (Q - Lambda(Y) + s I)^{-1} at a new iterate.
@@ -80,9 +81,13 @@ class RelaxedModel:
         if self.precond_factor is None:
             return R
         n, d, r = R.shape
-        R = remove_vertical(state.Z, R)
+        # tCG preconditions many vectors at one point: decompose its Gram matrix once.
+        if self._gram is None or self._gram[0] is not state.Z:
+            self._gram = (state.Z, gram_eigh(state.Z))
+        gram = self._gram[1]
+        R = remove_vertical(state.Z, R, gram)
         W = self.problem.schur_solve(self.precond_factor, R.reshape(n * d, r)).reshape(n, d, r)
-        return remove_vertical(state.Z, project(state.Z, 0.5 * W))
+        return remove_vertical(state.Z, project(state.Z, 0.5 * W), gram)
 
 
 @dataclass

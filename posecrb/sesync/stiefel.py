@@ -52,20 +52,26 @@ def lift(Z: np.ndarray, r: int) -> np.ndarray:
     return out
 
 
-def remove_vertical(Z: np.ndarray, W: np.ndarray) -> np.ndarray:
+def gram_eigh(Z: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Eigen-decomposition (ev, U) of the r x r Gram matrix G = Z^T Z (Z as (dn, r))."""
+    Zf = Z.reshape(-1, Z.shape[-1])
+    return np.linalg.eigh(Zf.T @ Zf)
+
+
+def remove_vertical(Z: np.ndarray, W: np.ndarray, gram: tuple[np.ndarray, np.ndarray] | None = None) -> np.ndarray:
     """Project a tangent vector off the vertical space {Z Omega : Omega in so(r)}.
 
     The relaxed objective is invariant under Y -> O Y (O in O(r)), so vertical directions
     carry no information; removing them keeps a preconditioner that amplifies the
     (near-)kernel of S = Q - Lambda from spending trust-region steps on the gauge.
     Solves G Omega + Omega G = 2 skew(Z^T W) with G = Z^T Z (least squares, then W - Z Omega).
+    ``gram`` is ``gram_eigh(Z)`` when the caller reuses it across vectors at one point.
     """
     n, d, r = Z.shape
     Zf = Z.reshape(n * d, r)
     Wf = W.reshape(n * d, r)
     A = Zf.T @ Wf
-    G = Zf.T @ Zf
-    ev, U = np.linalg.eigh(G)
+    ev, U = gram_eigh(Z) if gram is None else gram
     K = U.T @ (A - A.T) @ U
     den = ev[:, None] + ev[None, :]
     tiny = den <= 1e-12 * max(float(ev[-1]), 1e-300)
