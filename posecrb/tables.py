@@ -25,6 +25,7 @@ from .errors import DatasetNotFound, PosecrbError, status_of
 from .estimate import get_estimate
 from .io import load
 from .paper_tables import TABLE_II_FOOTNOTE, paper_row
+from .provenance import machine, versions
 from .timing import timed
 
 log = logging.getLogger("posecrb")
@@ -240,29 +241,10 @@ def to_latex(rows: list[dict], columns: list[str], caption: str, headers: dict[s
 # ---- reproducibility record ------------------------------------------------------------
 def run_record(settings: TableSettings, rows: list[dict], argv: Sequence[str] | None = None) -> dict:
     """Versions, machine, dataset checksums and settings: enough to reproduce and diff a run."""
-    import platform
-    import sys
-
-    from . import __version__
-
-    versions = {"posecrb": __version__, "python": sys.version.split()[0]}
-    from importlib.metadata import PackageNotFoundError, version
-
-    for dist in ("numpy", "scipy", "pandas", "scikit-sparse", "numba", "click", "rich"):
-        try:
-            versions[dist] = version(dist)
-        except PackageNotFoundError:
-            pass
-    cpu = platform.processor() or platform.machine()
-    try:
-        with open("/proc/cpuinfo") as fh:
-            cpu = next(ln.split(":", 1)[1].strip() for ln in fh if ln.startswith("model name"))
-    except (OSError, StopIteration):
-        pass
     return {
         "command": list(argv) if argv else None,
-        "versions": versions,
-        "machine": {"cpu": cpu, "cores": os.cpu_count(), "platform": platform.platform()},
+        "versions": versions(),
+        "machine": machine(),
         "settings": asdict(settings),
         "seeds": {"solver": settings.solver.get("seed", "default (deterministic)")},
         "datasets": {r["dataset"]: {"path": r.get("path"), "sha256": r.get("sha256"), "status": r["status"]}

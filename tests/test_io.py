@@ -1,7 +1,6 @@
 """Readers: content sniffing, id remapping, skipped tags, and a corpus of malformed files."""
 import numpy as np
 import pytest
-from click.testing import CliRunner
 
 from posecrb import load
 from posecrb.cli import main

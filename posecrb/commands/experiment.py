@@ -10,16 +10,14 @@ from __future__ import annotations
 import contextlib
 import json
 import logging
-import platform
 import sys
 import time
 from pathlib import Path
 
 import click
-import numpy as np
 
-from .. import __version__
 from ..errors import UsageError
+from ..provenance import machine, versions
 from ..report import print_rows, to_csv, to_json
 from ._common import anchor_option, data_dir_option, format_option, load_dataset
 
@@ -76,21 +74,6 @@ def _progress(total: int, label: str):
         yield lambda k: prog.advance(task, k)
 
 
-def _versions() -> dict:
-    import scipy
-
-    out = {"posecrb": __version__, "python": platform.python_version(), "numpy": np.__version__,
-           "scipy": scipy.__version__, "platform": platform.platform()}
-    try:
-        import dask
-        import distributed
-
-        out["dask"], out["distributed"] = dask.__version__, distributed.__version__
-    except ImportError:
-        pass
-    return out
-
-
 def _write_out(out_dir: str | None, experiment: str, settings: dict, rows: list[dict], seeds: list[dict],
                elapsed: float, extra: dict[str, list[dict]] | None = None) -> None:
     if not out_dir:
@@ -102,7 +85,7 @@ def _write_out(out_dir: str | None, experiment: str, settings: dict, rows: list[
     for name, data in (extra or {}).items():
         (d / f"{name}.csv").write_text(to_csv(data))
     run = {"experiment": experiment, "command": " ".join(["posecrb"] + sys.argv[1:]), "settings": settings,
-           "versions": _versions(), "seeds": seeds, "elapsed_seconds": elapsed,
+           "versions": {**versions(), "platform": machine()["platform"]}, "seeds": seeds, "elapsed_seconds": elapsed,
            "created": time.strftime("%Y-%m-%dT%H:%M:%S%z")}
     (d / "run.json").write_text(json.dumps(run, indent=2, default=str) + "\n")
     log.info("wrote %s/{rows.csv,rows.json,run.json}", d)
