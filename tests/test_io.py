@@ -85,7 +85,7 @@ MALFORMED = {
     "nan": (f"{E}\nEDGE_SE2 1 2 1 nan 0 {INFO2}\n", 2, "non-finite"),
     "inf": (f"EDGE_SE2 1 2 1 0 inf {INFO2}\n", 1, "non-finite"),
     "not_pd": (f"{E}\n{E}\nEDGE_SE2 1 2 1 0 0 -1 0 0 20 0 5\n", 3, "not positive definite"),
-    "rot_not_pd": (f"EDGE_SE2 1 2 1 0 0 10 1 0 20 0 0\n", 1, "rotation block"),
+    "rot_not_pd": ("EDGE_SE2 1 2 1 0 0 10 1 0 20 0 0\n", 1, "rotation block"),
     "unknown_vertex": (f"VERTEX_SE2 0 0 0 0\nVERTEX_SE2 1 0 0 0\n{E}\nEDGE_SE2 1 7 1 0 0 {INFO2}\n", 4,
                        "undeclared vertex id 7"),
     "self_loop": (f"{E}\nEDGE_SE2 3 3 1 0 0 {INFO2}\n", 2, "self-loop"),
