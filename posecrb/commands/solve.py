@@ -35,7 +35,7 @@ HEADERS = {"hessian_vector_products": "HVPs", "times.total": "time s", "duality_
 @click.option("--certificate-tol", type=float, default=1e-3, show_default=True,
               help="Accept lambda_min(Q - Lambda) >= -TOL as a certificate of global optimality.")
 @click.option("--sesync-compat", is_flag=True,
-              help="read 3D quaternions as SE-Sync does (unnormalised) to reproduce its objective values")
+              help="Read 3D quaternions as SE-Sync does (unnormalised) to reproduce its objective values.")
 @data_dir_option
 def command(file, out, fmt, r0, rmax, init, anchor, certificate_tol, sesync_compat, data_dir):
     """Certifiably correct pose-graph optimisation of FILE (SE-Sync's Riemannian staircase).
