@@ -68,6 +68,21 @@ def source_terms(graph: PoseGraph, tau: np.ndarray, anchor: int = 0) -> tuple[np
     return flat.reshape(n1, 3, 3), xi
 
 
+def t_optimality(graph: PoseGraph, anchor: int = 0, rotation_model: str = "eq59") -> tuple[float, float]:
+    """(eq. 73, eq. 72): graph-only T-optimality and its approximation with the measured p_ij.
+
+    ``trace(L_tau (x) I_d) + trace(L_w (x) I_dr)`` over the non-anchor poses, straight from the edge
+    arrays (each edge end that is not the anchor contributes ``d tau + d_r w``); eq. (72) adds
+    ``sum_{i != anchor} sum_{j in V_i^+} tau_ij ||p_ij||^2`` (``trace(Psi_(i,j))`` in 3D too, Appendix D).
+    """
+    tau = graph.tau
+    w = rotation_weight(graph.kappa, graph.dim, rotation_model)
+    ends = (graph.src != anchor).astype(float) + (graph.dst != anchor)
+    t_graph = float(graph.dim * np.dot(tau, ends) + graph.rot_dim * np.dot(w, ends))
+    psi = tau * np.einsum("ma,ma->m", graph.trans, graph.trans) * (graph.src != anchor)
+    return t_graph, t_graph + float(psi.sum())
+
+
 def block_diagonal(blocks: np.ndarray) -> sp.csc_matrix:
     """Sparse block-diagonal matrix from (k, b, b) blocks."""
     k, b, _ = blocks.shape
@@ -136,10 +151,8 @@ def compute_bounds(graph: PoseGraph, anchor: int | None = None, rotation_model: 
 
     lam_min = lambda_min(lap.l_w, factor=f_w, name="reduced rotation Laplacian L_w")
     n_p = graph.n - 1
-    _, xi = source_terms(graph, lap.tau, anchor)
     gap = dr * n_p * float(np.log1p(lam_inf / lam_min)) if lam_min > 0 else float("inf")
-    t_graph = d * float(lap.l_tau.diagonal().sum()) + dr * float(lap.l_w.diagonal().sum())
-    t_approx = t_graph + float(xi.sum()) * (2.0 if d == 3 else 1.0)
+    t_graph, t_approx = t_optimality(graph, anchor, rotation_model)
     total_degree = int(graph.degree.sum() - graph.degree[anchor])
     return BoundsResult(
         dim=d, anchor=anchor, anchor_id=int(graph.ids[anchor]), rotation_model=rotation_model,

@@ -273,15 +273,3 @@ def fim_logdet(fim: PaperFim, symbolic: SymbolicCholesky | None = None) -> float
 def trace_fim(fim: PaperFim) -> float:
     """T-optimality: exact trace(F) (eq. 69 / 70)."""
     return float(fim.matrix.diagonal().sum())
-
-
-def t_opt_approx(graph: PoseGraph, anchor: int = 0, rotation_model: str = "eq59") -> float:
-    """Eq. (72): trace(F) with ``x_j - x_i`` replaced by the measured ``p_ij`` (eq. 71):
-    ``trace(L_tau (x) I_d) + trace(L_w (x) I_dr) + sum_{i != anchor} sum_{j in V_i^+} tau_ij ||p_ij||^2``
-    (in 3D ``trace(Psi_(i,j)) = tau ||p||^2`` too, Appendix D)."""
-    d, dr = graph.dim, graph.rot_dim
-    w = graph.rotation_weight if rotation_model == "eq59" else _rotation_weight(graph.kappa, d, rotation_model)
-    ends = (graph.src != anchor).astype(float) + (graph.dst != anchor)
-    tau = graph.tau
-    psi = tau * np.einsum("ma,ma->m", graph.trans, graph.trans) * (graph.src != anchor)
-    return float(d * np.dot(tau, ends) + dr * np.dot(w, ends) + psi.sum())

@@ -96,7 +96,8 @@ def fim_row(file: str, data_dir: str | None, model: str, source: str, anchor_id:
     row: dict = {"dataset": graph.name, "model": model, "dim": graph.dim, "poses": graph.n,
                  "edges": graph.m, "components": graph.n_components}
     if model == "paper":
-        from ..fim import fim_logdet, paper_fim, t_opt_approx, trace_fim
+        from ..bounds import t_optimality
+        from ..fim import fim_logdet, paper_fim, trace_fim
 
         anchor = graph.anchor_index(anchor_id)
         fim = paper_fim(graph, est.rot, est.trans, anchor=anchor, rotation_model=rotation_model, variant=variant)
@@ -105,7 +106,7 @@ def fim_row(file: str, data_dir: str | None, model: str, source: str, anchor_id:
         ld = fim_logdet(fim)
         times["fim_logdet"] = time.perf_counter() - t0
         row.update({"anchors": [fim.anchor_id], "layout": fim.layout, "size": fim.size, "nnz": fim.nnz,
-                    "logdet": ld, "trace": trace_fim(fim), "t_opt_approx": t_opt_approx(graph, anchor, rotation_model),
+                    "logdet": ld, "trace": trace_fim(fim), "t_opt_approx": t_optimality(graph, anchor, rotation_model)[1],
                     "rank": fim.size, "nullity": 0, "rotation_weight": rotation_model,
                     "fim_variant": fim.variant})
         if save:
