@@ -47,7 +47,7 @@ from dataclasses import dataclass, field
 import numpy as np
 import scipy.sparse as sp
 
-from .graph import PoseGraph
+from .graph import PoseGraph, rotation_dimension
 from .laplacian import reduced_index
 from .linalg import SymbolicCholesky
 from .noise import rotation_weight as _rotation_weight
@@ -83,7 +83,7 @@ class PaperFim:
 
     @property
     def rot_dim(self) -> int:
-        return 1 if self.dim == 2 else 3
+        return rotation_dimension(self.dim)
 
     @property
     def q(self) -> int:

@@ -18,6 +18,11 @@ from .errors import ComponentSummary, DisconnectedGraph, UsageError
 from .noise import isotropic_precisions, rotation_weight
 
 
+def rotation_dimension(dim: int) -> int:
+    """d_r = dim SO(d): 1 in 2D, 3 in 3D."""
+    return 1 if dim == 2 else 3
+
+
 @dataclass(frozen=True, eq=False)
 class PoseGraph:
     dim: int                                # d = 2 or 3
@@ -47,7 +52,7 @@ class PoseGraph:
     @property
     def rot_dim(self) -> int:
         """d_r: 1 in 2D, 3 in 3D."""
-        return 1 if self.dim == 2 else 3
+        return rotation_dimension(self.dim)
 
     @property
     def q(self) -> int:

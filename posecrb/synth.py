@@ -29,7 +29,7 @@ from typing import Iterable, Sequence
 
 import numpy as np
 
-from .graph import PoseGraph
+from .graph import PoseGraph, rotation_dimension
 from .lie import exp_so3, rot2
 
 KINDS = ("grid2d", "grid3d", "sphere", "torus", "octagon", "demo")
@@ -324,7 +324,7 @@ def random_information(rng: np.random.Generator, m: int, dim: int, kind: str = "
     cross terms ``rho B_t^{1/2} W B_r^{1/2}``, ``||W||_2 = 1``, ``rho < 0.6``: positive
     definite by the Schur complement since ``rho^2 < 1``).
     """
-    r = 1 if dim == 2 else 3
+    r = rotation_dimension(dim)
     q = dim + r
     if kind == "isotropic":
         from .noise import isotropic_information
