@@ -110,6 +110,11 @@ GROUPS = {
 NAMES = sorted(GROUPS)
 
 
+def for_each_group(test):
+    """Run ``test(name, data)`` for every group, with hypothesis drawing from ``data``."""
+    return pytest.mark.parametrize("name", NAMES)(PROPERTY(given(data=st.data())(test)))
+
+
 # ---------------------------------------------------------------- strategies
 # Rotation angles stay below ANGLE_MAX where Log must invert Exp (Log is only a local inverse; at
 # angle pi it is discontinuous) and are unrestricted (up to 3 pi) where only Exp(Log X) = X is used.
@@ -146,27 +151,21 @@ def _norm(x: np.ndarray) -> float:
 
 
 # ---------------------------------------------------------------- Exp / Log
-@pytest.mark.parametrize("name", NAMES)
-@PROPERTY
-@given(data=st.data())
+@for_each_group
 def test_log_inverts_exp_below_angle_pi(name, data):
     g = GROUPS[name]
     xi = data.draw(tangents(g))
     np.testing.assert_allclose(g.log(g.exp(xi)), xi, rtol=0, atol=_tol(_norm(xi), _norm(xi)))
 
 
-@pytest.mark.parametrize("name", NAMES)
-@PROPERTY
-@given(data=st.data())
+@for_each_group
 def test_exp_inverts_log_everywhere(name, data):
     g = GROUPS[name]
     x = g.exp(data.draw(tangents(g, angle_max=3 * math.pi)))
     np.testing.assert_allclose(g.exp(g.log(x)), x, rtol=0, atol=_tol(_norm(x), _norm(x)))
 
 
-@pytest.mark.parametrize("name", NAMES)
-@PROPERTY
-@given(data=st.data())
+@for_each_group
 def test_exp_is_a_one_parameter_subgroup(name, data):
     """Exp(s xi) Exp(u xi) = Exp((s + u) xi)."""
     g = GROUPS[name]
@@ -177,9 +176,7 @@ def test_exp_is_a_one_parameter_subgroup(name, data):
 
 
 # ---------------------------------------------------------------- group axioms
-@pytest.mark.parametrize("name", NAMES)
-@PROPERTY
-@given(data=st.data())
+@for_each_group
 def test_identity_and_inverse(name, data):
     g = GROUPS[name]
     x = g.exp(data.draw(tangents(g)))
@@ -195,9 +192,7 @@ def test_identity_and_inverse(name, data):
     np.testing.assert_allclose(g.inverse(x), np.linalg.inv(x), rtol=0, atol=tol)
 
 
-@pytest.mark.parametrize("name", NAMES)
-@PROPERTY
-@given(data=st.data())
+@for_each_group
 def test_associativity(name, data):
     g = GROUPS[name]
     a, b, c = (g.exp(data.draw(tangents(g))) for _ in range(3))
@@ -208,9 +203,7 @@ def test_associativity(name, data):
     np.testing.assert_allclose(g.compose(a, b), a @ b, rtol=0, atol=_tol(_norm(a), _norm(b)))
 
 
-@pytest.mark.parametrize("name", NAMES)
-@PROPERTY
-@given(data=st.data())
+@for_each_group
 def test_log_of_inverse_is_minus_log(name, data):
     g = GROUPS[name]
     xi = data.draw(tangents(g))
@@ -218,9 +211,7 @@ def test_log_of_inverse_is_minus_log(name, data):
 
 
 # ---------------------------------------------------------------- adjoint
-@pytest.mark.parametrize("name", NAMES)
-@PROPERTY
-@given(data=st.data())
+@for_each_group
 def test_adjoint_conjugates_the_exponential(name, data):
     """Exp(Ad_X xi) = X Exp(xi) X^-1."""
     g = GROUPS[name]
@@ -231,9 +222,7 @@ def test_adjoint_conjugates_the_exponential(name, data):
     np.testing.assert_allclose(lhs, rhs, rtol=0, atol=_tol(_norm(x), _norm(x), _norm(x), _norm(xi)))
 
 
-@pytest.mark.parametrize("name", NAMES)
-@PROPERTY
-@given(data=st.data())
+@for_each_group
 def test_adjoint_is_a_homomorphism(name, data):
     """Ad_{XY} = Ad_X Ad_Y and Ad_{X^-1} = Ad_X^-1."""
     g = GROUPS[name]
@@ -247,9 +236,7 @@ def test_adjoint_is_a_homomorphism(name, data):
 _H = 1e-5  # central differences: truncation ~ H^2 |third derivative|, rounding ~ eps |X| / H
 
 
-@pytest.mark.parametrize("name", NAMES)
-@PROPERTY
-@given(data=st.data())
+@for_each_group
 def test_right_jacobian_matches_central_differences(name, data):
     """Jr(xi) d = Log(Exp(xi)^-1 Exp(xi + d)) to first order (right-perturbation convention)."""
     g = GROUPS[name]
@@ -269,9 +256,7 @@ def test_right_jacobian_matches_central_differences(name, data):
     np.testing.assert_allclose(g.jr(xi), fd, rtol=0, atol=tol)
 
 
-@pytest.mark.parametrize("name", NAMES)
-@PROPERTY
-@given(data=st.data())
+@for_each_group
 def test_inverse_right_jacobian(name, data):
     g = GROUPS[name]
     xi = data.draw(tangents(g))
@@ -280,9 +265,7 @@ def test_inverse_right_jacobian(name, data):
     np.testing.assert_allclose(prod, np.eye(g.dof), rtol=0, atol=_tol(_norm(xi), _norm(xi), _norm(xi)))
 
 
-@pytest.mark.parametrize("name", NAMES)
-@PROPERTY
-@given(data=st.data())
+@for_each_group
 def test_left_and_right_jacobians_are_related_by_the_adjoint(name, data):
     """Jl(xi) = Ad_{Exp(xi)} Jr(xi), with Jl(xi) = Jr(-xi)."""
     g = GROUPS[name]
