@@ -45,7 +45,7 @@ from posecrb.se_lie import (
 
 EPS = np.finfo(float).eps
 
-PROPERTY = settings(derandomize=True, max_examples=75, deadline=None, database=None,
+PROPERTY = settings(derandomize=True, max_examples=50, deadline=None, database=None,
                     suppress_health_check=[HealthCheck.too_slow])
 
 
