@@ -150,18 +150,22 @@ def sed_crb_in_frame(graph: PoseGraph, rot: np.ndarray, trans: np.ndarray, frame
 
     if check_frame(frame) == "world":
         return sed_crb(graph, rot, trans, anchors=anchors, quotient=quotient, per_pose=per_pose, **sed_options)
-    res = sed_crb(graph, rot, trans, anchors=anchors, quotient=quotient, per_pose=True, **sed_options)
-    blocks = np.stack([res.per_pose[i] for i in range(res.n)]) if res.n else np.zeros((0, res.q, res.q))
-    body = convert_covariance_blocks(blocks, rot, trans, "body")
-    trace = float(np.trace(body, axis1=1, axis2=2).sum())
-    n_err = res.n - (len(res.anchors) if res.kind == "anchored" else res.components)
     if per_pose is True:
-        want: Sequence[int] | None = range(res.n)
+        want: np.ndarray | None = np.arange(graph.n)
     elif per_pose is False or per_pose is None:
         want = None
     else:
-        want = sorted({int(i) for i in per_pose})
-        if want and (want[0] < 0 or want[-1] >= res.n):
-            raise UsageError(f"pose index out of range 0..{res.n - 1}")
+        want = np.unique(np.asarray(list(per_pose), dtype=np.int64))
+        if want.size and (want[0] < 0 or want[-1] >= graph.n):
+            raise UsageError(f"pose index out of range 0..{graph.n - 1}")
+    res = sed_crb(graph, rot, trans, anchors=anchors, quotient=quotient, per_pose=True, **sed_options)
+    keys = np.fromiter(res.per_pose.keys(), np.int64, res.n)
+    if not np.array_equal(keys, np.arange(res.n)):  # the stacking below relies on pose order
+        raise RuntimeError("sed_crb returned per-pose blocks out of pose order")
+    blocks = np.stack(list(res.per_pose.values())) if res.n else np.zeros((0, res.q, res.q))
+    body = convert_covariance_blocks(blocks, rot, trans, "body")
+    trace = float(np.trace(body, axis1=1, axis2=2).sum())
+    n_err = res.n - (len(res.anchors) if res.kind == "anchored" else res.components)
+    per = None if want is None else dict(zip(want.tolist(), body[want]))
     return replace(res, frame="body", trace_crlb=trace, mse_bound=trace / n_err if n_err > 0 else float("nan"),
-                   per_pose=None if want is None else {int(i): body[i] for i in want})
+                   per_pose=per)
