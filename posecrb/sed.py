@@ -134,6 +134,7 @@ class SedCrbResult:
     anchors: list[int]             # internal indices; "quotient": the one per component used for G
     per_pose: dict[int, np.ndarray] | None  # internal index -> (q, q) covariance bound block
     times: dict[str, float]
+    frame: str = "world"           # coordinates of trace and blocks (posecrb.frames): "world" | "body"
 
 
 # ------------------------------------------------------------------ information matrices

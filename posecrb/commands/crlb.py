@@ -9,8 +9,8 @@ import numpy as np
 from ..errors import UsageError
 from ..report import print_rows
 from ._common import data_dir_option, format_option
-from .fim import (estimate_option, fim_variant_option, load_with_estimate, model_option, resolve_fim_variant,
-                  rotation_weight_option, sed_coordinate_names)
+from .fim import (estimate_option, fim_variant_option, frame_option, load_with_estimate, model_option,
+                  resolve_fim_variant, resolve_frame, rotation_weight_option)
 
 log = logging.getLogger("posecrb")
 
@@ -41,10 +41,12 @@ def parse_pose_ids(text: str | None) -> bool | list[int]:
 
 def crlb_result(file: str, data_dir: str | None, model: str, source: str, anchor_ids: tuple[int, ...],
                 quotient: bool, poses: bool | list[int], rotation_model: str,
-                fim_variant: str | None = None) -> tuple[dict, list[dict]]:
+                fim_variant: str | None = None, frame: str | None = None) -> tuple[dict, list[dict]]:
     """The JSON-ready result and, when per-pose blocks were asked, one row per pose.
-    ``fim_variant``: None (default eq64, with a warning in 3D), "eq64" or "consistent"."""
+    ``fim_variant``: None (default eq64, with a warning in 3D), "eq64" or "consistent".
+    ``frame``: sed only, None/"world" or "body" (``posecrb.frames``)."""
     variant = resolve_fim_variant(model, fim_variant)
+    frame = resolve_frame(model, frame)
     graph, est, est_info, times = load_with_estimate(file, data_dir, source)
     row: dict = {"dataset": graph.name, "model": model, "dim": graph.dim, "poses": graph.n,
                  "edges": graph.m, "components": graph.n_components}
@@ -72,7 +74,7 @@ def crlb_result(file: str, data_dir: str | None, model: str, source: str, anchor
         row["coordinates"] = res.coordinates
         blocks, curv = res.per_pose, res.per_pose_curvature
     else:
-        from ..sed import sed_crb
+        from ..frames import coordinate_names, sed_crb_in_frame
 
         anchors = None if not anchor_ids else [graph.index_of(a) for a in anchor_ids]
         if poses is True:
@@ -81,13 +83,17 @@ def crlb_result(file: str, data_dir: str | None, model: str, source: str, anchor
             want = [graph.index_of(p) for p in poses]
         else:
             want = False
-        res = sed_crb(graph, est.rot, est.trans, anchors=anchors, quotient=quotient, per_pose=want)
+        res = sed_crb_in_frame(graph, est.rot, est.trans, frame, anchors=anchors, quotient=quotient, per_pose=want)
         times.update(res.times)
         row.update({"kind": res.kind, "anchors": [int(graph.ids[a]) for a in res.anchors],
                     "nullity": res.nullity, "trace_crlb": res.trace_crlb, "mse_bound": res.mse_bound,
-                    "coordinates": sed_coordinate_names(graph.dim)})
+                    "coordinates": coordinate_names(graph.dim, frame)})
         blocks = None if res.per_pose is None else {int(graph.ids[k]): v for k, v in res.per_pose.items()}
         curv = None
+    from ..frames import coordinates_description
+
+    row["frame"] = frame
+    row["coordinates_description"] = coordinates_description(graph.dim, frame)
     per_rows: list[dict] = []
     if blocks is not None:
         row["per_pose"] = {str(k): v for k, v in blocks.items()}
@@ -116,9 +122,11 @@ def crlb_result(file: str, data_dir: str | None, model: str, source: str, anchor
 @estimate_option
 @rotation_weight_option
 @fim_variant_option
+@frame_option
 @data_dir_option
 @format_option()
-def command(file, model, quotient, anchors, poses, estimate_source, rotation_model, fim_variant, data_dir, fmt):
+def command(file, model, quotient, anchors, poses, estimate_source, rotation_model, fim_variant, frame, data_dir,
+            fmt):
     """Cramér-Rao lower bound of FILE at an estimate: exact trace, MSE bound, per-pose blocks.
 
     paper: C >= F^{-1} (2D, eq. 67); 3D adds the curvature term of eq. (68)
@@ -127,10 +135,15 @@ def command(file, model, quotient, anchors, poses, estimate_source, rotation_mod
     in 3D the two differ, see `posecrb fim --help`).
     sed: the thesis' intrinsic CRB on SE(d)^n, anchored (5.1) or --quotient (5.5).
     Traces and blocks are exact (selected inversion of the sparse Cholesky factor).
-    Per-pose blocks use the coordinates listed in `coordinates` (JSON: full matrices).
+    sed --frame world (default): the thesis' coordinates, X_i -> Exp(-delta) X_i about the
+    world origin (blocks carry lever-arm terms); --frame body: GTSAM's and g2o's
+    X_i -> X_i Exp(xi), C_body = B C B^T with B = -P Ad_{X_i^-1}, comparable with
+    gtsam.Marginals (anchored: the anchor pose known exactly). Traces and MSE bounds are in
+    the same frame as the blocks. Per-pose blocks use the coordinates listed in
+    `coordinates`; `frame` and `coordinates_description` say what they mean (JSON: full matrices).
     """
     row, per_rows = crlb_result(file, data_dir, model, estimate_source, anchors, quotient,
-                                parse_pose_ids(poses), rotation_model, fim_variant)
+                                parse_pose_ids(poses), rotation_model, fim_variant, frame)
     if fmt == "json":
         print_rows([row], "json")
         return

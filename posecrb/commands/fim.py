@@ -40,16 +40,30 @@ fim_variant_option = click.option(
          "[default: eq64]")
 
 
+frame_option = click.option(
+    "--frame", type=click.Choice(("world", "body")), default=None,
+    help="sed model: coordinates of the FIM and of every per-pose number. world: the thesis' X_i -> Exp(-delta) X_i, "
+         "about the world origin, rotation first (omega, v). body: GTSAM's and g2o's X_i -> X_i Exp(xi), "
+         "in GTSAM's order (Pose2 x, y, theta; Pose3 rotation, translation), comparable with "
+         "gtsam.Marginals / a GTSAM Hessian. Not for --model paper (its own coordinates, JSON "
+         "coordinates_description).  [default: world]")
+
+
+def resolve_frame(model: str, frame: str | None) -> str:
+    """The frame of the numbers: ``--frame`` for sed (default world), "mixed" for the paper model."""
+    if model != "sed":
+        if frame is not None:
+            raise UsageError("--frame applies to --model sed (the paper model's coordinates are translation "
+                             "in the world frame, rotation in the body frame)")
+        return "mixed"
+    return frame or "world"
+
+
 def resolve_fim_variant(model: str, fim_variant: str | None) -> str:
     """The paper FIM variant to use; ``--fim-variant`` with ``--model sed`` is a usage error."""
     if fim_variant is not None and model != "paper":
         raise UsageError("--fim-variant applies to --model paper")
     return fim_variant or "eq64"
-
-
-def sed_coordinate_names(dim: int) -> list[str]:
-    """Thesis model coordinates per pose: Lie algebra, rotation first (DESIGN.md section 5)."""
-    return ["omega", "vx", "vy"] if dim == 2 else ["omega1", "omega2", "omega3", "v1", "v2", "v3"]
 
 
 def load_with_estimate(file: str, data_dir: str | None, source: str):
@@ -79,19 +93,22 @@ def anchored_logdet(matrix, q: int, anchors: list[int], name: str) -> float:
 
 
 def save_npz(path: str, matrix, row_ids: np.ndarray, row_coord: np.ndarray, names: list[str],
-             model: str, anchors: list[int]) -> None:
+             model: str, anchors: list[int], frame: str = "mixed") -> None:
     """A scipy sparse .npz (``scipy.sparse.load_npz`` reads it) plus the index map:
-    ``row_pose_id[k]`` and ``row_coordinate[k]`` (into ``coordinate_names``) for row k."""
+    ``row_pose_id[k]`` and ``row_coordinate[k]`` (into ``coordinate_names``) for row k, and
+    ``frame`` (world/body for sed, mixed for the paper model)."""
     m = matrix.tocsc()
     np.savez(path, data=m.data, indices=m.indices, indptr=m.indptr, format=np.array("csc"),
              shape=np.array(m.shape), row_pose_id=np.asarray(row_ids, np.int64),
              row_coordinate=np.asarray(row_coord, np.int64), coordinate_names=np.array(names),
-             model=np.array(model), anchor_ids=np.asarray(anchors, np.int64))
+             model=np.array(model), anchor_ids=np.asarray(anchors, np.int64), frame=np.array(frame))
 
 
 def fim_row(file: str, data_dir: str | None, model: str, source: str, anchor_id: int | None,
-            rotation_model: str, save: str | None, fim_variant: str | None = None) -> dict:
+            rotation_model: str, save: str | None, fim_variant: str | None = None,
+            frame: str | None = None) -> dict:
     variant = resolve_fim_variant(model, fim_variant)
+    frame = resolve_frame(model, frame)
     graph, est, est_info, times = load_with_estimate(file, data_dir, source)
     row: dict = {"dataset": graph.name, "model": model, "dim": graph.dim, "poses": graph.n,
                  "edges": graph.m, "components": graph.n_components}
@@ -113,10 +130,13 @@ def fim_row(file: str, data_dir: str | None, model: str, source: str, anchor_id:
             ids, coord = fim.index_map()
             save_npz(save, fim.matrix, ids, coord, fim.coordinate_names(), "paper", [fim.anchor_id])
     else:
+        from ..frames import coordinate_names, convert_information
         from ..sed import sed_fim
 
         fim = sed_fim(graph, est.rot, est.trans)
         times.update(fim.times)
+        # log-det, rank and nullity are the same in both frames (det B_i = +-1, posecrb.frames)
+        matrix = fim.matrix if frame == "world" else convert_information(fim.matrix, est.rot, est.trans, "body")
         if anchor_id is not None:
             if graph.n_components > 1:
                 raise UsageError("--anchor with --model sed needs a connected graph "
@@ -127,13 +147,19 @@ def fim_row(file: str, data_dir: str | None, model: str, source: str, anchor_id:
             times["fim_logdet"] = time.perf_counter() - t0
         else:
             anchors, ld = list(fim.anchors), fim.logdet_anchored
-        row.update({"anchors": [int(graph.ids[a]) for a in anchors], "layout": "poses (rotation first)",
-                    "size": int(fim.matrix.shape[0]), "nnz": int(fim.matrix.nnz), "logdet": ld,
-                    "trace": fim.trace, "rank": fim.rank, "nullity": fim.nullity,
+        names = coordinate_names(graph.dim, frame)
+        layout = "poses (rotation first)" if frame == "world" else f"poses (GTSAM order: {', '.join(names)})"
+        row.update({"anchors": [int(graph.ids[a]) for a in anchors], "layout": layout,
+                    "size": int(matrix.shape[0]), "nnz": int(matrix.nnz), "logdet": ld,
+                    "trace": float(matrix.diagonal().sum()), "rank": fim.rank, "nullity": fim.nullity,
                     "expected_nullity": fim.q * fim.components})
         if save:
-            save_npz(save, fim.matrix, np.repeat(graph.ids, fim.q), np.tile(np.arange(fim.q), graph.n),
-                     sed_coordinate_names(graph.dim), "sed", row["anchors"])
+            save_npz(save, matrix, np.repeat(graph.ids, fim.q), np.tile(np.arange(fim.q), graph.n),
+                     names, "sed", row["anchors"], frame=frame)
+    from ..frames import coordinates_description
+
+    row["frame"] = frame
+    row["coordinates_description"] = coordinates_description(graph.dim, frame)
     if save:
         row["saved"] = save
     row["estimate"] = est_info
@@ -149,22 +175,27 @@ def fim_row(file: str, data_dir: str | None, model: str, source: str, anchor_id:
               help="Pose id anchored for the log-det; default: the smallest id (of each component, sed).")
 @rotation_weight_option
 @fim_variant_option
+@frame_option
 @click.option("--save", type=click.Path(dir_okay=False, writable=True), default=None,
               help="Write the FIM as a scipy sparse .npz with its index map "
-                   "(row_pose_id, row_coordinate, coordinate_names).")
+                   "(row_pose_id, row_coordinate, coordinate_names) and its frame; with --model sed "
+                   "--frame body it is comparable with a GTSAM Hessian.")
 @data_dir_option
 @format_option()
-def command(file, model, estimate_source, anchor, rotation_model, fim_variant, save, data_dir, fmt):
+def command(file, model, estimate_source, anchor, rotation_model, fim_variant, frame, save, data_dir, fmt):
     """Fisher information matrix of FILE at an estimate: size, nnz, log-det, trace, rank.
 
     paper: anchored FIM of eq. (42) (2D) / (64) (3D), rows [translations; rotations]
     (rotation coordinates: angle in 2D, along G_k/sqrt(2) in 3D); logdet = D-optimality,
     trace = T-optimality (eq. 69/70), t_opt_approx = eq. (72); --fim-variant consistent gives
     the frame-consistent Fisher information of the model instead of eq. (64) as printed. sed: thesis FIM on SE(d)^n
-    (size n q, pose-major, rotation first), rank and nullity (nullity = q x components,
-    Th. 4.8.1) and the log-det with one anchor per component.
+    (size n q, pose-major), rank and nullity (nullity = q x components,
+    Th. 4.8.1) and the log-det with one anchor per component; --frame world (default, the
+    thesis' coordinates, rotation first) or body (GTSAM's and g2o's, F_body = M^-T F M^-1,
+    M = blkdiag(-P Ad_{X_i^-1})): trace and the saved matrix change, log-det, rank and
+    nullity do not. JSON: frame, coordinates_description.
     """
-    row = fim_row(file, data_dir, model, estimate_source, anchor, rotation_model, save, fim_variant)
+    row = fim_row(file, data_dir, model, estimate_source, anchor, rotation_model, save, fim_variant, frame)
     if fmt != "json":
         row = {k: (",".join(map(str, v)) if isinstance(v, list) else v) for k, v in row.items()}
     if fmt == "table":

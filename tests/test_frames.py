@@ -1,0 +1,296 @@
+"""World <-> body frame conversion of the thesis model against a dense finite-difference reference.
+
+The reference never uses posecrb.frames or posecrb.sed: it differentiates the g2o/GTSAM error
+``e_ij = Log(z^{-1} X_i^{-1} X_j)`` (scipy's expm, posecrb.se_lie's checked Log) under body-frame retractions
+``X_i expm(hat(xi_i))`` with ``xi`` in GTSAM's order (Pose2 (x, y, theta), Pose3 (rotation,
+translation)) and weights it with the file's information matrix reordered the same way: the
+Hessian GTSAM builds, in dense numpy.
+"""
+from __future__ import annotations
+
+import json
+from dataclasses import replace
+
+import numpy as np
+import pytest
+import scipy.sparse as sp
+from scipy.linalg import expm
+
+from posecrb import se_lie as L
+from posecrb.frames import (FRAMES, body_map, convert_covariance_blocks, convert_information, coordinate_names,
+                            sed_crb_in_frame, world_map)
+from posecrb.graph import PoseGraph
+from posecrb.sed import kernel_basis, sed_crb, sed_fim
+
+from .conftest import make_random_graph
+
+# Finite differences: step H, truncation ~H^2 and rounding ~eps/H (the closed-form Log is
+# accurate to a few eps) put each Jacobian entry within ~1e-10 relative; FD_RTOL leaves a
+# margin of 100 for F; an inverse loses at most cond(F) more.
+H = 1e-5
+FD_RTOL = 1e-8
+
+
+# ------------------------------------------------------------------ independent reference
+def hat_gtsam(xi: np.ndarray) -> np.ndarray:
+    """hat() of a tangent vector in GTSAM's order."""
+    if xi.size == 3:
+        x, y, th = xi
+        return np.array([[0, -th, x], [th, 0, y], [0, 0, 0]], float)
+    w1, w2, w3, v1, v2, v3 = xi
+    return np.array([[0, -w3, w2, v1], [w3, 0, -w1, v2], [-w2, w1, 0, v3], [0, 0, 0, 0]], float)
+
+
+def vee_gtsam(x: np.ndarray) -> np.ndarray:
+    if x.shape[0] == 3:
+        return np.array([x[0, 2], x[1, 2], x[1, 0]])
+    return np.array([x[2, 1], x[0, 2], x[1, 0], x[0, 3], x[1, 3], x[2, 3]])
+
+
+def homog(r, t):
+    d = r.shape[-1]
+    out = np.eye(d + 1)
+    out[:d, :d], out[:d, d] = r, t
+    return out
+
+
+def gtsam_information(graph: PoseGraph) -> np.ndarray:
+    """(m, q, q) file information in GTSAM's order (2D unchanged; 3D rotation block first)."""
+    p = np.arange(3) if graph.dim == 2 else np.r_[3:6, 0:3]
+    return graph.info[:, p][:, :, p]
+
+
+def body_fim_reference(graph: PoseGraph, rot, trans) -> np.ndarray:
+    """Dense ``sum J^T I J`` with J = d e_ij / d(xi_i, xi_j) by central differences.
+
+    The perturbation ``expm(hat(+-H e_a))`` is one 4x4 (3x3) matrix per coordinate; the
+    logarithm of the perturbed relative poses is ``se_lie.se_log`` (closed form, checked
+    against scipy's logm in test_se_lie.py), batched over the edges."""
+    q, n, d = graph.q, graph.n, graph.dim
+    info = gtsam_information(graph)
+    xs = np.stack([homog(rot[i], trans[i]) for i in range(n)])
+    zinv = np.linalg.inv(np.stack([homog(a, b) for a, b in zip(graph.rot, graph.trans)]))
+    xi, xj = xs[graph.src], xs[graph.dst]
+    to_gtsam = np.array([1, 2, 0]) if d == 2 else np.arange(6)
+
+    def err(ei, ej):
+        a = zinv @ np.linalg.inv(xi @ ei) @ xj @ ej
+        return L.se_log(a[:, :d, :d], a[:, :d, d])[:, to_gtsam]
+
+    one = np.eye(d + 1)
+    jac_i = np.empty((graph.m, q, q))
+    jac_j = np.empty((graph.m, q, q))
+    for a in range(q):  # q coordinates, each batched over every edge
+        e = np.zeros(q)
+        e[a] = H
+        ep, em = expm(hat_gtsam(e)), expm(hat_gtsam(-e))
+        jac_i[:, :, a] = (err(ep, one) - err(em, one)) / (2 * H)
+        jac_j[:, :, a] = (err(one, ep) - err(one, em)) / (2 * H)
+    w = 0.5 * (info + np.swapaxes(info, 1, 2))
+    f = np.zeros((n * q, n * q))
+    for k in range(graph.m):
+        jac = np.zeros((q, n * q))
+        i, j = int(graph.src[k]), int(graph.dst[k])
+        jac[:, i * q:(i + 1) * q] += jac_i[k]
+        jac[:, j * q:(j + 1) * q] += jac_j[k]
+        f += jac.T @ w[k] @ jac
+    return f
+
+
+def consistent_graph(dim: int, seed: int, noise: float = 0.1, **kw) -> PoseGraph:
+    """A random graph whose measurements are its vertices' relative poses times Exp(noise):
+    residual angles ~ noise, far from the branch cut of Log where the reference breaks down."""
+    rng = np.random.default_rng(seed)
+    g = make_random_graph(rng, dim=dim, **kw)
+    ri, ti = L.se_inverse(g.vertex_rot[g.src], g.vertex_trans[g.src])
+    rz, tz = L.se_compose(ri, ti, g.vertex_rot[g.dst], g.vertex_trans[g.dst])
+    re, te = L.se_exp(noise * rng.normal(size=(g.m, g.q)))
+    rz, tz = L.se_compose(rz, tz, re, te)
+    return replace(g, rot=rz, trans=tz)
+
+
+def free_dofs(n: int, q: int, anchors) -> np.ndarray:
+    keep = np.setdiff1d(np.arange(n), anchors)
+    return (keep[:, None] * q + np.arange(q)).ravel()
+
+
+# ------------------------------------------------------------------ tests
+@pytest.mark.parametrize("seed", [0, 1])
+@pytest.mark.parametrize("dim", [2, 3])
+def test_body_fim_is_the_gtsam_hessian_reference(dim, seed):
+    g = consistent_graph(dim, seed)
+    r, t = g.vertex_rot, g.vertex_trans
+    ref = body_fim_reference(g, r, t)
+    fb = convert_information(sed_fim(g, r, t).matrix, r, t, "body").toarray()
+    assert np.abs(fb - fb.T).max() == 0.0
+    np.testing.assert_allclose(fb, ref, rtol=0, atol=FD_RTOL * np.abs(ref).max())
+
+
+@pytest.mark.parametrize("seed", [0, 1])
+@pytest.mark.parametrize("dim", [2, 3])
+def test_body_anchored_blocks_are_the_dense_inverse(dim, seed):
+    g = consistent_graph(dim, seed)
+    r, t = g.vertex_rot, g.vertex_trans
+    q, n = g.q, g.n
+    ref = body_fim_reference(g, r, t)
+    anchors = [0, 4]
+    dofs = free_dofs(n, q, anchors)
+    cov = np.zeros((n * q, n * q))
+    cov[np.ix_(dofs, dofs)] = np.linalg.inv(ref[np.ix_(dofs, dofs)])
+    cond = np.linalg.cond(ref[np.ix_(dofs, dofs)])
+    res = sed_crb_in_frame(g, r, t, "body", anchors=anchors, per_pose=True)
+    assert res.frame == "body"
+    for i in range(n):
+        blk = cov[i * q:(i + 1) * q, i * q:(i + 1) * q]
+        np.testing.assert_allclose(res.per_pose[i], blk, rtol=0,
+                                   atol=10 * cond * FD_RTOL * np.abs(cov).max())
+    assert res.trace_crlb == pytest.approx(np.trace(cov), rel=10 * cond * FD_RTOL)
+    assert res.mse_bound == pytest.approx(res.trace_crlb / (n - 2), rel=1e-15)
+
+
+@pytest.mark.parametrize("dim", [2, 3])
+def test_gauge_directions_in_body_coordinates(dim):
+    """ker F_world is [delta; ...; delta] (Th. 4.8.1); in body coordinates it is [B_i delta]_i,
+    which the independent body Hessian annihilates."""
+    g = consistent_graph(dim, 2)
+    r, t = g.vertex_rot, g.vertex_trans
+    ref = body_fim_reference(g, r, t)
+    n_world = kernel_basis(g)
+    b = body_map(r, t)
+    n_body = np.einsum("iab,ibc->iac", b, n_world.reshape(g.n, g.q, g.q)).reshape(g.n * g.q, g.q)
+    scale = np.abs(ref).max() * np.abs(n_body).max()
+    assert np.abs(ref @ n_body).max() < 1e2 * FD_RTOL * scale
+
+
+@pytest.mark.parametrize("dim", [2, 3])
+def test_round_trips_and_invariants(dim):
+    g = consistent_graph(dim, 3)
+    r, t = g.vertex_rot, g.vertex_trans
+    q, n = g.q, g.n
+    np.testing.assert_allclose(body_map(r, t) @ world_map(r, t), np.broadcast_to(np.eye(q), (n, q, q)),
+                               atol=1e-12)
+    np.testing.assert_allclose(np.abs(np.linalg.det(body_map(r, t))), 1.0, rtol=1e-12)
+    fim = sed_fim(g, r, t)
+    fb = convert_information(fim.matrix, r, t, "body")
+    back = convert_information(fb, r, t, "world").toarray()
+    np.testing.assert_allclose(back, fim.matrix.toarray(), rtol=0, atol=1e-11 * abs(fim.matrix).max())
+    # log det (anchored), rank: the same in both frames; the pattern is kept
+    dofs = free_dofs(n, q, [0])
+    ld_w = np.linalg.slogdet(fim.matrix.toarray()[np.ix_(dofs, dofs)])
+    ld_b = np.linalg.slogdet(fb.toarray()[np.ix_(dofs, dofs)])
+    assert ld_w[0] == ld_b[0] == 1 and ld_b[1] == pytest.approx(ld_w[1], abs=1e-9)
+    assert np.linalg.matrix_rank(fb.toarray()) == fim.rank
+    assert (abs(fb) > 0).astype(int).nnz <= (abs(fim.matrix) > 0).astype(int).nnz
+    blocks = np.stack([v for _, v in sorted(sed_crb(g, r, t, per_pose=True).per_pose.items())])
+    there = convert_covariance_blocks(blocks, r, t, "body")
+    np.testing.assert_allclose(convert_covariance_blocks(there, r, t, "world"), blocks, rtol=0,
+                               atol=1e-11 * np.abs(blocks).max())
+
+
+@pytest.mark.parametrize("dim", [2, 3])
+def test_quotient_in_body_frame_is_a_generalised_inverse(dim):
+    g = consistent_graph(dim, 4)
+    r, t = g.vertex_rot, g.vertex_trans
+    q, n = g.q, g.n
+    f = sed_fim(g, r, t).matrix.toarray()
+    fplus = np.linalg.pinv(f, rcond=1e-10, hermitian=True)
+    bmat = sp.block_diag(list(body_map(r, t))).toarray()
+    gb = bmat @ fplus @ bmat.T
+    fb = convert_information(sp.csc_matrix(f), r, t, "body").toarray()
+    np.testing.assert_allclose(fb @ gb @ fb, fb, rtol=0, atol=1e-8 * np.abs(fb).max())
+    res = sed_crb_in_frame(g, r, t, "body", quotient=True, per_pose=[1, 3])
+    assert sorted(res.per_pose) == [1, 3]
+    for i in (1, 3):
+        np.testing.assert_allclose(res.per_pose[i], gb[i * q:(i + 1) * q, i * q:(i + 1) * q], rtol=1e-7,
+                                   atol=1e-9 * np.abs(gb).max())
+    assert res.trace_crlb == pytest.approx(np.trace(gb), rel=1e-8)
+    assert res.mse_bound == pytest.approx(np.trace(gb) / (n - 1), rel=1e-8)
+
+
+def test_world_frame_is_sed_crb_unchanged():
+    g = consistent_graph(2, 5)
+    r, t = g.vertex_rot, g.vertex_trans
+    a = sed_crb(g, r, t, per_pose=[2])
+    b = sed_crb_in_frame(g, r, t, "world", per_pose=[2])
+    assert b.frame == "world" and a.trace_crlb == b.trace_crlb
+    np.testing.assert_array_equal(a.per_pose[2], b.per_pose[2])
+
+
+def test_coordinate_names_and_bad_frame():
+    from posecrb.errors import UsageError
+
+    assert FRAMES == ("world", "body")
+    assert coordinate_names(2, "body") == ["x", "y", "theta"]
+    assert coordinate_names(3, "body")[:3] == ["rx", "ry", "rz"]
+    assert coordinate_names(2, "world") == ["omega", "vx", "vy"]
+    with pytest.raises(UsageError):
+        coordinate_names(2, "gtsam")
+    g = consistent_graph(2, 6)
+    with pytest.raises(UsageError):
+        sed_crb_in_frame(g, g.vertex_rot, g.vertex_trans, "body", per_pose=[g.n])
+
+
+# ------------------------------------------------------------------ CLI
+def run_cli(argv, capsys):
+    from posecrb.cli import main
+
+    code = main(argv)
+    out = capsys.readouterr()
+    return code, out.out, out.err
+
+
+@pytest.mark.parametrize("dim", [2, 3])
+def test_cli_crlb_and_fim_frames(dim, tmp_path, capsys):
+    from posecrb.io import load, write_g2o
+
+    path = tmp_path / f"f{dim}.g2o"
+    write_g2o(consistent_graph(dim, 7), path)
+    g = load(path)
+    r, t = g.vertex_rot, g.vertex_trans
+    base = ["crlb", str(path), "--model", "sed", "--estimate", "vertices", "--poses", "all", "--format", "json"]
+    code, out, err = run_cli(base, capsys)
+    assert code == 0, err
+    world = json.loads(out)
+    assert world["frame"] == "world" and world["coordinates"] == coordinate_names(dim, "world")
+    assert "world" in world["coordinates_description"]
+    code, out, err = run_cli(base + ["--frame", "body"], capsys)
+    assert code == 0, err
+    body = json.loads(out)
+    assert body["frame"] == "body" and body["coordinates"] == coordinate_names(dim, "body")
+    assert "X_i Exp(xi)" in body["coordinates_description"]
+    ref = body_fim_reference(g, r, t)
+    dofs = free_dofs(g.n, g.q, [0])
+    cov = np.linalg.inv(ref[np.ix_(dofs, dofs)])
+    cond = np.linalg.cond(ref[np.ix_(dofs, dofs)])
+    assert body["trace_crlb"] == pytest.approx(np.trace(cov), rel=10 * cond * FD_RTOL)
+    k = int(g.ids[3])
+    np.testing.assert_allclose(np.array(body["per_pose"][str(k)]), cov[2 * g.q:3 * g.q, 2 * g.q:3 * g.q],
+                               rtol=0, atol=10 * cond * FD_RTOL * np.abs(cov).max())
+
+    npz = tmp_path / "fb.npz"
+    code, out, err = run_cli(["fim", str(path), "--model", "sed", "--estimate", "vertices", "--frame", "body",
+                              "--save", str(npz), "--format", "json"], capsys)
+    assert code == 0, err
+    row = json.loads(out)
+    assert row["frame"] == "body"
+    saved = sp.load_npz(npz).toarray()
+    np.testing.assert_allclose(saved, ref, rtol=0, atol=FD_RTOL * np.abs(ref).max())
+    with np.load(npz) as z:
+        assert str(z["frame"]) == "body" and list(z["coordinate_names"]) == coordinate_names(dim, "body")
+    assert row["trace"] == pytest.approx(np.trace(ref), rel=FD_RTOL)
+    code, out, err = run_cli(["fim", str(path), "--model", "sed", "--estimate", "vertices", "--format", "json"],
+                             capsys)
+    world_fim = json.loads(out)
+    assert world_fim["frame"] == "world" and world_fim["logdet"] == pytest.approx(row["logdet"], abs=1e-9)
+
+
+@pytest.mark.parametrize("cmd", ["crlb", "fim"])
+def test_cli_frame_with_paper_model_is_a_usage_error(cmd, tmp_path, capsys):
+    from posecrb.io import write_g2o
+
+    path = tmp_path / "p.g2o"
+    write_g2o(consistent_graph(2, 8), path)
+    code, _, err = run_cli([cmd, str(path), "--estimate", "vertices", "--frame", "body"], capsys)
+    assert code == 2 and "--frame applies to --model sed" in err
+    code, out, err = run_cli([cmd, str(path), "--estimate", "vertices", "--format", "json"], capsys)
+    assert code == 0 and json.loads(out)["frame"] == "mixed"
