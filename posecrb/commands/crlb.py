@@ -8,7 +8,7 @@ import numpy as np
 
 from ..errors import UsageError
 from ..report import print_rows
-from ._common import data_dir_option, format_option
+from ._common import POSE_ID, data_dir_option, format_option
 from .fim import (estimate_option, fim_variant_option, load_with_estimate, model_option, resolve_fim_variant,
                   rotation_weight_option, sed_coordinate_names)
 
@@ -108,7 +108,7 @@ def crlb_result(file: str, data_dir: str | None, model: str, source: str, anchor
 @click.argument("file")
 @model_option
 @click.option("--quotient", is_flag=True, help="sed: quotient CRB F^+ (thesis 5.5) instead of the anchored one (5.1).")
-@click.option("--anchor", "anchors", type=int, multiple=True,
+@click.option("--anchor", "anchors", type=POSE_ID, multiple=True,
               help="Anchored pose id (repeatable; sed: one or more per component). "
                    "Default: the smallest id (of each component).")
 @click.option("--poses", default=None, metavar="IDS",
