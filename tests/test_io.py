@@ -367,8 +367,11 @@ def test_fim_npz_write_failure_keeps_the_previous_file(tmp_path, monkeypatch):
     target = tmp_path / "f.npz"
     target.write_bytes(b"previous")
 
-    def broken_savez(fh, **arrays):
-        fh.write(b"PK partial")
+    def broken_savez(file, **arrays):      # numpy's savez killed half-way (disk full, SIGKILL, ...)
+        if isinstance(file, (str, os.PathLike)):
+            file = open(str(file) if str(file).endswith(".npz") else f"{file}.npz", "wb")
+        file.write(b"PK partial")
+        file.flush()
         raise OSError(28, "No space left on device")
 
     monkeypatch.setattr(fim_cmd.np, "savez", broken_savez)
@@ -422,3 +425,23 @@ def test_sigterm_during_a_write_removes_the_temporary(tmp_path):
     assert "terminated" in res.stderr and "Traceback" not in res.stderr
     assert target.read_text() == "previous\n"
     assert [p.name for p in target.parent.iterdir()] == ["result.g2o"]
+
+
+def test_ctrl_c_during_a_write_exits_130_and_removes_the_temporary(tmp_path, monkeypatch, capsys):
+    import posecrb.commands.info as info
+    from posecrb.io.files import atomic_write
+
+    target = tmp_path / "out" / "result.txt"
+    target.parent.mkdir()
+
+    def interrupted(graph):
+        with atomic_write(target) as fh:
+            fh.write("partial")
+            raise KeyboardInterrupt
+
+    monkeypatch.setattr(info, "graph_info", interrupted)
+    g = tmp_path / "g.g2o"
+    g.write_text(f"{E}\n")
+    assert main(["info", str(g)]) == 130
+    assert "interrupted" in capsys.readouterr().err
+    assert list(target.parent.iterdir()) == []

@@ -124,12 +124,13 @@ def check_output_file(path: str | os.PathLike, inputs: Sequence[str | os.PathLik
             raise UsageError(f"{option} {shown} is the input file {os.fspath(inp)}: refusing to overwrite an "
                              "input; write to another path")
     parent = p.parent
+    parent_shown = os.path.dirname(shown.rstrip(os.sep)) or "."   # as the user wrote it
     if parent.is_dir():
         _probe_writable(parent, option, shown)
     elif os.path.lexists(parent):
-        raise UsageError(f"{option} {shown}: {parent} is not a directory")
+        raise UsageError(f"{option} {shown}: {parent_shown} is not a directory")
     elif not create_parents:
-        raise UsageError(f"{option} {shown}: directory {parent} does not exist")
+        raise UsageError(f"{option} {shown}: directory {parent_shown} does not exist")
     else:
         anc = _nearest_existing(parent)
         if not anc.is_dir():
