@@ -367,6 +367,9 @@ def test_pose_id_options_are_integers_that_fit_int64(tmp_path, capsys):
     for bad in ("1_0", "-1", str(2 ** 63), "1.0"):
         rc, out, err = run_cli(["crlb", str(f), "--anchor", bad], capsys)
         assert rc == 2 and "is not a pose id" in err
+    for bad in ("1_0", "\u0661", str(2 ** 63), f"0-{2 ** 63 - 1}"):
+        rc, out, err = run_cli(["crlb", str(f), "--poses", bad], capsys)
+        assert rc == 2 and "--poses" in err and "is not a pose id or an id range" in err
 
 
 # ---------------------------------------------------------------- outputs never destroy data
@@ -432,3 +435,13 @@ def test_output_locations_are_checked_before_the_work(tmp_path, capsys, monkeypa
     rc, out, err = run_cli([a.format(f=f, o=tmp_path) for a in args], capsys)
     assert rc == 2 and message.format(o=tmp_path) in err, err
     assert sorted(p.name for p in tmp_path.iterdir()) == before and (tmp_path / "afile").read_text() == "keep\n"
+
+
+@pytest.mark.timeout(120)
+def test_non_regular_expected_file_is_named_not_read(tmp_path, capsys):
+    for path, what in _special_inputs(tmp_path).values():
+        rc, out, err = run_cli(["regress", "--expected", path], capsys)
+        if what == "is a directory":   # click.Path(dir_okay=False) already refuses it: usage error
+            assert rc == 2 and f"'{path}' is a directory" in err, err
+        else:
+            assert rc == 1 and f"{path}: {what}, not a regular file" in err, err

@@ -2,13 +2,14 @@
 from __future__ import annotations
 
 import logging
+import re
 
 import click
 import numpy as np
 
 from ..errors import UsageError
 from ..report import print_rows
-from ._common import POSE_ID, data_dir_option, format_option
+from ._common import INT64_MAX, POSE_ID, data_dir_option, format_option
 from .fim import (estimate_option, fim_variant_option, load_with_estimate, model_option, resolve_fim_variant,
                   rotation_weight_option, sed_coordinate_names)
 
@@ -25,11 +26,14 @@ def parse_pose_ids(text: str | None) -> bool | list[int]:
     out: list[int] = []
     for part in text.split(","):
         part = part.strip()
+        # digits only (int() would take 1_0 and non-ASCII digits), ids that fit int64
+        if re.fullmatch(r"[0-9]+(?:-[0-9]+)?", part) is None or max(map(int, part.split("-"))) > INT64_MAX:
+            raise UsageError(f"--poses: {part!r} is not a pose id or an id range a-b")
         try:
             if "-" in part[1:]:
                 lo, hi = part.split("-", 1) if not part.startswith("-") else (part, "")
                 lo_i, hi_i = int(lo), int(hi)
-                if hi_i < lo_i:
+                if hi_i < lo_i or hi_i - lo_i > 10 ** 7:   # (a huge range would exhaust memory)
                     raise ValueError
                 out.extend(range(lo_i, hi_i + 1))
             else:
