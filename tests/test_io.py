@@ -274,11 +274,11 @@ def test_raw_quaternion_too_large_to_use_unnormalised_is_an_error():
 
 
 @pytest.mark.parametrize("line, reason", [
-    (f"EDGE_SE2 1 2 1 0 0 1e200 0 0 1e200 0 1e200", "information entry 1e+200 exceeds 1e+100"),
-    (f"EDGE_SE2 1 2 1 0 0 1e308 0 0 1e308 0 1e308", "information entry 1e+308 exceeds 1e+100"),
+    ("EDGE_SE2 1 2 1 0 0 1e200 0 0 1e200 0 1e200", "information entry 1e+200 exceeds 1e+100"),
+    ("EDGE_SE2 1 2 1 0 0 1e308 0 0 1e308 0 1e308", "information entry 1e+308 exceeds 1e+100"),
     (f"EDGE_SE2 1 2 1e308 0 0 {INFO2}", "translation component 1e+308 exceeds 1e+50"),
-    (f"EDGE_SE2 1 2 1 0 0 1e-300 0 0 1e-300 0 5", "translation precision tau = 0 is outside [1e-100, 1e+100]"),
-    (f"EDGE_SE2 1 2 1 0 0 10 0 0 10 0 1e-120", "rotation concentration kappa = 1e-120 is outside"),
+    ("EDGE_SE2 1 2 1 0 0 1e-300 0 0 1e-300 0 5", "translation precision tau = 0 is outside [1e-100, 1e+100]"),
+    ("EDGE_SE2 1 2 1 0 0 10 0 0 10 0 1e-120", "rotation concentration kappa = 1e-120 is outside"),
     (f"EDGE_SE3:QUAT 1 2 0 0 0 0 0 0 1 {INFO3.rsplit(' ', 6)[0]} 1e-60 0 0 1e-60 0 1e-60",
      "rotation weight omega(kappa)/3 (eq. 59) = 8.33333e-122 is outside"),
 ])
@@ -316,7 +316,7 @@ def test_positive_definiteness_is_scale_aware():
 
 def test_messages_show_plain_numbers():
     for text in (f"EDGE_SE2 -1 2 1 0 0 {INFO2}\n", f"EDGE_SE2 1 1 1 0 0 {INFO2}\n",
-                 f"EDGE_SE2 1 2 1 0 0 -1 0 0 1 0 1\n"):
+                 "EDGE_SE2 1 2 1 0 0 -1 0 0 1 0 1\n"):
         with pytest.raises(ParseError) as exc:
             parse_text(text, "m.g2o")
         assert "np." not in str(exc.value) and "float64" not in str(exc.value)
