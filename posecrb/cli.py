@@ -1,7 +1,11 @@
 """The ``posecrb`` command line: a thin click shell over the library.
 
 Exceptions become exit codes in exactly one place (``main``):
-0 ok; 1 data or solver error (file:line and reason); 2 usage error.
+0 ok; 1 data or solver error (file:line and reason); 2 usage error;
+130 interrupted (SIGINT), 143 terminated (SIGTERM; temporaries are removed first).
+Python warnings (numpy's RuntimeWarning included) never reach the user as raw text:
+``main`` routes each through the posecrb logger as one line on stderr (filters such as
+``-W error::RuntimeWarning`` still apply, which is how the tests prove none occurs).
 Subcommands live in ``posecrb.commands.<name>`` and are discovered
 automatically; each module exposes a click command as ``command``.
 """
@@ -12,11 +16,15 @@ import logging
 import os
 import pkgutil
 import sys
+import warnings
 
 import click
 
 from . import __version__
 from .errors import PosecrbError, UsageError
+from .io.files import Terminated, handle_sigterm, remove_temporaries
+
+log = logging.getLogger("posecrb")
 
 
 class _StderrHandler(logging.Handler):
@@ -63,8 +71,37 @@ def _register_commands() -> None:
 _register_commands()
 
 
+def _warning_origin(filename: str) -> str:
+    """``posecrb.fim`` for .../posecrb/fim.py; the file's base name otherwise."""
+    parts = os.path.normpath(filename).split(os.sep)
+    if "posecrb" in parts:
+        k = len(parts) - 1 - parts[::-1].index("posecrb")
+        mod = ".".join(parts[k:])
+        return mod[:-3] if mod.endswith(".py") else mod
+    return os.path.basename(filename)
+
+
+def _route_warning(message, category, filename, lineno, file=None, line=None) -> None:
+    """warnings.showwarning replacement: one line through the posecrb logger, no source line."""
+    text = " ".join(str(message).split())
+    origin = _warning_origin(filename)
+    if issubclass(category, RuntimeWarning):
+        log.warning("numerical problem in %s (%s); results may be inaccurate", origin, text)
+    else:
+        log.warning("%s from %s: %s", category.__name__, origin, text)
+
+
 def main(argv: list[str] | None = None) -> int:
     """Entry point: run the CLI and map every exception to an exit code."""
+    with warnings.catch_warnings(), handle_sigterm():
+        warnings.showwarning = _route_warning      # restored by catch_warnings on exit
+        try:
+            return _main(argv)
+        finally:
+            remove_temporaries()
+
+
+def _main(argv: list[str] | None) -> int:
     try:
         cli.main(args=argv, prog_name="posecrb", standalone_mode=False)
     except click.exceptions.Exit as exc:
@@ -75,7 +112,11 @@ def main(argv: list[str] | None = None) -> int:
     except UsageError as exc:
         click.echo(f"posecrb: usage error: {exc}", err=True)
         return 2
-    except click.Abort:
+    except click.Abort as exc:
+        # click turns KeyboardInterrupt into Abort
+        if isinstance(exc.__cause__ or exc.__context__, KeyboardInterrupt):
+            click.echo("posecrb: interrupted", err=True)
+            return 130
         click.echo("posecrb: aborted", err=True)
         return 1
     except PosecrbError as exc:
@@ -84,6 +125,9 @@ def main(argv: list[str] | None = None) -> int:
     except KeyboardInterrupt:
         click.echo("posecrb: interrupted", err=True)
         return 130
+    except Terminated as exc:
+        click.echo(f"posecrb: terminated (signal {exc.signum}); partial output removed", err=True)
+        return 128 + int(exc.signum)
     except BrokenPipeError:
         # Output piped into `head` and friends: not an error of ours.
         sys.stderr.close()

@@ -68,6 +68,7 @@ def _resolve_on_path(name_or_path: str | os.PathLike, data_dir: str | os.PathLik
     if os.sep in name or (os.altsep and os.altsep in name):
         from .errors import ParseError
 
+        _not_regular(name)
         raise ParseError(name, None, "no such file")
     candidates = [name] if name.endswith(EXTENSIONS) else [name + ext for ext in EXTENSIONS]
     dirs = search_path(data_dir)
@@ -84,6 +85,19 @@ def _resolve_on_path(name_or_path: str | os.PathLike, data_dir: str | os.PathLik
             if f.is_file() and f.name.lower() in lowered:
                 return f
     raise DatasetNotFound(name, [str(d) for d in dirs if d.is_dir()])
+
+
+def _not_regular(name: str | os.PathLike) -> None:
+    """ParseError saying what ``name`` is when it exists but is not a regular file (a
+    directory, FIFO or device is never read as a dataset nor reported as missing)."""
+    try:
+        st = os.stat(name)
+    except OSError:
+        return
+    from .errors import ParseError
+    from .io.files import path_kind
+
+    raise ParseError(str(name), None, f"is {path_kind(st)}, not a regular file")
 
 
 def discover(data_dir: str | os.PathLike | None = None) -> list[Path]:
@@ -131,6 +145,7 @@ def resolve(name_or_path: str | os.PathLike, data_dir: str | os.PathLike | None 
         entry = (manifest or load_manifest()).find(str(name_or_path))
         found = locate(entry, data_dir) if entry is not None else None
         if found is None:
+            _not_regular(name_or_path)
             if entry is not None and entry.name != str(name_or_path):
                 raise DatasetNotFound(entry.name, exc.searched) from None
             raise

@@ -17,11 +17,18 @@ DPI = 100
 
 
 def _save(fig, path) -> Path:
+    """savefig to a temporary in the target directory, renamed into place (atomic_write);
+    the format follows the suffix (PNG without one)."""
+    from .io.files import atomic_write
+
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
-    fig.tight_layout()
-    fig.savefig(path, dpi=DPI)
-    plt.close(fig)
+    try:
+        fig.tight_layout()
+        with atomic_write(path, "wb") as fh:
+            fig.savefig(fh, dpi=DPI, format=path.suffix[1:].lower() or "png")
+    finally:
+        plt.close(fig)
     return path
 
 

@@ -17,6 +17,7 @@ from .bounds import compute_bounds
 from .errors import PosecrbError
 from .estimate import get_estimate
 from .io import load
+from .io.files import read_regular_file, write_text
 
 GRAPH_ONLY = ("lb", "ub", "ub_lambda")
 ESTIMATE_DEPENDENT = ("fim_logdet", "objective", "trace_crlb")
@@ -31,11 +32,13 @@ def default_expected_path() -> Path:
 
 def load_expected(path: str | os.PathLike | None = None) -> dict:
     p = Path(path) if path else default_expected_path()
-    try:
-        data = json.loads(p.read_text())
-    except FileNotFoundError:
+    if not os.path.lexists(p):
         return {"version": 1, "datasets": {}}
-    except json.JSONDecodeError as exc:
+    try:
+        data = json.loads(read_regular_file(p))   # a directory, FIFO or device is an error, not a hang
+    except (json.JSONDecodeError, UnicodeDecodeError) as exc:
+        if isinstance(exc, UnicodeDecodeError):
+            raise PosecrbError(f"{p}: not a text file (invalid UTF-8)") from None
         raise PosecrbError(f"{p}:{exc.lineno}: invalid JSON ({exc.msg})") from None
     if not isinstance(data, dict) or not isinstance(data.get("datasets"), dict):
         raise PosecrbError(f"{p}: expected an object with a 'datasets' mapping")
@@ -44,10 +47,7 @@ def load_expected(path: str | os.PathLike | None = None) -> dict:
 
 def save_expected(data: dict, path: str | os.PathLike | None = None) -> Path:
     p = Path(path) if path else default_expected_path()
-    target = p.resolve()
-    tmp = target.with_suffix(".json.tmp")
-    tmp.write_text(json.dumps(data, indent=2, sort_keys=True) + "\n")
-    os.replace(tmp, target)
+    write_text(p.resolve(), json.dumps(data, indent=2, sort_keys=True) + "\n")   # atomic, through a symlink
     return p
 
 

@@ -65,8 +65,12 @@ def dataset_row(name: str, settings: TableSettings,
     row: dict = {"dataset": name, "status": "ok"}
     try:
         path = datasets.resolve(name, settings.data_dir)
-    except (DatasetNotFound, PosecrbError) as exc:
+    except DatasetNotFound as exc:
         row.update(status="not found", hint=f"posecrb datasets fetch {name}", error=str(exc))
+        return row
+    except PosecrbError as exc:   # e.g. a directory or a device given as the dataset
+        row.update(status=status_of(exc), error=str(exc))
+        log.error("%s", exc)
         return row
     try:
         step("parse")

@@ -217,3 +217,128 @@ def test_cli_fetch_success_and_failure(server, tmp_path, capsys):
     assert files_in(dest) == ["tinyGrid3D.g2o"]
     assert main(["datasets", "fetch", "--dest", str(dest)]) == 2          # neither NAME nor --all
     assert main(["datasets", "fetch", "--all", "--url", url]) == 2        # --url needs one NAME
+
+
+# ---------------------------------------------------------------- misbehaving servers: bounded in time and size
+class _HostileHandler(http.server.BaseHTTPRequestHandler):
+    """/drip: announces 1000 bytes and sends one every 0.1 s; /announce-huge: announces 1 GB;
+    /stream-huge: no Content-Length, streams zeros until the client hangs up (at most 64 MiB)."""
+
+    def log_message(self, *args) -> None:
+        pass
+
+    def do_GET(self) -> None:
+        import time
+
+        self.send_response(200)
+        self.send_header("Content-Type", "application/octet-stream")
+        try:
+            if self.path.startswith("/drip"):
+                self.send_header("Content-Length", "1000")
+                self.end_headers()
+                for _ in range(1000):
+                    self.wfile.write(b"x")
+                    self.wfile.flush()
+                    time.sleep(0.1)
+            elif self.path.startswith("/announce-huge"):
+                self.send_header("Content-Length", str(10 ** 9))
+                self.end_headers()
+                self.wfile.write(b"\0" * 4096)
+            else:
+                self.end_headers()
+                for _ in range(1024):
+                    self.wfile.write(b"\0" * 65536)
+        except (BrokenPipeError, ConnectionResetError):
+            pass
+        self.close_connection = True
+
+
+@pytest.fixture
+def hostile_server():
+    httpd = http.server.ThreadingHTTPServer(("127.0.0.1", 0), _HostileHandler)
+    httpd.daemon_threads = True
+    thread = threading.Thread(target=httpd.serve_forever, kwargs={"poll_interval": 0.05}, daemon=True)
+    thread.start()
+    try:
+        yield f"http://127.0.0.1:{httpd.server_address[1]}"
+    finally:
+        httpd.shutdown()
+        httpd.server_close()
+        thread.join(5)
+
+
+@pytest.mark.timeout(60)
+def test_trickling_server_hits_the_overall_deadline(hostile_server, tmp_path):
+    import time
+
+    dest = tmp_path / "dest"
+    t0 = time.monotonic()
+    with pytest.raises(FetchError, match=r"exceeded the deadline of 1 s"):
+        fetch("intel", url=f"{hostile_server}/drip/intel.g2o", dest=dest, timeout=5, deadline=1.0)
+    assert time.monotonic() - t0 < 5          # the per-read timeout (5 s) never fires: a byte every 0.1 s
+    assert files_in(dest) == []
+
+
+@pytest.mark.timeout(60)
+@pytest.mark.parametrize("path, message", [("announce-huge", "announces 1000000000 bytes, more than the expected"),
+                                           ("stream-huge", "exceeds the expected size of 307525 bytes")])
+def test_response_larger_than_the_manifest_size_is_aborted(hostile_server, tmp_path, path, message):
+    dest = tmp_path / "dest"
+    assert load_manifest().get("intel").size == 307525
+    with pytest.raises(FetchError, match=message):
+        fetch("intel", url=f"{hostile_server}/{path}/intel.g2o", dest=dest, timeout=5)
+    assert files_in(dest) == []
+
+
+def test_size_cap_without_a_manifest_size():
+    from dataclasses import replace
+
+    from posecrb.fetch import MAX_UNKNOWN_SIZE, size_cap
+
+    entry = load_manifest().get("intel")
+    assert size_cap(entry) == entry.size
+    assert size_cap(replace(entry, size=None)) == MAX_UNKNOWN_SIZE
+
+
+@pytest.mark.timeout(120)
+def test_sigterm_during_cli_fetch_removes_the_partial_file(hostile_server, tmp_path):
+    import os
+    import signal
+    import subprocess
+    import sys
+    import time
+
+    dest = tmp_path / "dest"
+    repo = Path(__file__).resolve().parents[1]
+    env = {**os.environ, "PYTHONPATH": str(repo), "XDG_CACHE_HOME": str(tmp_path / "xdg")}
+    proc = subprocess.Popen([sys.executable, "-m", "posecrb", "-q", "datasets", "fetch", "intel", "--url",
+                             f"{hostile_server}/drip/intel.g2o", "--dest", str(dest), "--timeout", "5"],
+                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, env=env)
+    try:
+        deadline = time.monotonic() + 60
+        while not any(p.name.endswith(".part") for p in dest.glob(".*")) and time.monotonic() < deadline:
+            time.sleep(0.05)
+        assert any(p.name.endswith(".part") for p in dest.glob(".*")), "the download never started"
+        time.sleep(0.3)                                    # some bytes written
+        proc.send_signal(signal.SIGTERM)
+        out, err = proc.communicate(timeout=30)
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+            proc.communicate()
+    assert proc.returncode == 128 + signal.SIGTERM, err
+    assert "terminated" in err and "Traceback" not in err
+    assert files_in(dest) == []
+
+
+def test_cli_fetch_options_are_validated(tmp_path, capsys):
+    for opt in ("--timeout", "--deadline"):
+        for bad in ("nan", "inf", "-1", "0"):
+            assert main(["datasets", "fetch", "intel", opt, bad, "--dest", str(tmp_path)]) == 2
+            assert opt in capsys.readouterr().err
+    f = tmp_path / "afile"
+    f.write_text("")
+    assert main(["datasets", "fetch", "intel", "--dest", str(f)]) == 2
+    assert "--dest" in capsys.readouterr().err
+    assert main(["datasets", "fetch", "intel", "--dest", str(f / "sub")]) == 2     # parent is a file
+    assert "is not a directory" in capsys.readouterr().err

@@ -1,4 +1,12 @@
-"""Readers: content sniffing, id remapping, skipped tags, and a corpus of malformed files."""
+"""Readers: content sniffing, id remapping, skipped tags, and a corpus of malformed files;
+robustness of the reader (line ends, ids, number syntax, magnitudes) and atomic writes."""
+import os
+import signal
+import stat
+import subprocess
+import sys
+from pathlib import Path
+
 import numpy as np
 import pytest
 
@@ -205,3 +213,235 @@ def test_raw_quaternions_still_reject_zero_and_bad_mode():
         parse_text(f"EDGE_SE3:QUAT 0 1 0 0 0 0 0 0 0 {INFO3}\n", "z.g2o", quaternions="raw")
     with pytest.raises(UsageError, match="quaternions"):
         parse_text(f"EDGE_SE2 0 1 1 2 0.5 {INFO2}\n", quaternions="normalise")
+
+
+# ---- robustness of the reader ----------------------------------------------------------------
+
+def test_lines_end_at_lf_crlf_and_cr_only():
+    text = f"# a\r\n{E}\rEDGE_SE2 1 2 1 0 0 {INFO2}\n\nEDGE_SE2 2 3 1 0 0 {INFO2}\r\n"
+    g = parse_text(text, "le.g2o")
+    assert list(g.edge_lines) == [2, 3, 5]
+
+
+@pytest.mark.parametrize("sep", ["\f", "\v", "\x1c", "\x1d", "\x1e", "\x85", "\u2028", "\u2029"])
+def test_a_commented_out_edge_stays_commented_whatever_separator_it_contains(sep):
+    # str.splitlines() breaks at each of these: the tail of the comment became an edge (0, 2)
+    text = f"{E}\nEDGE_SE2 1 2 1 0 0 {INFO2}\n# off:{sep}EDGE_SE2 0 2 5 5 1 {INFO2}\nEDGE_SE2 1 2 1 0 0 {INFO2} 9\n"
+    with pytest.raises(ParseError) as exc:
+        parse_text(text, "c.g2o")
+    assert exc.value.line == 4                       # later line numbers are not shifted
+    g = parse_text(text.rsplit("\n", 2)[0] + "\n", "c.g2o")
+    assert g.m == 2 and g.skipped == {"#": 1}
+
+
+def test_ids_are_integers_not_floats(tmp_path):
+    a, b, top = 2 ** 53, 2 ** 53 + 1, 2 ** 63 - 1       # a and b are the same float64
+    g = parse_text(f"EDGE_SE2 {a} {b} 1 0 0 {INFO2}\nEDGE_SE2 {b} {top} 1 0 0 {INFO2}\n", "i.g2o")
+    assert g.ids.tolist() == [a, b, top] and g.ids.dtype == np.int64
+    out = tmp_path / "o.g2o"
+    write_g2o(g.with_vertices(np.repeat(np.eye(2)[None], 3, 0), np.zeros((3, 2))), out)
+    assert f"VERTEX_SE2 {b} " in out.read_text() and f"EDGE_SE2 {a} {b} " in out.read_text()
+    assert load(out).ids.tolist() == [a, b, top]
+    with pytest.raises(ParseError, match=r"'9223372036854775808' is not a non-negative integer id") as exc:
+        parse_text(f"{E}\nEDGE_SE2 1 {2 ** 63} 1 0 0 {INFO2}\n", "i.g2o")
+    assert exc.value.line == 2
+
+
+@pytest.mark.parametrize("token, where", [("1_0", "id"), ("+1", "id"), ("1e0", "id"), ("\u0661", "id"),
+                                          ("1_0", "value"), ("\u0661", "value"), ("0x10", "value"),
+                                          ("1.0.0", "value")])
+def test_python_number_extensions_are_not_numbers(token, where):
+    # int() and float() accept underscores and non-ASCII digits; a g2o file does not
+    line = f"EDGE_SE2 {token} 2 1 0 0 {INFO2}" if where == "id" else f"EDGE_SE2 1 2 {token} 0 0 {INFO2}"
+    with pytest.raises(ParseError, match="not a non-negative integer id" if where == "id" else "not a number") as exc:
+        parse_text(f"{E}\n{line}\n", "n.g2o")
+    assert exc.value.line == 2
+
+
+@pytest.mark.parametrize("q", ["1e308 1e308 0 0", "-1e308 -1e308 0 0", "1e-320 1e-320 0 0", "3e200 3e200 0 0"])
+def test_quaternion_normalised_after_scaling_never_the_identity(q):
+    # q/|q| overflowed to 0 -> identity (1e308), or was rejected as "zero" (1e-320)
+    g = parse_text(f"EDGE_SE3:QUAT 0 1 0 0 0 {q} {INFO3}\n", "q.g2o")
+    c = parse_text(f"EDGE_SE3:QUAT 0 1 0 0 0 0.70710678118654752 0.70710678118654752 0 0 {INFO3}\n", "q.g2o")
+    np.testing.assert_allclose(g.rot[0], c.rot[0], rtol=0, atol=4 * np.finfo(float).eps)
+    # 180 degrees about (1, 1, 0)/sqrt 2: R = 2 n n^T - I
+    np.testing.assert_allclose(g.rot[0], [[0, 1, 0], [1, 0, 0], [0, 0, -1]], rtol=0, atol=1e-15)
+
+
+def test_raw_quaternion_too_large_to_use_unnormalised_is_an_error():
+    with pytest.raises(ParseError, match="quaternion norm 1.41421e\\+308 is too large"):
+        parse_text(f"EDGE_SE3:QUAT 0 1 0 0 0 1e308 1e308 0 0 {INFO3}\n", "q.g2o", quaternions="raw")
+
+
+@pytest.mark.parametrize("line, reason", [
+    ("EDGE_SE2 1 2 1 0 0 1e200 0 0 1e200 0 1e200", "information entry 1e+200 exceeds 1e+100"),
+    ("EDGE_SE2 1 2 1 0 0 1e308 0 0 1e308 0 1e308", "information entry 1e+308 exceeds 1e+100"),
+    (f"EDGE_SE2 1 2 1e308 0 0 {INFO2}", "translation component 1e+308 exceeds 1e+50"),
+    ("EDGE_SE2 1 2 1 0 0 1e-300 0 0 1e-300 0 5", "translation precision tau = 0 is outside [1e-100, 1e+100]"),
+    ("EDGE_SE2 1 2 1 0 0 10 0 0 10 0 1e-120", "rotation concentration kappa = 1e-120 is outside"),
+    (f"EDGE_SE3:QUAT 1 2 0 0 0 0 0 0 1 {INFO3.rsplit(' ', 6)[0]} 1e-60 0 0 1e-60 0 1e-60",
+     "rotation weight omega(kappa)/3 (eq. 59) = 8.33333e-122 is outside"),
+])
+def test_values_that_would_overflow_downstream_are_rejected_with_file_line(line, reason):
+    first = E if line.startswith("EDGE_SE2") else f"EDGE_SE3:QUAT 0 1 0 0 0 0 0 0 1 {INFO3}"
+    with pytest.raises(ParseError) as exc:
+        parse_text(f"{first}\n{line}\n", "o.g2o")
+    assert exc.value.line == 2 and reason in exc.value.reason, exc.value.reason
+
+
+def test_vertex_translation_that_would_overflow_is_rejected():
+    with pytest.raises(ParseError, match="VERTEX_SE2: translation component -1e\\+300 exceeds") as exc:
+        parse_text(f"VERTEX_SE2 0 0 0 0\nVERTEX_SE2 1 -1e300 0 0\n{E}\n", "v.g2o")
+    assert exc.value.line == 2
+
+
+def test_positive_definiteness_is_scale_aware():
+    a, c = 1e12, 1e-3
+    g = parse_text(f"EDGE_SE2 0 1 1 0 0 {a:g} 0 0 {c:g} 0 1000\n", "pd.g2o")
+    assert g.tau[0] == pytest.approx(2 * a * c / (a + c), rel=1e-15)   # tau = 2 / trace(inv(I_tt))
+    g3 = parse_text("EDGE_SE3:QUAT 0 1 0 0 0 0 0 0 1 1e12 0 0 0 0 0 1e-3 0 0 0 0 1 0 0 0 "
+                    "1e9 0 0 1e-4 0 1\n", "pd3.g2o")
+    assert g3.m == 1
+    cases = {"1 1 0 1 0 5": "(singular to working precision)",
+             "1 2 0 1 0 5": "(smallest eigenvalue -1 after scaling to unit diagonal)",
+             "0 0 0 1 0 5": "(diagonal entry 1 is 0)",
+             "1e12 0 0 -1e-3 0 5": "(diagonal entry 2 is -0.001)"}
+    for info, why in cases.items():
+        with pytest.raises(ParseError) as exc:
+            parse_text(f"{E}\nEDGE_SE2 1 2 1 0 0 {info}\n", "pd.g2o")
+        msg = str(exc.value)
+        assert exc.value.line == 2 and "translation block of the information matrix is not positive definite" in msg
+        assert msg.endswith(why) and "np." not in msg
+
+
+def test_messages_show_plain_numbers():
+    for text in (f"EDGE_SE2 -1 2 1 0 0 {INFO2}\n", f"EDGE_SE2 1 1 1 0 0 {INFO2}\n",
+                 "EDGE_SE2 1 2 1 0 0 -1 0 0 1 0 1\n"):
+        with pytest.raises(ParseError) as exc:
+            parse_text(text, "m.g2o")
+        assert "np." not in str(exc.value) and "float64" not in str(exc.value)
+
+
+@pytest.mark.timeout(60)
+def test_only_regular_files_are_read(tmp_path):
+    d = tmp_path / "d.g2o"
+    d.mkdir()
+    fifo = tmp_path / "f.g2o"
+    os.mkfifo(fifo)          # open() would block until a writer appears
+    for path, kind in ((d, "a directory"), (fifo, "a FIFO (named pipe)"), ("/dev/zero", "a character device"),
+                       (tmp_path / "none.g2o", None)):
+        with pytest.raises(ParseError) as exc:
+            load(path)
+        assert exc.value.reason == (f"is {kind}, not a regular file" if kind else "no such file")
+
+
+# ---- atomic writes ------------------------------------------------------------------------------
+
+def test_write_g2o_leaves_a_users_tmp_file_alone(tmp_path, random_graph):
+    g = random_graph(np.random.default_rng(1), n=5)
+    out = tmp_path / "out.g2o"
+    (tmp_path / "out.g2o.tmp").write_text("mine\n")      # write_g2o used to write (and leave) OUT.tmp
+    write_g2o(g, out)
+    assert (tmp_path / "out.g2o.tmp").read_text() == "mine\n"
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["out.g2o", "out.g2o.tmp"]
+
+
+@pytest.mark.parametrize("exc_type", [RuntimeError, KeyboardInterrupt])
+def test_failed_write_keeps_the_previous_file_and_no_temporary(tmp_path, exc_type):
+    from posecrb.io.files import atomic_write
+
+    f = tmp_path / "result.txt"
+    f.write_text("previous\n")
+    with pytest.raises(exc_type):
+        with atomic_write(f) as fh:
+            fh.write("partial")
+            raise exc_type("stop")
+    assert f.read_text() == "previous\n" and [p.name for p in tmp_path.iterdir()] == ["result.txt"]
+
+
+def test_fim_npz_write_failure_keeps_the_previous_file(tmp_path, monkeypatch):
+    import scipy.sparse as sp
+
+    from posecrb.commands import fim as fim_cmd
+
+    target = tmp_path / "f.npz"
+    target.write_bytes(b"previous")
+
+    def broken_savez(file, **arrays):      # numpy's savez killed half-way (disk full, SIGKILL, ...)
+        if isinstance(file, (str, os.PathLike)):
+            file = open(str(file) if str(file).endswith(".npz") else f"{file}.npz", "wb")
+        file.write(b"PK partial")
+        file.flush()
+        raise OSError(28, "No space left on device")
+
+    monkeypatch.setattr(fim_cmd.np, "savez", broken_savez)
+    with pytest.raises(OSError):
+        fim_cmd.save_npz(str(tmp_path / "f"), sp.eye(3), np.arange(3), np.zeros(3), ["x"], "paper", [0])
+    assert target.read_bytes() == b"previous" and [p.name for p in tmp_path.iterdir()] == ["f.npz"]
+
+
+def test_atomic_write_permissions(tmp_path):
+    from posecrb.io.files import write_text
+
+    new = write_text(tmp_path / "new.txt", "x")
+    umask = os.umask(0)
+    os.umask(umask)
+    assert stat.S_IMODE(new.stat().st_mode) == 0o666 & ~umask
+    old = tmp_path / "old.txt"
+    old.write_text("y")
+    old.chmod(0o640)
+    write_text(old, "z")
+    assert stat.S_IMODE(old.stat().st_mode) == 0o640 and old.read_text() == "z"
+
+
+@pytest.mark.timeout(120)
+def test_sigterm_during_a_write_removes_the_temporary(tmp_path):
+    """SIGTERM (what `kill` and job schedulers send) is turned into an exception in the CLI,
+    so the temporary of a write in progress is removed and the previous file kept."""
+    script = tmp_path / "killed.py"
+    target = tmp_path / "out" / "result.g2o"
+    target.parent.mkdir()
+    target.write_text("previous\n")
+    script.write_text(
+        "import os, signal, sys, time\n"
+        "from posecrb.cli import main\n"
+        "import posecrb.commands.info as info\n"
+        "from posecrb.io.files import atomic_write\n"
+        "def slow(graph):\n"
+        f"    with atomic_write({str(target)!r}) as fh:\n"
+        "        fh.write('partial')\n"
+        "        fh.flush()\n"
+        "        os.kill(os.getpid(), signal.SIGTERM)\n"
+        "        time.sleep(30)\n"
+        "info.graph_info = slow\n"
+        "sys.exit(main(sys.argv[1:]))\n")
+    g = tmp_path / "g.g2o"
+    g.write_text(f"{E}\n")
+    repo = Path(__file__).resolve().parents[1]
+    env = {**os.environ, "PYTHONPATH": str(repo)}
+    res = subprocess.run([sys.executable, str(script), "info", str(g)], capture_output=True, text=True,
+                         env=env, timeout=60)
+    assert res.returncode == 128 + signal.SIGTERM, res.stderr
+    assert "terminated" in res.stderr and "Traceback" not in res.stderr
+    assert target.read_text() == "previous\n"
+    assert [p.name for p in target.parent.iterdir()] == ["result.g2o"]
+
+
+def test_ctrl_c_during_a_write_exits_130_and_removes_the_temporary(tmp_path, monkeypatch, capsys):
+    import posecrb.commands.info as info
+    from posecrb.io.files import atomic_write
+
+    target = tmp_path / "out" / "result.txt"
+    target.parent.mkdir()
+
+    def interrupted(graph):
+        with atomic_write(target) as fh:
+            fh.write("partial")
+            raise KeyboardInterrupt
+
+    monkeypatch.setattr(info, "graph_info", interrupted)
+    g = tmp_path / "g.g2o"
+    g.write_text(f"{E}\n")
+    assert main(["info", str(g)]) == 130
+    assert "interrupted" in capsys.readouterr().err
+    assert list(target.parent.iterdir()) == []

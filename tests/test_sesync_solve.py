@@ -160,15 +160,21 @@ def test_cli_json_and_out(shared_datasets, tmp_path):
     assert objective_loop(g, est.vertex_rot, est.vertex_trans) == pytest.approx(row["objective"], rel=1e-9)
 
 
-def test_cli_uncertified_exit_code(shared_datasets, tmp_path):
+def test_cli_uncertified_exit_code(shared_datasets, tmp_path, monkeypatch):
+    from dataclasses import replace
+
+    import posecrb.commands.solve as solve_cmd
     from posecrb.cli import main
 
+    # An uncertified result (negative tolerances, the old way to force one, are now rejected
+    # as usage errors): exit 1, estimate still written.
+    real = solve_cmd.solve
+    monkeypatch.setattr(solve_cmd, "solve", lambda *a, **k: replace(real(*a, **k), certified=False))
     out = tmp_path / "est.g2o"
-    # An impossible tolerance (lambda_min >= +1) cannot be certified: exit 1, estimate still written.
-    code = main(["solve", str(shared_datasets / "tinyGrid3D.g2o"), "--certificate-tol", "-1", "--rmax", "4",
-                 "--out", str(out)])
+    code = main(["solve", str(shared_datasets / "tinyGrid3D.g2o"), "--rmax", "4", "--out", str(out)])
     assert code == 1
     assert out.exists()
+    assert main(["solve", str(shared_datasets / "tinyGrid3D.g2o"), "--certificate-tol", "-1"]) == 2
 
 
 def test_cli_sesync_compat_reads_raw_quaternions(shared_datasets, tmp_path):

@@ -2,13 +2,14 @@
 from __future__ import annotations
 
 import logging
+import re
 
 import click
 import numpy as np
 
 from ..errors import UsageError
 from ..report import print_rows
-from ._common import data_dir_option, format_option
+from ._common import INT64_MAX, POSE_ID, data_dir_option, format_option
 from .fim import (estimate_option, fim_variant_option, frame_option, load_with_estimate, model_option,
                   resolve_fim_variant, resolve_frame, rotation_weight_option)
 
@@ -25,11 +26,14 @@ def parse_pose_ids(text: str | None) -> bool | list[int]:
     out: list[int] = []
     for part in text.split(","):
         part = part.strip()
+        # digits only (int() would take 1_0 and non-ASCII digits), ids that fit int64
+        if re.fullmatch(r"[0-9]+(?:-[0-9]+)?", part) is None or max(map(int, part.split("-"))) > INT64_MAX:
+            raise UsageError(f"--poses: {part!r} is not a pose id or an id range a-b")
         try:
             if "-" in part[1:]:
                 lo, hi = part.split("-", 1) if not part.startswith("-") else (part, "")
                 lo_i, hi_i = int(lo), int(hi)
-                if hi_i < lo_i:
+                if hi_i < lo_i or hi_i - lo_i > 10 ** 7:   # (a huge range would exhaust memory)
                     raise ValueError
                 out.extend(range(lo_i, hi_i + 1))
             else:
@@ -114,7 +118,7 @@ def crlb_result(file: str, data_dir: str | None, model: str, source: str, anchor
 @click.argument("file")
 @model_option
 @click.option("--quotient", is_flag=True, help="sed: quotient CRB F^+ (thesis 5.5) instead of the anchored one (5.1).")
-@click.option("--anchor", "anchors", type=int, multiple=True,
+@click.option("--anchor", "anchors", type=POSE_ID, multiple=True,
               help="Anchored pose id (repeatable; sed: one or more per component). "
                    "Default: the smallest id (of each component).")
 @click.option("--poses", default=None, metavar="IDS",

@@ -9,7 +9,7 @@ import click
 from .. import datasets as ds
 from ..errors import PosecrbError, UsageError
 from ..report import print_rows
-from ._common import data_dir_option, format_option
+from ._common import FiniteFloat, data_dir_option, format_option
 
 log = logging.getLogger("posecrb")
 
@@ -61,24 +61,32 @@ def _progress_bar():
 @click.option("--dest", type=click.Path(file_okay=False), default=None,
               help="Download directory (default: the user cache ~/.cache/posecrb).")
 @click.option("--url", default=None, help="Download from this URL instead of the manifest's (one NAME only).")
-@click.option("--timeout", type=float, default=60.0, show_default=True, help="Network timeout in seconds.")
+@click.option("--timeout", type=FiniteFloat(min=0, min_open=True, max=1e6), default=60.0, show_default=True,
+              help="Network timeout in seconds (connection and each read).")
+@click.option("--deadline", type=FiniteFloat(min=0, min_open=True, max=1e7), default=600.0, show_default=True,
+              help="Overall time limit of each download in seconds (a server that trickles bytes "
+                   "never trips --timeout).")
 @data_dir_option
 @format_option()
 def fetch_cmd(names: tuple[str, ...], all_: bool, dest: str | None, url: str | None, timeout: float,
-              data_dir: str | None, fmt: str) -> None:
+              deadline: float, data_dir: str | None, fmt: str) -> None:
     """Download NAME(s) over HTTPS, verify the checksum, then move into place atomically.
 
     A file that already verifies (at the destination, or without --dest anywhere on
     the search path) is never downloaded again or overwritten. A bad checksum or an
-    interrupted download leaves no file and exits 1.
+    interrupted download leaves no file and exits 1. A response larger than the
+    manifest's size of the file is aborted as soon as it exceeds it.
     """
     from ..fetch import fetch_many
+    from ..io import check_output_dir
     from ..manifest import load_manifest
 
     if all_ == bool(names):
         raise click.UsageError("give dataset NAME(s) or --all (not both)")
     if url and (all_ or len(names) != 1):
         raise click.UsageError("--url needs exactly one NAME")
+    if dest is not None:
+        check_output_dir(dest, option="--dest")
     manifest = load_manifest()
     entries = list(manifest) if all_ else [manifest.get(n) for n in names]
     quiet = log.getEffectiveLevel() >= logging.ERROR
@@ -98,11 +106,11 @@ def fetch_cmd(names: tuple[str, ...], all_: bool, dest: str | None, url: str | N
 
         def run():
             return [fetch(entries[0], dest=dest, url=url, manifest=manifest, timeout=timeout,
-                          data_dir=data_dir, progress=factory(entries[0]))]
+                          deadline=deadline, data_dir=data_dir, progress=factory(entries[0]))]
     else:
         def run():
             return fetch_many(entries, dest=dest, manifest=manifest, progress_factory=factory,
-                              timeout=timeout, data_dir=data_dir)
+                              timeout=timeout, deadline=deadline, data_dir=data_dir)
     if bar is not None:
         with bar:
             results = run()
@@ -152,12 +160,12 @@ def verify_cmd(data_dir: str | None, parse: bool, fmt: str) -> None:
 @click.argument("kind", type=click.Choice(["grid2d", "grid3d", "sphere", "torus", "octagon", "demo"]))
 @click.option("--poses", type=click.IntRange(2), default=None,
               help="Number of poses (grid2d 100, grid3d 125, sphere 2500, torus 5000; octagon is always 8).")
-@click.option("--noise", "sigma", type=click.FloatRange(min=0, min_open=True), default=None,
+@click.option("--noise", "sigma", type=FiniteFloat(min=1e-6, max=1e6), default=None,
               help="Noisy measurements with translation std SIGMA and rotation angle std SIGMA [rad]: "
                    "tau = 1/SIGMA^2, kappa = 1/(2 SIGMA^2).")
-@click.option("--tau", type=click.FloatRange(min=0, min_open=True), default=None,
+@click.option("--tau", type=FiniteFloat(min=1e-12, max=1e12), default=None,
               help="Translation precision 1/delta^2 (implies noise unless --noise-free).")
-@click.option("--kappa", type=click.FloatRange(min=0, min_open=True), default=None,
+@click.option("--kappa", type=FiniteFloat(min=1e-12, max=1e12), default=None,
               help="Langevin rotation concentration (implies noise unless --noise-free).")
 @click.option("--noise-free", is_flag=True, help="Exact measurements even with --tau/--kappa (information only).")
 @click.option("--seed", type=int, default=0, show_default=True, help="Seed of the noise (numpy PCG64).")
@@ -176,7 +184,7 @@ def synth_cmd(kind: str, poses: int | None, sigma: float | None, tau: float | No
     encode (tau, kappa) in SE-Sync's convention. `demo` is the fixed graph `make run`
     falls back on (noisy 10x10 2D grid, fixed seed).
     """
-    from ..io import write_g2o
+    from ..io import check_output_file, write_g2o
     from ..synth import generate
 
     if sigma is not None and (tau is not None or kappa is not None):
@@ -186,6 +194,7 @@ def synth_cmd(kind: str, poses: int | None, sigma: float | None, tau: float | No
     noisy = (sigma is not None or tau is not None or kappa is not None) and not noise_free
     if kind == "demo" and (poses or sigma or tau or kappa or noise_free):
         raise click.UsageError("`demo` is fixed: no --poses/--noise/--tau/--kappa/--noise-free")
+    check_output_file(out, option="--out", create_parents=True)
     try:
         graph = generate(kind, poses, tau=tau, kappa=kappa, noise=noisy, seed=seed, extra_edges=extra_edges)
     except ValueError as exc:

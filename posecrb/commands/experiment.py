@@ -19,7 +19,7 @@ import click
 from ..errors import UsageError
 from ..provenance import machine, versions
 from ..report import print_rows, to_csv, to_json
-from ._common import anchor_option, data_dir_option, format_option, load_dataset
+from ._common import FiniteFloat, anchor_option, data_dir_option, format_option, load_dataset
 
 log = logging.getLogger("posecrb")
 
@@ -78,16 +78,18 @@ def _write_out(out_dir: str | None, experiment: str, settings: dict, rows: list[
                elapsed: float, extra: dict[str, list[dict]] | None = None) -> None:
     if not out_dir:
         return
+    from ..io.files import write_text
+
     d = Path(out_dir)
     d.mkdir(parents=True, exist_ok=True)
-    (d / "rows.csv").write_text(to_csv(rows))
-    (d / "rows.json").write_text(to_json(rows, single=False) + "\n")
+    write_text(d / "rows.csv", to_csv(rows))   # every file atomically (temporary + rename)
+    write_text(d / "rows.json", to_json(rows, single=False) + "\n")
     for name, data in (extra or {}).items():
-        (d / f"{name}.csv").write_text(to_csv(data))
+        write_text(d / f"{name}.csv", to_csv(data))
     run = {"experiment": experiment, "command": " ".join(["posecrb"] + sys.argv[1:]), "settings": settings,
            "versions": {**versions(), "platform": machine()["platform"]}, "seeds": seeds, "elapsed_seconds": elapsed,
            "created": time.strftime("%Y-%m-%dT%H:%M:%S%z")}
-    (d / "run.json").write_text(json.dumps(run, indent=2, default=str) + "\n")
+    write_text(d / "run.json", json.dumps(run, indent=2, default=str) + "\n")
     log.info("wrote %s/{rows.csv,rows.json,run.json}", d)
 
 
@@ -95,6 +97,25 @@ def _plot_target(plot_path: str | None, out_dir: str | None, name: str) -> str |
     if plot_path:
         return plot_path
     return str(Path(out_dir) / f"{name}.png") if out_dir else None
+
+
+def _check_outputs(plot_path: str | None, out_dir: str | None, name: str, extra: tuple[str, ...] = (),
+                   inputs: tuple[str, ...] = ()) -> None:
+    """Validate --plot and --out before the trials run (exit 2), not after."""
+    from ..io import check_output_dir, check_output_file
+
+    if out_dir:
+        check_output_dir(out_dir, inputs, ["rows.csv", "rows.json", "run.json", f"{name}.png",
+                                           *(f"{e}.csv" for e in extra)], option="--out")
+    if plot_path:
+        check_output_file(plot_path, inputs, option="--plot", create_parents=True)
+        fmt = Path(plot_path).suffix[1:].lower()
+        if fmt:
+            from matplotlib.backend_bases import FigureCanvasBase
+
+            if fmt not in FigureCanvasBase.get_supported_filetypes():
+                raise UsageError(f"--plot {plot_path}: matplotlib cannot write .{fmt} files (use .png, .pdf, "
+                                 ".svg, ...)")
 
 
 @click.group("experiment")
@@ -120,9 +141,9 @@ CRLB_HEADERS = {"mse_stderr": "± s.e.", "mse_bound": "CRLB/n_p", "mse_bound_cur
 @click.option("--scale", type=click.Choice(["both", "rotation"]), default="both", show_default=True,
               help="both: k_c multiplies kappa and tau (the whole information); rotation: only kappa, "
                    "eq. (80) as printed.")
-@click.option("--kappa", type=click.FloatRange(min=0, min_open=True), default=None,
+@click.option("--kappa", type=FiniteFloat(min=1e-12, max=1e12), default=None,
               help="Base Langevin concentration for every edge instead of the file's (paper Fig. 6: 150).")
-@click.option("--tau", type=click.FloatRange(min=0, min_open=True), default=None,
+@click.option("--tau", type=FiniteFloat(min=1e-12, max=1e12), default=None,
               help="Base translation precision 1/delta^2 for every edge instead of the file's (Fig. 6: 140).")
 @anchor_option
 @data_dir_option
@@ -143,6 +164,7 @@ def crlb_cmd(file, kc_spec, scale, kappa, tau, anchor, data_dir, trials, seed, j
     trials = trials or (20 if quick else 100)
     ex = _executor(executor, jobs, scheduler)
     graph, _ = load_dataset(file, data_dir)
+    _check_outputs(plot_path, out_dir, "crlb", ("trials",), (graph.path,))
     anchor_idx = graph.anchor_index(anchor)
     t0 = time.perf_counter()
     with _progress(len(kcs) * trials, f"{graph.name}: trials") as cb:
@@ -199,6 +221,7 @@ def thesis_cmd(m_spec, trials, seed, jobs, executor, scheduler, plot_path, out_d
         ms = list(QUICK_M if quick else DEFAULT_M)
     trials = trials or (100 if quick else 200)
     ex = _executor(executor, jobs, scheduler)
+    _check_outputs(plot_path, out_dir, "thesis", ("eigenvalues",))
     t0 = time.perf_counter()
     with _progress(len(ms) * trials, "thesis: trials") as cb:
         res = thesis_experiment(ms, trials, seed, progress=cb, **ex)
@@ -223,7 +246,7 @@ OCTAGON_HEADERS = {"extra_edges": "extra", "m": "edges", "total_degree": "degree
 
 
 @command.command("octagon", short_help="T- vs D-optimality vs node degree (paper Fig. 4/5).")
-@click.option("--radius", type=click.FloatRange(min=0, min_open=True), default=0.1, show_default=True,
+@click.option("--radius", type=FiniteFloat(min=1e-6, max=1e6), default=0.1, show_default=True,
               help="Circumradius of the octagon. The paper gives no size; 0.1 keeps sum tau||p||^2 small, as it states.")
 @_run_options("random graphs per number of extra edges; default 50; --quick: 5")
 def octagon_cmd(radius, trials, seed, jobs, executor, scheduler, plot_path, out_dir, quick, fmt):
@@ -233,6 +256,7 @@ def octagon_cmd(radius, trials, seed, jobs, executor, scheduler, plot_path, out_
 
     trials = trials or (5 if quick else 50)
     ex = _executor(executor, jobs, scheduler)
+    _check_outputs(plot_path, out_dir, "octagon", ("graphs",))
     t0 = time.perf_counter()
     with _progress(22, "octagon: levels") as cb:
         res = octagon_experiment(trials, seed, radius=radius, progress=cb, **ex)

@@ -11,7 +11,7 @@ from ..errors import UsageError
 from ..fim import FIM_VARIANTS
 from ..noise import ROTATION_WEIGHT_MODELS
 from ..report import print_rows
-from ._common import data_dir_option, format_option, load_dataset
+from ._common import POSE_ID, data_dir_option, estimate_inputs, format_option, load_dataset
 
 log = logging.getLogger("posecrb")
 
@@ -92,16 +92,27 @@ def anchored_logdet(matrix, q: int, anchors: list[int], name: str) -> float:
     return logdet(matrix[dofs][:, dofs].tocsc(), name=name)
 
 
+def npz_path(path: str) -> str:
+    """The file ``--save PATH`` writes: numpy's rule, ``.npz`` appended unless present."""
+    return path if path.endswith(".npz") else path + ".npz"
+
+
 def save_npz(path: str, matrix, row_ids: np.ndarray, row_coord: np.ndarray, names: list[str],
-             model: str, anchors: list[int], frame: str = "mixed") -> None:
+             model: str, anchors: list[int], frame: str = "mixed") -> str:
     """A scipy sparse .npz (``scipy.sparse.load_npz`` reads it) plus the index map:
     ``row_pose_id[k]`` and ``row_coordinate[k]`` (into ``coordinate_names``) for row k, and
-    ``frame`` (world/body for sed, mixed for the paper model)."""
+    ``frame`` (world/body for sed, mixed for the paper model).
+    Written atomically to ``npz_path(path)``, which is returned."""
+    from ..io import atomic_write
+
     m = matrix.tocsc()
-    np.savez(path, data=m.data, indices=m.indices, indptr=m.indptr, format=np.array("csc"),
+    target = npz_path(path)
+    with atomic_write(target, "wb") as fh:
+        np.savez(fh, data=m.data, indices=m.indices, indptr=m.indptr, format=np.array("csc"),
              shape=np.array(m.shape), row_pose_id=np.asarray(row_ids, np.int64),
              row_coordinate=np.asarray(row_coord, np.int64), coordinate_names=np.array(names),
-             model=np.array(model), anchor_ids=np.asarray(anchors, np.int64), frame=np.array(frame))
+                 model=np.array(model), anchor_ids=np.asarray(anchors, np.int64), frame=np.array(frame))
+    return target
 
 
 def fim_row(file: str, data_dir: str | None, model: str, source: str, anchor_id: int | None,
@@ -109,6 +120,12 @@ def fim_row(file: str, data_dir: str | None, model: str, source: str, anchor_id:
             frame: str | None = None) -> dict:
     variant = resolve_fim_variant(model, fim_variant)
     frame = resolve_frame(model, frame)
+    if save:
+        from .. import datasets
+        from ..io import check_output_file
+
+        save = npz_path(save)   # the file really written (and reported as `saved`)
+        check_output_file(save, [datasets.resolve(file, data_dir), *estimate_inputs(source)], option="--save")
     graph, est, est_info, times = load_with_estimate(file, data_dir, source)
     row: dict = {"dataset": graph.name, "model": model, "dim": graph.dim, "poses": graph.n,
                  "edges": graph.m, "components": graph.n_components}
@@ -171,15 +188,15 @@ def fim_row(file: str, data_dir: str | None, model: str, source: str, anchor_id:
 @click.argument("file")
 @model_option
 @estimate_option
-@click.option("--anchor", type=int, default=None,
+@click.option("--anchor", type=POSE_ID, default=None,
               help="Pose id anchored for the log-det; default: the smallest id (of each component, sed).")
 @rotation_weight_option
 @fim_variant_option
 @frame_option
 @click.option("--save", type=click.Path(dir_okay=False, writable=True), default=None,
               help="Write the FIM as a scipy sparse .npz with its index map "
-                   "(row_pose_id, row_coordinate, coordinate_names) and its frame; with --model sed "
-                   "--frame body it is comparable with a GTSAM Hessian.")
+                   "(row_pose_id, row_coordinate, coordinate_names) and its frame; .npz is appended "
+                   "unless present. With --model sed --frame body it is comparable with a GTSAM Hessian.")
 @data_dir_option
 @format_option()
 def command(file, model, estimate_source, anchor, rotation_model, fim_variant, frame, save, data_dir, fmt):

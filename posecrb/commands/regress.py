@@ -28,6 +28,11 @@ def command(names, update, expected_path, all_rows, data_dir, fmt):
     at the certified optimum (1e-6) and compare them with the expected file. Exits 1 on any
     drift or changed input checksum. A dataset not found is skipped with a warning unless it
     was named with --datasets."""
+    if update:   # the file is rewritten at the end (atomically): check that it can be, first
+        from ..io import check_output_file
+        from ..regress import default_expected_path
+
+        check_output_file(expected_path or default_expected_path().resolve(), option="--expected")
     data = load_expected(expected_path)
     stored = data["datasets"]
     requested = [n.strip() for n in names.split(",") if n.strip()] if names else None

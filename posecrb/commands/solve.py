@@ -5,11 +5,11 @@ import click
 
 from .. import datasets
 from ..errors import SolverError
-from ..io import load, write_g2o
+from ..io import check_output_file, load, write_g2o
 from ..report import print_rows
 from ..sesync import solve
 from ..timing import timed
-from ._common import data_dir_option, format_option
+from ._common import POSE_ID, FiniteFloat, data_dir_option, format_option
 
 # Compact column set for the human-readable formats; json/csv carry every key.
 TABLE_COLUMNS = ["dataset", "dim", "poses", "edges", "objective", "duality_gap", "lambda_min", "certified", "rank",
@@ -30,9 +30,9 @@ HEADERS = {"hessian_vector_products": "HVPs", "times.total": "time s", "duality_
               help="Last rank of the Riemannian staircase.")
 @click.option("--init", "init", type=click.Choice(["chordal", "vertices"]), default="chordal", show_default=True,
               help="Initial rotations: chordal relaxation, or the file's own vertices.")
-@click.option("--anchor", type=int, default=None,
+@click.option("--anchor", type=POSE_ID, default=None,
               help="Pose id (as in the file) put at the identity in the output; default: the smallest id.")
-@click.option("--certificate-tol", type=float, default=1e-3, show_default=True,
+@click.option("--certificate-tol", type=FiniteFloat(min=0, min_open=True), default=1e-3, show_default=True,
               help="Accept lambda_min(Q - Lambda) >= -TOL as a certificate of global optimality.")
 @click.option("--sesync-compat", is_flag=True,
               help="Read 3D quaternions as SE-Sync does (unnormalised) to reproduce its objective values.")
@@ -48,6 +48,8 @@ def command(file, out, fmt, r0, rmax, init, anchor, certificate_tol, sesync_comp
     """
     quaternions = "raw" if sesync_compat else "normalize"
     path = datasets.resolve(file, data_dir)
+    if out:
+        check_output_file(out, [path], option="--out")   # before the work, not after a long solve
     graph, parse_time = timed(lambda: load(path, quaternions=quaternions))
     anchor_idx = graph.anchor_index(anchor)
     res = solve(graph, r0=r0, rmax=rmax, init=init, anchor=anchor_idx, certificate_tol=certificate_tol)

@@ -19,6 +19,8 @@ from ._common import data_dir_option
 
 log = logging.getLogger("posecrb")
 ROMAN = {1: "I", 2: "II", 3: "III", 4: "IV"}
+OUT_FILES = [f"table{t}.{ext}" for t in ROMAN for ext in ("md", "csv", "json", "tex")] + \
+    ["rows.csv", "rows.json", "run.json"]
 
 
 def _progress(total: int):
@@ -76,6 +78,10 @@ def command(all_, tables, names, repeat, jobs, fmt, out_dir, compare_paper, rota
     if all_ and names:
         raise click.UsageError("--all and --datasets are exclusive")
     requested = [n.strip() for n in names.split(",") if n.strip()] if names else None
+    if out_dir:
+        from ..io import check_output_dir
+
+        check_output_dir(out_dir, requested or [], OUT_FILES, option="--out")
     tables = sorted(set(tables)) or [1, 2, 3, 4]
     settings = TableSettings(repeat=repeat, rotation_model=rotation_model, data_dir=data_dir)
     todo = dataset_names(requested, data_dir)
@@ -115,18 +121,20 @@ def command(all_, tables, names, repeat, jobs, fmt, out_dir, compare_paper, rota
         click.echo(_render(rows, tables, fmt, compare_paper, rotation_model), nl=False)
 
     if out_dir:
+        from ..io.files import write_text
+
         out = Path(out_dir)
         out.mkdir(parents=True, exist_ok=True)
-        for t in tables:
+        for t in tables:   # every file atomically (temporary + rename)
             trs, cols = table_rows(rows, t, compare_paper)
             stem = out / f"table{t}"
-            stem.with_suffix(".md").write_text(to_markdown(trs, cols, HEADERS))
-            stem.with_suffix(".csv").write_text(to_csv(trs, cols))
-            stem.with_suffix(".json").write_text(to_json(trs))
-            stem.with_suffix(".tex").write_text(to_latex(trs, cols, TITLES[t], HEADERS))
-        (out / "rows.csv").write_text(to_csv(rows))
-        (out / "rows.json").write_text(to_json(rows))
-        (out / "run.json").write_text(json.dumps(run_record(settings, rows, sys.argv), indent=2) + "\n")
+            write_text(stem.with_suffix(".md"), to_markdown(trs, cols, HEADERS))
+            write_text(stem.with_suffix(".csv"), to_csv(trs, cols))
+            write_text(stem.with_suffix(".json"), to_json(trs))
+            write_text(stem.with_suffix(".tex"), to_latex(trs, cols, TITLES[t], HEADERS))
+        write_text(out / "rows.csv", to_csv(rows))
+        write_text(out / "rows.json", to_json(rows))
+        write_text(out / "run.json", json.dumps(run_record(settings, rows, sys.argv), indent=2) + "\n")
         log.info("wrote %s", os.fspath(out))
 
     bad = failed(rows, requested)

@@ -62,6 +62,8 @@ def parse_levels(spec: str) -> list[float]:
                 step = float(bits[2]) if len(bits) == 3 else 1.0
             except ValueError as exc:
                 raise UsageError(f"bad --kc range {part!r}: {exc}") from exc
+            if not all(map(math.isfinite, (start, stop, step))):
+                raise UsageError(f"bad --kc range {part!r}: START, STOP and STEP must be finite numbers")
             if step <= 0 or stop < start:
                 raise UsageError(f"bad --kc range {part!r}: need STOP >= START and STEP > 0")
             count = int(math.floor((stop - start) / step + 1e-9)) + 1

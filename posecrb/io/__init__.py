@@ -1,10 +1,13 @@
-"""Readers and writers for g2o and TORO pose-graph files.
+"""Readers and writers for g2o and TORO pose-graph files, and safe file access.
 
 ``load(path)`` sniffs the format from the content (never the extension) and
 returns a ``PoseGraph``. Parsing is vectorised: lines are grouped by tag and
-each group's numeric columns are converted by numpy in one call.
+each group's numeric columns are converted by numpy in one call. Every file
+posecrb writes goes through ``posecrb.io.files.atomic_write``.
 """
+from .files import atomic_write, check_output_dir, check_output_file, read_regular_file
 from .reader import QUATERNION_MODES, load, parse_text
 from .g2o import write_g2o
 
-__all__ = ["QUATERNION_MODES", "load", "parse_text", "write_g2o"]
+__all__ = ["QUATERNION_MODES", "atomic_write", "check_output_dir", "check_output_file", "load", "parse_text",
+           "read_regular_file", "write_g2o"]

@@ -1,4 +1,4 @@
-"""Line formats of g2o and TORO (DESIGN.md section 2, datasets/SOURCES.md).
+"""Line formats of g2o and TORO (README "Conventions", datasets/SOURCES.md).
 
 Each record kind maps a file tag to: format family, dimension, vertex or edge,
 and the number of numeric fields after the tag.
@@ -14,7 +14,12 @@ class RecordKind:
     family: str   # "g2o" | "toro"
     dim: int
     kind: str     # "vertex" | "edge"
-    fields: int   # numeric fields after the tag
+    fields: int   # numeric fields after the tag (the ids included)
+
+    @property
+    def n_ids(self) -> int:
+        """Leading integer id fields: 1 (vertex id) or 2 (edge endpoints)."""
+        return 1 if self.kind == "vertex" else 2
 
 
 RECORDS: dict[str, RecordKind] = {r.tag: r for r in [

@@ -1,4 +1,4 @@
-"""g2o writer: original ids, every edge, vertices from an estimate."""
+"""g2o writer: original ids, every edge, vertices from an estimate (written atomically)."""
 from __future__ import annotations
 
 import io
@@ -8,6 +8,7 @@ import numpy as np
 
 from ..graph import PoseGraph
 from ..lie import angle2, rot_to_quat
+from .files import atomic_write
 
 
 def _fmt_rows(arr: np.ndarray) -> list[str]:
@@ -20,7 +21,10 @@ def write_g2o(graph: PoseGraph, path: str | os.PathLike, rot: np.ndarray | None 
               trans: np.ndarray | None = None) -> None:
     """Write ``graph`` as a g2o file; vertices from (rot, trans) or the graph's own estimate.
 
-    Information matrices are written in g2o order whatever the input format was.
+    Information matrices are written in g2o order whatever the input format was. Ids are
+    written from the int64 ids as read (never through float64). The file is replaced
+    atomically (``posecrb.io.files.atomic_write``): a failure or a signal leaves the previous
+    file, if any, and no temporary.
     """
     rot = graph.vertex_rot if rot is None else rot
     trans = graph.vertex_trans if trans is None else trans
@@ -39,7 +43,5 @@ def write_g2o(graph: PoseGraph, path: str | os.PathLike, rot: np.ndarray | None 
         lines += [f"{vtag} {i} {row}" for i, row in zip(graph.ids, _fmt_rows(vcols))]
     lines += [f"{etag} {i} {j} {row}" for i, j, row in
               zip(graph.ids[graph.src], graph.ids[graph.dst], _fmt_rows(ecols))]
-    tmp = f"{os.fspath(path)}.tmp"
-    with open(tmp, "w") as fh:
+    with atomic_write(path, "w") as fh:
         fh.write("\n".join(lines) + "\n")
-    os.replace(tmp, path)

@@ -21,7 +21,7 @@ from dataclasses import dataclass
 import numpy as np
 from scipy.sparse.linalg import ArpackNoConvergence, LinearOperator, eigsh
 
-from ..errors import NotPositiveDefinite
+from ..errors import NotPositiveDefinite, SolverError
 from .problem import Problem
 from .stiefel import gram_eigh, lift, project, remove_vertical, retract, sym_block_diag_product
 from .trust_region import State
@@ -124,7 +124,13 @@ def _largest_inverse_eig(problem: Problem, factor, dn: int, rng: np.random.Gener
 
 def verify(problem: Problem, state: State, tol: float, rng: np.random.Generator,
            estimate_lambda: bool = True) -> Certificate:
-    """Decide lambda_min(Q - Lambda) >= -tol by sparse Cholesky; return the eigenpair if not."""
+    """Decide lambda_min(Q - Lambda) >= -tol by sparse Cholesky; return the eigenpair if not.
+
+    ``tol`` must be finite and >= 0 (a NaN made the shift search below loop forever); a
+    non-finite certificate matrix is a SolverError, never an endless search.
+    """
+    if not (math.isfinite(tol) and tol >= 0):
+        raise SolverError(f"certificate tolerance must be a finite number >= 0, got {float(tol)}")
     n, d = problem.n, problem.d
     dn = n * d
     lam = state.lam
@@ -142,9 +148,11 @@ def verify(problem: Problem, state: State, tol: float, rng: np.random.Generator,
         return Certificate(True, lm, None, 1, solves)
     # Not PSD within tol: find a positive-definite shift, then shift-invert at it.
     scale = problem.gershgorin_max() + float(np.max(np.abs(lam)))
-    sigma = max(10.0 * abs(tol), 1e-9 * scale)
+    if not math.isfinite(scale):
+        raise SolverError("the certificate matrix Q - Lambda has non-finite entries; cannot verify the estimate")
+    sigma = max(10.0 * tol, 1e-9 * scale, np.finfo(float).tiny)
     facs = 1
-    while True:
+    while True:   # sigma grows 10x per step from >= 1e-9 scale to 4 scale: at most ~11 steps
         try:
             fac = problem.factor_full(lam, sigma, name="shifted certificate matrix")
             facs += 1
