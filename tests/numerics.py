@@ -70,3 +70,33 @@ def assert_within(got: np.ndarray, ref: np.ndarray, tol: np.ndarray | float, wha
         k = np.unravel_index(np.argmax(np.where(bad, err / np.where(tol > 0, tol, 1e-300), 0)), err.shape)
         raise AssertionError(f"{what}: {bad.sum()} entries outside the tolerance; worst at {k}: "
                              f"|{np.asarray(got)[k]!r} - {np.asarray(ref)[k]!r}| = {err[k]:.3g} > {tol[k]:.3g}")
+
+
+def suboptimality_bound(res, n: int, d: int) -> float:
+    """Certified bound on ``objective - F*`` of a solve (SE-Sync's dual certificate): with
+    ``Lambda = SymBlockDiag(Q Y^T Y)``, ``trace(Lambda) = f(Y)`` (the relaxation value) and for any
+    feasible Z of the SDP ``tr(Q Z) = tr((Q - Lambda) Z) + tr(Lambda) >= n d lambda_min(Q - Lambda)
+    + f(Y)``, so ``F* >= f(Y) + n d min(lambda_min, 0)``."""
+    return max(res.duality_gap, 0.0) + n * d * max(-res.lambda_min, 0.0)
+
+
+def objective_atol(kappa: np.ndarray, d: int, objective: float, margin: float = MARGIN) -> float:
+    """Rounding of an SE-Sync objective evaluated as ``sum kappa (|R_i|^2 + |R_j|^2 - 2 tr(R_j^T R_i R~))
+    + tau |r|^2``: each rotation term cancels entries of size ~2d, so the sum carries
+    ``eps (4 d sum kappa + objective)`` (this is the reference form SE-Sync itself uses)."""
+    return margin * EPS * (4 * d * float(np.sum(kappa)) + abs(objective))
+
+
+def pinv_entry_atol(a: np.ndarray, nullity: int, margin: float = MARGIN) -> float:
+    """``inverse_entry_atol`` for the pseudo-inverse of a PSD matrix with a known ``nullity``: the
+    condition number of its range, ``lambda_max / lambda_min+``."""
+    ev = np.linalg.eigvalsh((a + a.T) / 2)
+    pos = ev[nullity]
+    assert pos > 0
+    return margin * a.shape[0] * (ev[-1] / pos) * EPS / pos
+
+
+def pinv_trace_rtol(a: np.ndarray, nullity: int, margin: float = MARGIN) -> float:
+    """Relative tolerance on ``trace(pinv(a))`` (``trace_inverse_rtol`` on the range)."""
+    ev = np.linalg.eigvalsh((a + a.T) / 2)[nullity:]
+    return margin * a.shape[0] * len(ev) * (ev[-1] / ev[0]) * EPS * (1.0 / ev[0]) / np.sum(1.0 / ev)
