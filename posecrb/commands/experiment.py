@@ -153,6 +153,10 @@ def crlb_cmd(file, kc_spec, scale, kappa, tau, anchor, fim_variant, data_dir, tr
     if not res.truth_certified:
         log.warning("the ground truth (solution of %s) is not certified", graph.name)
     for lv in res.levels:
+        if lv.accuracy and lv.accuracy["status"] != "ok":
+            log.warning("k_c = %g: CRLB %s: %s", lv.kc,
+                        "not available" if lv.accuracy["status"] == "unavailable" else "doubtful",
+                        lv.accuracy["reason"])
         if lv.curvature_status:
             log.warning("k_c = %g: curvature-corrected CRLB (eq. 68) %s: %s", lv.kc,
                         "not available" if lv.curvature_status["status"] == "unavailable" else "doubtful",

@@ -129,6 +129,7 @@ class CrlbLevel:
     uncertified: int                    # trials whose solve was not certified (still counted)
     fim_variant: str = "consistent"
     curvature_status: dict | None = None  # posecrb.status JSON when eq. (68) is not ok at this level
+    accuracy: dict | None = None          # posecrb.crlb.InverseAccuracy of the bound (JSON form)
 
     def row(self) -> dict:
         r = dict(vars(self))
@@ -199,6 +200,7 @@ def _bounds(graph: PoseGraph, rot, trans, anchor: int, kc: float, scale: str, ta
     curv = res.trace_crlb_curvature if graph.dim == 3 else None
     out["mse_bound_curvature"] = None if curv is None else float(curv) / n_p
     out["curvature_status"] = None if res.curvature_status.ok else res.curvature_status.as_json()
+    out["accuracy"] = None if res.accuracy is None else res.accuracy.as_json()
     return out
 
 
@@ -259,7 +261,7 @@ def crlb_sweep(graph: PoseGraph, kcs: Sequence[float], trials: int = 100, seed: 
             mse_rot=float(sq_r.mean() / n_p), mse_bound=b["mse_bound"], mse_bound_trans=b["mse_bound_trans"],
             mse_bound_rot=b["mse_bound_rot"], mse_bound_curvature=curv, ratio=mse / b["mse_bound"],
             ratio_curvature=None if curv is None else mse / curv, uncertified=int((~cert).sum()),
-            fim_variant=fim_variant, curvature_status=b["curvature_status"]))
+            fim_variant=fim_variant, curvature_status=b["curvature_status"], accuracy=b["accuracy"]))
     return CrlbSweepResult(
         dataset=graph.name, dim=graph.dim, n=graph.n, m=graph.m, anchor_id=int(graph.ids[anchor]),
         scale=scale, tau=tau, kappa=kappa, trials=trials, seed=seed, truth_certified=truth_certified,
