@@ -9,7 +9,12 @@ weights tau) and L_w (rotation weights w, DESIGN.md section 3):
   with eq. 71: the measured p_ij replace x_j - x_i; the paper's Table I "Upper bound");
 * ``ub_lambda = d logdet(L_tau) + d_r logdet(L_w + lambda_inf I)`` (eq. 75 right,
   eq. 77), one more factorization with the same ordering;
-* Lemma 4: ``0 <= logdet F - lb <= d_r n_p log(1 + xi / lambda_min(L_w))``;
+* Lemma 4: ``0 <= logdet F - lb <= d_r n_p log(1 + xi / lambda_min(L_w))``, evaluated with a
+  certified lower bound of ``lambda_min(L_w)`` (``rotation_lambda_min``) so that it stays an
+  upper bound of the gap whatever the rounding; when ``lambda_min(L_w)`` is below what double
+  precision resolves, ``lambda_min_rot`` is unavailable (a ``Status``, never a negative number)
+  and the gap uses the graph lower bound ``lambda_min >= 1 / sum_i R_T(anchor, i)`` (tree
+  resistances, ``tree_lambda_min_bound``), with a warning;
 * T-optimality: graph-only eq. (73) and eq. (72) with p_ij; total node degree
   ``sum_{i != anchor} |V_i|`` (the paper's sum over i = 1..n_p).
 """
@@ -20,11 +25,20 @@ from dataclasses import dataclass, field
 import numpy as np
 import scipy.sparse as sp
 
+from .errors import NotPositiveDefinite
 from .graph import PoseGraph
 from .laplacian import kron_identity, reduced_index, reduced_laplacian
-from .linalg import SymbolicCholesky, lambda_min
+from .linalg import SymbolicCholesky
 from .noise import isotropic_precisions, rotation_weight
+from .status import OK, Status
 from .timing import timed
+
+# lambda_min(L_w) is reported with a warning when its certified interval is wider than this
+# (relative to the estimate).
+LAMBDA_INTERVAL_WARN = 1e-3
+# Rounding level of the sparse products and of the Cholesky check, in units of
+# eps ||L_w||_1 per stored entry of a column (a bound with a margin of 4).
+_ROUNDING_MARGIN = 4.0
 
 
 @dataclass(frozen=True)
@@ -83,6 +97,109 @@ def t_optimality(graph: PoseGraph, anchor: int = 0, rotation_model: str = "eq59"
     return t_graph, t_graph + float(psi.sum())
 
 
+@dataclass(frozen=True)
+class EigenEstimate:
+    """``lambda_min`` of a reduced Laplacian: ``value`` is the Rayleigh quotient of the computed
+    eigenvector (an upper bound of lambda_min, accurate to a few ulps because it is summed edge
+    by edge from non-negative terms), ``lower`` a certified lower bound, both None when
+    ``status`` is unavailable."""
+
+    value: float | None
+    lower: float | None
+    status: Status = OK
+
+
+def tree_lambda_min_bound(n: int, src: np.ndarray, dst: np.ndarray, w: np.ndarray, anchor: int) -> float:
+    """Graph lower bound ``lambda_min(L_w) >= 1 / trace(L_w^{-1}) >= 1 / sum_i R_T(anchor, i)``.
+
+    ``trace(L_w^{-1})`` (anchor removed) is the sum of the effective resistances between the
+    anchor and every pose (conductances w); by Rayleigh's monotonicity each is at most the
+    resistance of the path in a spanning tree T (here the maximum-weight one). Only sums of
+    positive numbers: no cancellation, valid at any conditioning. 0.0 when a weight is not
+    positive and finite.
+    """
+    from scipy.sparse.csgraph import minimum_spanning_tree, shortest_path
+
+    w = np.asarray(w, dtype=float)
+    if not (np.all(np.isfinite(w)) and np.all(w > 0)):
+        return 0.0
+    cond = sp.coo_matrix((np.concatenate([w, w]), (np.concatenate([src, dst]), np.concatenate([dst, src]))),
+                         shape=(n, n)).tocsr()          # parallel edges: conductances add
+    cond.sum_duplicates()
+    res = cond.copy()
+    with np.errstate(divide="ignore", over="ignore"):
+        res.data = 1.0 / res.data
+    tree = minimum_spanning_tree(res)
+    dist = shortest_path(tree, directed=False, indices=anchor)
+    total = float(np.sum(dist[np.arange(n) != anchor]))
+    return 1.0 / total if np.isfinite(total) and total > 0 else 0.0
+
+
+def rotation_lambda_min(lap: "WeightedLaplacians", graph: PoseGraph, symbolic: SymbolicCholesky,
+                        factor=None, name: str = "reduced rotation Laplacian L_w") -> EigenEstimate:
+    """Smallest eigenvalue of the reduced L_w with a certified interval, or a status.
+
+    1. eigenvector of the smallest eigenvalue: dense ``eigh`` up to 200 rows, otherwise
+       shift-invert Lanczos at 0 with the Cholesky ``factor`` as inverse operator;
+    2. ``rho`` = its Rayleigh quotient summed edge by edge, ``r = ||L v - rho v||``;
+       some eigenvalue lies in ``rho -+ (r + delta)``, ``delta`` the rounding level of the
+       products (``_ROUNDING_MARGIN`` x eps x ||L_w||_1 x entries per column);
+    3. inertia check: the Cholesky factorization of ``L_w - s I`` with ``s = rho - r - 2 delta``
+       must succeed (no eigenvalue below s, up to its own backward error ``delta``), so
+       ``lower = s - delta`` is a lower bound of lambda_min. When ``lower <= 0`` the eigenvalue is
+       below what double precision resolves for this matrix: unavailable, with the reason.
+    """
+    from scipy.sparse.linalg import ArpackError, ArpackNoConvergence, LinearOperator, eigsh
+
+    a = sp.csc_matrix(lap.l_w)
+    n = a.shape[0]
+    if n == 0:
+        return EigenEstimate(None, None, Status.unavailable("L_w is empty (a single pose)"))
+    eps = float(np.finfo(float).eps)
+    try:
+        if n <= 200:
+            _, vecs = np.linalg.eigh(a.toarray())
+            v = vecs[:, 0]
+        else:
+            if factor is None:
+                factor = symbolic.factor(a, name=name)
+            op = LinearOperator((n, n), matvec=lambda x: factor(np.asarray(x, float)), dtype=float)
+            _, vecs = eigsh(a, k=1, sigma=0.0, which="LM", OPinv=op, v0=np.ones(n), tol=1e-12)
+            v = vecs[:, 0]
+    except (ArpackNoConvergence, ArpackError, np.linalg.LinAlgError) as exc:
+        return EigenEstimate(None, None, Status.unavailable(
+            f"the eigenvalue solver did not converge on {name} ({exc})"))
+    v = v / np.linalg.norm(v)
+    red = reduced_index(graph.n, lap.anchor)
+    va = np.append(v, 0.0)                                       # index -1: the anchor, fixed at 0
+    diff = va[red[graph.src]] - va[red[graph.dst]]
+    rho = float(np.dot(lap.w, diff * diff))
+    r = float(np.linalg.norm(a @ v - rho * v))
+    per_col = int(np.diff(a.indptr).max())
+    anorm = float(abs(a).sum(axis=0).max())
+    delta = _ROUNDING_MARGIN * eps * anorm * per_col
+    span = f"rotation weights from {lap.w.min():.3g} to {lap.w.max():.3g}"
+    s = rho - r - 2.0 * delta
+    lower = s - delta
+    if not (np.isfinite(rho) and lower > 0):
+        return EigenEstimate(None, None, Status.unavailable(
+            f"lambda_min(L_w) (about {rho:.3g}) is below what double precision resolves for this matrix "
+            f"(rounding level {delta:.2g} with ||L_w||_1 = {anorm:.3g}; {span})",
+            "the gap bound falls back on a graph lower bound of lambda_min; rescale or check the "
+            "rotation information of the weakest edges"))
+    try:
+        symbolic.factor(a, name=name, beta=-s)
+    except NotPositiveDefinite:
+        return EigenEstimate(None, None, Status.unavailable(
+            f"the eigenvalue solver's lambda_min(L_w) = {rho:.6g} is contradicted by the inertia check "
+            f"(L_w - {s:.6g} I is not positive definite)", "report this file to the developers"))
+    status = OK
+    if rho - lower > LAMBDA_INTERVAL_WARN * rho:
+        status = Status.warning(f"lambda_min(L_w) is only known to lie in [{lower:.6g}, {rho:.6g}] "
+                                f"({span})", "the gap bound uses the lower end")
+    return EigenEstimate(rho, lower, status)
+
+
 def block_diagonal(blocks: np.ndarray) -> sp.csc_matrix:
     """Sparse block-diagonal matrix from (k, b, b) blocks."""
     k, b, _ = blocks.shape
@@ -101,15 +218,19 @@ class BoundsResult:
     logdet_l_tau: float
     logdet_l_w: float
     lb: float
-    ub: float                     # ub_psi, the paper's Table I/II upper bound
+    ub: float | None              # ub_psi, the paper's Table I/II upper bound (None: see ub_status)
     ub_lambda: float
     lambda_inf: float
-    lambda_min_rot: float         # lambda_min(L_w)
-    gap_bound: float              # Lemma 4
+    lambda_min_rot: float | None  # lambda_min(L_w) (estimate, an upper bound); None if unavailable
+    gap_bound: float | None       # Lemma 4, with a certified lower bound of lambda_min(L_w)
     t_opt_graph: float            # eq. (73)
     t_opt_approx: float           # eq. (72)
     total_degree: int
     times: dict[str, float] = field(default_factory=dict)
+    lambda_min_rot_lower: float | None = None   # certified lower bound used by gap_bound
+    lambda_min_rot_status: Status = OK
+    gap_bound_status: Status = OK
+    ub_status: Status = OK
 
 
 def compute_bounds(graph: PoseGraph, anchor: int | None = None, rotation_model: str = "eq59",
@@ -138,9 +259,22 @@ def compute_bounds(graph: PoseGraph, anchor: int | None = None, rotation_model: 
     def upper():
         psi, _ = source_terms(graph, lap.tau, anchor)
         m = kron_identity(lap.l_w, dr) + block_diagonal(psi)
-        return SymbolicCholesky(m).factor_logdet(m, "L_w (x) I + blkdiag(Psi)")[1]
+        try:
+            return SymbolicCholesky(m).factor_logdet(m, "L_w (x) I + blkdiag(Psi)")[1]
+        except NotPositiveDefinite as exc:
+            return exc
 
     ld_psi, t_ub = timed(upper, repeat)
+    ub_status = OK
+    if isinstance(ld_psi, NotPositiveDefinite):
+        # L_w is positive definite (its factorization succeeded) and every Psi_i is positive
+        # semidefinite, so the matrix is positive definite in exact arithmetic: a breakdown is
+        # rounding, the weights spanning too many orders of magnitude.
+        ub_status = Status.unavailable(
+            f"the Cholesky factorization of L_w (x) I + blkdiag(Psi) breaks down in double precision "
+            f"({ld_psi.reason}) although the matrix is positive definite in exact arithmetic (rotation "
+            f"weights from {lap.w.min():.3g} to {lap.w.max():.3g})", "ub_lambda is a looser upper bound")
+        ld_psi = None
 
     def upper_lambda():
         _, xi = source_terms(graph, lap.tau, anchor)
@@ -149,17 +283,33 @@ def compute_bounds(graph: PoseGraph, anchor: int | None = None, rotation_model: 
 
     (lam_inf, ld_w_lam), t_ubl = timed(upper_lambda, repeat)
 
-    lam_min = lambda_min(lap.l_w, factor=f_w, name="reduced rotation Laplacian L_w")
+    eig = rotation_lambda_min(lap, graph, sym, f_w)
     n_p = graph.n - 1
-    gap = dr * n_p * float(np.log1p(lam_inf / lam_min)) if lam_min > 0 else float("inf")
+    tree = tree_lambda_min_bound(graph.n, graph.src, graph.dst, lap.w, anchor)
+    lower = max(eig.lower or 0.0, tree)
+    if eig.status.available and eig.lower is not None and eig.lower >= tree:
+        gap_status = eig.status if not eig.status.ok else OK
+    elif lower > 0:
+        gap_status = Status.warning(
+            f"computed with the graph lower bound lambda_min(L_w) >= {tree:.3g} (tree resistances), "
+            "because lambda_min(L_w) itself is not resolved: a valid but looser bound")
+    else:
+        gap_status = Status.unavailable("no positive lower bound of lambda_min(L_w) (a rotation weight is "
+                                        "zero or not finite)")
+    gap = dr * n_p * float(np.log1p(lam_inf / lower)) if lower > 0 else None
+    if gap is not None and not np.isfinite(gap):
+        gap, gap_status = None, Status.unavailable(f"log(1 + lambda_inf / lambda_min) overflows "
+                                                   f"(lambda_inf {lam_inf:.3g}, lower bound {lower:.3g})")
     t_graph, t_approx = t_optimality(graph, anchor, rotation_model)
     total_degree = int(graph.degree.sum() - graph.degree[anchor])
     return BoundsResult(
         dim=d, anchor=anchor, anchor_id=int(graph.ids[anchor]), rotation_model=rotation_model,
         logdet_l_tau=float(ld_tau), logdet_l_w=float(ld_w),
-        lb=d * float(ld_tau) + dr * float(ld_w), ub=d * float(ld_tau) + float(ld_psi),
+        lb=d * float(ld_tau) + dr * float(ld_w), ub=None if ld_psi is None else d * float(ld_tau) + float(ld_psi),
         ub_lambda=d * float(ld_tau) + dr * float(ld_w_lam), lambda_inf=lam_inf,
-        lambda_min_rot=lam_min, gap_bound=gap, t_opt_graph=t_graph, t_opt_approx=t_approx,
+        lambda_min_rot=eig.value, gap_bound=gap, t_opt_graph=t_graph, t_opt_approx=t_approx,
         total_degree=total_degree,
         times={"laplacians": t_lap, "lb": t_lb, "ub": t_ub, "ub_lambda": t_ubl},
+        lambda_min_rot_lower=lower if lower > 0 else None, lambda_min_rot_status=eig.status,
+        gap_bound_status=gap_status, ub_status=ub_status,
     )

@@ -14,29 +14,39 @@ body-frame perturbation ``R_i Exp(delta)`` along the paper's basis ``R_i E``)
     dr/dphi_i  = (1/sqrt 2) [u]_x          (3D, basis E_k = G_k / sqrt 2).
 
 ``J^T tau J`` reproduces the blocks of the paper: the translation block is
-``L_tau (x) I_d`` (eq. 19/45), the cross block is Delta_w (eq. 33/54) and the rotation
+``L_tau (x) I_d`` (eq. 19/45), the cross block is Delta_w (eq. 33/52-54) and the rotation
 diagonal gains ``psi_i = sum tau ||x_j - x_i||^2`` (eq. 41) or
 ``Psi_i = sum tau/2 (||u||^2 I - u u^T)`` (eq. 63), summed over edges whose SOURCE is i.
+Sign of the cross block: eq. (54) as printed has ``(x_j - x_i)`` in its ``i = i_1`` case, the
+opposite sign of its own derivation eq. (52) (``(x_i - x_j)``); built literally, eq. (64) is then
+indefinite (tinyGrid3D has a negative eigenvalue of order -100). posecrb uses eq. (52)'s sign,
+which is the one ``J^T tau J`` gives.
 
 Two variants of the rotation Laplacian (``FIM_VARIANTS``), identical in 2D:
 
-* ``"eq64"`` (default): eq. (64) exactly as printed, ``L_w (x) I_{d_r}``: the diagonal
-  blocks ``sum w I`` (eq. 58) and the off-diagonal blocks ``-w I`` of eq. (61)-(62).
-  It reproduces the paper's tables.
-* ``"consistent"``: the Fisher information of the same noise model with every pose
-  perturbed on the right, as in Delta (eq. 54) and Psi (eq. 56-60, 63). Under
-  ``R_i Exp(a_i)``, ``R_j Exp(a_j)`` the relative rotation moves as
-  ``R_ij Exp(a_j - R_ij^T a_i)`` with ``R_ij = R_i^T R_j`` (the estimate's), so the
-  off-diagonal rotation block of edge (i, j) is ``-w R_i^T R_j`` (its transpose at (j, i)),
-  not ``-w I``. Eq. (61)-(62) pair the tangent noise of ``Z_ij`` and ``Z_ji`` as if both
-  were expressed in the same frame; ``-w I`` is the coupling for world-frame (left)
-  perturbations, which does not match the body-frame Delta and Psi. In 2D rotations
-  commute, ``R_ij`` acts on the angle as 1 and both variants are the same matrix.
-  With ``T = blkdiag(R_i^T)`` on the rotations, ``T (L_w (x) I_3) T^T`` is the consistent
-  Laplacian, so the two have the same trace and the same Laplacian-only log det, but
-  their inverses (the CRLB) differ once the poses are rotated relative to each other:
-  the Monte Carlo MSE of the certified MLE (``posecrb experiment crlb``) reaches the
-  bound of the consistent variant, not that of eq. (64) in 3D.
+* ``"consistent"`` (default): the Fisher information of the measurement model that g2o /
+  SE-Sync files and posecrb's simulator use (edge (i, j) measures ``X_i^{-1} X_j``, rotation
+  ``R~_ij = R_i^T R_j Z_ij``), with every pose perturbed on the right, as in Delta
+  (eq. 52-54) and Psi (eq. 56-60, 63). Under ``R_i Exp(a_i)``, ``R_j Exp(a_j)`` the relative
+  rotation moves as ``R_ij Exp(a_j - R_ij^T a_i)`` with ``R_ij = R_i^T R_j`` (the estimate's),
+  so the off-diagonal rotation block of edge (i, j) is ``-w R_i^T R_j`` (its transpose at
+  (j, i)). Checked against a finite-difference expected Hessian of the log-likelihood and by
+  Monte Carlo (``posecrb experiment crlb``: the MSE of the certified MLE reaches this bound).
+* ``"eq64"``: eq. (64) exactly as printed, ``L_w (x) I_{d_r}``: the diagonal blocks
+  ``sum w I`` (eq. 58) and the off-diagonal blocks ``-w I`` of eq. (61)-(62). Together with
+  the body-frame Delta and Psi this is the body-frame Fisher information of the rotation
+  model as literally printed in eq. (4), ``H_ij = Z_ij R_j R_i^T``, which is not invariant
+  under a global rotation of all poses (a frame slip: eq. (61)-(62) pair the tangent noise of
+  ``Z_ij`` and ``Z_ji`` as if both were expressed in the same frame). It reproduces the
+  paper's printed Table II (with the empirical rotation weight ``table2``,
+  ``posecrb tables --as-published``).
+
+In 2D rotations commute, ``R_ij`` acts on the angle as 1 and both variants are the same
+matrix. With ``T = blkdiag(R_i^T)`` on the rotations, ``T (L_w (x) I_3) T^T`` is the consistent
+Laplacian, so the two have the same trace (T-optimality) and the same Laplacian-only
+log det, but their inverses (the CRLB) and full log-dets differ once the poses are rotated
+relative to each other (tinyGrid3D at its file's vertices: trace F^{-1} 7.60 for the model,
+2.28 for eq. 64; the Monte Carlo MSE of the MLE reaches the former).
 
 Everything is assembled vectorised from the edge arrays (COO), anchor removed.
 """
@@ -68,7 +78,7 @@ class PaperFim:
     Free poses are the graph's poses in increasing id order without the anchor
     (``pose_ids``); rotation coordinates are the angle (2D) or along ``E_k = G_k/sqrt 2`` (3D).
     ``variant`` is the rotation Laplacian used (``FIM_VARIANTS``, see the module docstring):
-    ``"eq64"`` as printed in the paper or ``"consistent"`` (the model's Fisher information).
+    ``"consistent"`` (the model's Fisher information) or ``"eq64"`` (as printed in the paper).
     """
 
     matrix: sp.csc_matrix
@@ -78,7 +88,7 @@ class PaperFim:
     pose_ids: np.ndarray         # (n_p,) ids of the free poses, in row order
     layout: str
     rotation_model: str
-    variant: str = "eq64"
+    variant: str = "consistent"
     build_time: float = field(default=0.0)
 
     @property
@@ -179,18 +189,18 @@ def rotation_jacobians(graph: PoseGraph, rot: np.ndarray, trans: np.ndarray) -> 
 
 
 def paper_fim(graph: PoseGraph, rot: np.ndarray, trans: np.ndarray, anchor: int = 0,
-              rotation_model: str = "eq59", layout: str = "blocks", variant: str = "eq64") -> PaperFim:
+              rotation_model: str = "eq59", layout: str = "blocks", variant: str = "consistent") -> PaperFim:
     """Anchored paper FIM (eq. 42 in 2D, eq. 64 in 3D) at the estimate ``(rot, trans)``.
 
     ``rot`` (n, d, d) and ``trans`` (n, d) are world poses ``X_i = (R_i, x_i)`` in the graph's
     internal order; ``anchor`` is an internal index (``graph.anchor_index(id)``).
     ``rotation_model`` picks the rotation weight: ``"eq59"`` (default, eq. 39-41 / 59) or
     ``"table2"`` (the empirical fit that reproduces Table II, see DESIGN.md section 4).
-    ``variant`` picks the rotation Laplacian (module docstring): ``"eq64"`` (default) is
-    eq. (64) as printed, off-diagonal rotation blocks ``-w I`` (eq. 61-62);
-    ``"consistent"`` is the Fisher information of the same noise model in the body-frame
-    coordinates that eq. (54) and (63) use, off-diagonal blocks ``-w R_i^T R_j`` for an
-    edge i -> j. Both give the same matrix in 2D.
+    ``variant`` picks the rotation Laplacian (module docstring): ``"consistent"`` (default) is
+    the Fisher information of the model in the body-frame coordinates that eq. (52)-(54) and
+    (63) use, off-diagonal blocks ``-w R_i^T R_j`` for an edge i -> j; ``"eq64"`` is eq. (64)
+    as printed, off-diagonal rotation blocks ``-w I`` (eq. 61-62). Both give the same matrix
+    in 2D. The cross block follows eq. (52)'s sign (eq. 54 as printed has the opposite one).
     Raises DisconnectedGraph when the graph is not connected (the anchored FIM is singular).
     """
     import time

@@ -15,8 +15,9 @@ from math import factorial
 import numpy as np
 from scipy.special import ive
 
-# Table II of the paper is reproduced by w = TABLE2_FIT * kappa^2 (an empirical
-# fit measured on the published lower bounds, NOT eq. 59); see DESIGN.md section 4.
+# Table II of the paper is reproduced by w = TABLE2_FIT * kappa^2 (an empirical fit
+# measured on the published lower bounds, NOT eq. 59; with eq. 64 as printed it also
+# reproduces the printed FIM column); see DESIGN.md section 4.
 TABLE2_FIT = 0.5515
 
 ROTATION_WEIGHT_MODELS = ("eq59", "table2")
@@ -299,10 +300,12 @@ def perturb_measurements(graph, rot_true: np.ndarray, trans_true: np.ndarray, rn
                          kc: float = 1.0, scale: str = "both", tau=None, kappa=None):
     """A new PoseGraph with measurements regenerated from a ground truth by eq. (80).
 
-    Rotation: ``R~_ij = R_i^T R_j Z_ij``, ``Z_ij ~ Lang(I, k_c kappa_ij)`` (SE-Sync's
-    generative model; the paper writes ``H_ij = Z_ij R_j R_i^T`` in its own frame
-    convention; since Lang(I, kappa) is conjugation invariant both sides give the same
-    law). Translation: ``t~_ij = R_i^T (x_j - x_i) + y_ij``, ``y_ij ~ N(0, I / tau'_ij)``
+    Rotation: ``R~_ij = R_i^T R_j Z_ij``, ``Z_ij ~ Lang(I, k_c kappa_ij)``: the model of g2o /
+    SE-Sync files (edge (i, j) measures ``X_i^{-1} X_j``), whose Fisher information is the
+    ``"consistent"`` variant of ``posecrb.fim``. The paper's eq. (4), ``H_ij = Z_ij R_j R_i^T``,
+    is a different law in general: conjugation invariance of Lang(I, kappa) only moves the noise
+    to the other side of the same matrix (``Z R_j R_i^T = R_j R_i^T Z'``, ``Z' ~ Lang(I, kappa)``),
+    and ``R_j R_i^T != R_i^T R_j`` unless the rotations commute (2D). Translation: ``t~_ij = R_i^T (x_j - x_i) + y_ij``, ``y_ij ~ N(0, I / tau'_ij)``
     with ``tau' = k_c tau`` (``scale="both"``) or ``tau`` (``scale="rotation"``).
     The information matrices encode (tau', k_c kappa) under SE-Sync's convention
     (``isotropic_information``), so solving the returned graph gives the MLE.

@@ -45,9 +45,20 @@ TABLE_IV = {
 }
 
 TABLE_II_FOOTNOTE = (
-    "Table II: the published 3D values correspond to a rotation weight of about 0.5515*kappa^2, not "
-    "eq. (59); with the default --rotation-weight eq59 the 3D values differ from the paper by design. "
-    "--rotation-weight table2 uses that EMPIRICAL fit (not eq. 59) to reproduce the printed lower bounds."
+    "Table II: the 3D values are the model's quantities (rotation weight eq. (59), the model's Fisher "
+    "information with rotation coupling -w R_i^T R_j) and differ from the printed Table II by design. "
+    "`posecrb tables --as-published` gives the printed FIM and lb columns: eq. (64) exactly as printed "
+    "with the empirical rotation weight 0.5515*kappa^2."
+)
+TABLE_II_PUBLISHED_FOOTNOTE = (
+    "Table II as published: eq. (64) exactly as printed (rotation coupling -w I) with the EMPIRICAL rotation "
+    "weight 0.5515*kappa^2 (not eq. 59). It reproduces the printed FIM and lb columns; the printed ub column "
+    "is not reproduced (README, Table II upper bound). These are not the model's quantities: drop "
+    "--as-published for them."
+)
+TABLE_II_FIT_FOOTNOTE = (
+    "Table II: 3D rotation weight w = 0.5515*kappa^2, an EMPIRICAL fit to the published Table II, NOT eq. (59); "
+    "the FIM column is the {variant} FIM."
 )
 
 

@@ -3,7 +3,9 @@
 For each dataset the file stores the input's sha256 and ``lb, ub, ub_lambda``
 (graph-only: relative tolerance 1e-9) and ``fim_logdet, objective, trace_crlb``
 (at the certified optimum: relative tolerance 1e-6, since they depend on the
-solver's stopping point). A changed input file is reported, not compared.
+solver's stopping point), with ``fim_variant``, the FIM they were computed from (the model's
+Fisher information, ``"consistent"``, the default of ``posecrb.fim.paper_fim``; the same matrix
+as eq. 64 in 2D). A changed input file or FIM variant is reported, not compared.
 """
 from __future__ import annotations
 
@@ -21,6 +23,7 @@ from .io.files import read_regular_file, write_text
 
 GRAPH_ONLY = ("lb", "ub", "ub_lambda")
 ESTIMATE_DEPENDENT = ("fim_logdet", "objective", "trace_crlb")
+FIM_DERIVED = ("fim_logdet", "trace_crlb")
 TOLERANCES = {**{k: 1e-9 for k in GRAPH_ONLY}, **{k: 1e-6 for k in ESTIMATE_DEPENDENT}}
 
 
@@ -51,8 +54,8 @@ def save_expected(data: dict, path: str | os.PathLike | None = None) -> Path:
     return p
 
 
-def compute_metrics(name: str, data_dir: str | None = None) -> dict:
-    """The regressed quantities of one dataset, at its certified optimum."""
+def compute_metrics(name: str, data_dir: str | None = None, variant: str = "consistent") -> dict:
+    """The regressed quantities of one dataset, at its certified optimum (FIM ``variant``)."""
     from .crlb import crlb_from_fim
     from .fim import fim_logdet, paper_fim
 
@@ -62,8 +65,8 @@ def compute_metrics(name: str, data_dir: str | None = None) -> dict:
     est = get_estimate(graph, "solve")
     if not est.certified:
         raise PosecrbError(f"{name}: the solver did not certify its estimate")
-    fim = paper_fim(graph, est.rot, est.trans, 0)
-    return {"sha256": graph.sha256, "lb": b.lb, "ub": b.ub, "ub_lambda": b.ub_lambda,
+    fim = paper_fim(graph, est.rot, est.trans, 0, variant=variant)
+    return {"sha256": graph.sha256, "fim_variant": fim.variant, "lb": b.lb, "ub": b.ub, "ub_lambda": b.ub_lambda,
             "fim_logdet": fim_logdet(fim), "objective": est.objective,
             "trace_crlb": crlb_from_fim(fim, graph).trace_crlb}  # the same FIM, built once
 
@@ -77,16 +80,21 @@ class Diff:
     rel_diff: float | None
     tolerance: float | None
     ok: bool
+    fim_variant: str | None = None      # for the FIM-derived quantities (fim_logdet, trace_crlb)
 
 
 def compare(name: str, expected: dict, got: dict) -> list[Diff]:
     if expected.get("sha256") and got.get("sha256") != expected["sha256"]:
         return [Diff(name, "sha256", expected["sha256"], got.get("sha256"), None, None, False)]
+    variant = got.get("fim_variant")
+    if expected.get("fim_variant") and expected["fim_variant"] != variant:
+        return [Diff(name, "fim_variant", expected["fim_variant"], variant, None, None, False, variant)]
     out = []
     for q, tol in TOLERANCES.items():
         e, g = expected.get(q), got.get(q)
         if e is None:
             continue
         rel = abs(g - e) / max(abs(e), 1e-300) if g is not None else None
-        out.append(Diff(name, q, e, g, rel, tol, rel is not None and rel <= tol))
+        out.append(Diff(name, q, e, g, rel, tol, rel is not None and rel <= tol,
+                        variant if q in FIM_DERIVED else None))
     return out

@@ -2,7 +2,10 @@
 
 Nested dicts (``times``) are flattened to dotted columns for the tabular formats;
 JSON keeps them nested. Floats keep full precision in JSON/CSV and are shown with
-5 significant digits in the terminal table and Markdown.
+5 significant digits in the terminal table and Markdown. A value with a sibling
+``<key>_status`` (``posecrb.status``) is shown as ``n/a (reason)`` when unavailable and
+``value (warning)`` for a warning in the human formats (the reason goes to stderr); JSON/CSV
+keep both keys.
 """
 from __future__ import annotations
 
@@ -31,6 +34,22 @@ def _plain(value: Any) -> Any:
     return value
 
 
+def render_statuses(row: dict[str, Any]) -> dict[str, Any]:
+    """For the human formats: fold every ``<key>_status`` into ``<key>``'s cell (recursively)."""
+    out: dict[str, Any] = {}
+    for k, v in row.items():
+        st = row.get(f"{k}_status")
+        if isinstance(v, dict):
+            v = render_statuses(v)
+        if isinstance(st, dict) and st.get("status") in ("warning", "unavailable"):
+            reason = st.get("reason") or ""
+            v = f"n/a ({reason})" if st["status"] == "unavailable" else f"{fmt_value(v)} (warning)"
+        if k.endswith("_status") and k[: -len("_status")] in row and isinstance(v, dict):
+            continue
+        out[k] = v
+    return out
+
+
 def flatten(row: dict[str, Any], prefix: str = "") -> dict[str, Any]:
     out: dict[str, Any] = {}
     for k, v in row.items():
@@ -40,6 +59,12 @@ def flatten(row: dict[str, Any], prefix: str = "") -> dict[str, Any]:
         else:
             out[key] = v
     return out
+
+
+def key_value_rows(row: dict[str, Any]) -> list[dict[str, Any]]:
+    """One ``{"field", "value"}`` row per (flattened) key, statuses folded in: the layout of the
+    single-result commands' terminal output."""
+    return [{"field": k, "value": v} for k, v in flatten(render_statuses(_plain(row))).items()]
 
 
 def fmt_value(v: Any, digits: int = 5) -> str:
@@ -86,7 +111,7 @@ def to_csv(rows: Sequence[dict[str, Any]], columns: Sequence[str] | None = None)
 
 def to_markdown(rows: Sequence[dict[str, Any]], columns: Sequence[str] | None = None,
                 headers: dict[str, str] | None = None) -> str:
-    flat = [flatten(_plain(r)) for r in rows]
+    flat = [flatten(render_statuses(_plain(r))) for r in rows]
     cols = _columns(flat, columns)
     headers = headers or {}
     lines = ["| " + " | ".join(headers.get(c, c) for c in cols) + " |",
@@ -100,7 +125,7 @@ def to_rich_table(rows: Sequence[dict[str, Any]], columns: Sequence[str] | None 
                   caption: str | None = None):
     from rich.table import Table
 
-    flat = [flatten(_plain(r)) for r in rows]
+    flat = [flatten(render_statuses(_plain(r))) for r in rows]
     cols = _columns(flat, columns)
     headers = headers or {}
     table = Table(title=title, caption=caption, show_lines=False)

@@ -78,6 +78,7 @@ from .errors import NotPositiveDefinite, UsageError
 from .graph import PoseGraph
 from .linalg import cholesky
 from .se_lie import se_adjoint, se_inverse, se_jr_inv, se_log
+from .status import OK, Status
 
 log = logging.getLogger("posecrb")
 
@@ -112,6 +113,7 @@ class SedFim:
     max_residual_angle: float      # max rotation angle of r_ij: the linearisation point's quality
     times: dict[str, float]
     factor: Any = field(default=None, repr=False)  # CHOLMOD factor of F on the free poses
+    logdet_status: Status = OK     # unavailable when F on the free poses is numerically singular
 
     @property
     def trace(self) -> float:
@@ -135,6 +137,7 @@ class SedCrbResult:
     per_pose: dict[int, np.ndarray] | None  # internal index -> (q, q) covariance bound block
     times: dict[str, float]
     frame: str = "world"           # coordinates of trace and blocks (posecrb.frames): "world" | "body"
+    accuracy: Any = None           # posecrb.crlb.InverseAccuracy of the anchored inverse G
 
 
 # ------------------------------------------------------------------ information matrices
@@ -350,11 +353,13 @@ def sed_fim(graph: PoseGraph, rot: np.ndarray, trans: np.ndarray, *, indefinite:
     anchors = default_anchors(graph)
     ff, _ = _free_matrix(mat, graph.n, q, anchors)
     fac = _factor_free(ff, "SE(d) FIM on the free poses") if ff.shape[0] else None
+    status = OK
     if fac is not None or ff.shape[0] == 0:
         rank, method = ff.shape[0], "cholesky"
         logdet = float(fac.logdet()) if fac is not None else 0.0
     else:
         rank, method, logdet = _dense_rank(mat, labels, q, graph), "dense-eig", None
+        status = _singular_status(graph, graph.n * q - rank, q * c)
     t2 = time.perf_counter()
     ang = np.linalg.norm(res[:, : graph.rot_dim], axis=1)
     return SedFim(
@@ -362,7 +367,21 @@ def sed_fim(graph: PoseGraph, rot: np.ndarray, trans: np.ndarray, *, indefinite:
         components=c, component_labels=labels, anchors=anchors, logdet_anchored=logdet,
         rank_method=method, indefinite_edges=n_bad, indefinite_policy=indefinite,
         max_residual_angle=float(ang.max()) if ang.size else 0.0,
-        times={"fim_build": t1 - t0, "fim_rank": t2 - t1}, factor=fac)
+        times={"fim_build": t1 - t0, "fim_rank": t2 - t1}, factor=fac, logdet_status=status)
+
+
+def _singular_status(graph: PoseGraph, nullity: int, expected: int) -> Status:
+    """Why the FIM on the free poses is numerically singular, naming the weakest edge of the file."""
+    lam = np.linalg.eigvalsh(np.asarray(graph.info, float))
+    weakest = int(np.argmin(lam[:, 0]))
+    line = f", line {int(graph.edge_lines[weakest])}" if graph.edge_lines is not None else ""
+    edge = f"edge {graph.ids[graph.src[weakest]]} -> {graph.ids[graph.dst[weakest]]}{line}"
+    return Status.unavailable(
+        f"numerically singular: numerical nullity {nullity} where q x components = {expected} is expected "
+        f"(Th. 4.8.1), i.e. some directions carry information below double precision relative to the rest "
+        f"(smallest information eigenvalue {lam[weakest, 0]:.3g} at {edge}; largest {lam[:, -1].max():.3g}); "
+        "no log-det or inverse", "check that edge's information matrix, or drop it (the graph then splits "
+        "and each component gets its own anchor)")
 
 
 def kernel_basis(graph: PoseGraph, rot: np.ndarray | None = None, trans: np.ndarray | None = None,
@@ -428,6 +447,8 @@ def sed_crb(graph: PoseGraph, rot: np.ndarray, trans: np.ndarray, anchors: Seque
     name = "SE(d) FIM on the free poses"
     if anchors_ == fim.anchors and fim.factor is not None:
         fac = fim.factor
+    elif anchors_ == fim.anchors and not fim.logdet_status.available:
+        raise NotPositiveDefinite(name, f"{fim.logdet_status.reason}; {fim.logdet_status.hint}")
     elif ff.shape[0]:
         fac = cholesky(ff, name=name)
     else:
@@ -456,6 +477,11 @@ def sed_crb(graph: PoseGraph, rot: np.ndarray, trans: np.ndarray, anchors: Seque
     else:
         trace_g = float(_selinv().trace_inverse(ff, name, factor=fac))
     times["crb_selinv"] = time.perf_counter() - t0
+    t0 = time.perf_counter()
+    from .crlb import inverse_accuracy
+
+    accuracy = inverse_accuracy(ff, fac, "SE(d) FIM on the free poses") if fac is not None else None
+    times["accuracy"] = time.perf_counter() - t0
 
     c = fim.components
     if not quotient:
@@ -491,4 +517,4 @@ def sed_crb(graph: PoseGraph, rot: np.ndarray, trans: np.ndarray, anchors: Seque
     return SedCrbResult(
         model="sed", kind=kind, dim=fim.dim, q=q, n=n, trace_crlb=trace,
         mse_bound=trace / n_err if n_err > 0 else float("nan"),
-        nullity=fim.nullity, components=c, anchors=anchors_, per_pose=per, times=times)
+        nullity=fim.nullity, components=c, anchors=anchors_, per_pose=per, times=times, accuracy=accuracy)

@@ -24,8 +24,9 @@ from .bounds import compute_bounds
 from .errors import DatasetNotFound, PosecrbError, status_of
 from .estimate import get_estimate
 from .io import load
-from .paper_tables import TABLE_II_FOOTNOTE, paper_row
+from .paper_tables import TABLE_II_FIT_FOOTNOTE, TABLE_II_FOOTNOTE, TABLE_II_PUBLISHED_FOOTNOTE, paper_row
 from .provenance import machine, versions
+from .status import put
 from .timing import timed
 
 log = logging.getLogger("posecrb")
@@ -37,10 +38,23 @@ FAILED_STATUSES = ("parse error", "not positive definite", "uncertified", "disco
 
 @dataclass(frozen=True)
 class TableSettings:
+    """``rotation_model`` / ``fim_variant``: the model's quantities by default (eq. 59, the model's
+    Fisher information); ``published()`` gives the settings that reproduce the printed Table II."""
+
     repeat: int = 3
     rotation_model: str = "eq59"
     data_dir: str | None = None
     solver: dict = field(default_factory=dict)
+    fim_variant: str = "consistent"
+
+    @property
+    def as_published(self) -> bool:
+        return self.rotation_model == "table2" and self.fim_variant == "eq64"
+
+
+def published_settings(**kwargs) -> TableSettings:
+    """Eq. (64) as printed with the empirical Table II rotation weight (``posecrb tables --as-published``)."""
+    return TableSettings(rotation_model="table2", fim_variant="eq64", **kwargs)
 
 
 def dataset_names(names: Sequence[str] | None = None, data_dir: str | None = None) -> list[str]:
@@ -81,7 +95,9 @@ def dataset_row(name: str, settings: TableSettings,
                    poses=graph.n, edges=graph.m)
         step("bounds")
         b = compute_bounds(graph, 0, settings.rotation_model, settings.repeat)
-        row.update(lb=b.lb, ub=b.ub, ub_lambda=b.ub_lambda, lb_time=b.times["lb"], ub_time=b.times["ub"],
+        row.update(lb=b.lb)
+        put(row, "ub", b.ub, b.ub_status)
+        row.update(ub_lambda=b.ub_lambda, lb_time=b.times["lb"], ub_time=b.times["ub"],
                    ub_lambda_time=b.times["ub_lambda"], laplacians_build_time=b.times["laplacians"])
         step("solve")
         est = get_estimate(graph, "solve", **settings.solver)
@@ -89,11 +105,12 @@ def dataset_row(name: str, settings: TableSettings,
         step("fim")
         from .fim import fim_logdet, paper_fim
 
-        fim, t_build = timed(lambda: paper_fim(graph, est.rot, est.trans, 0, settings.rotation_model),
-                             settings.repeat)
+        fim, t_build = timed(lambda: paper_fim(graph, est.rot, est.trans, 0, settings.rotation_model,
+                                               variant=settings.fim_variant), settings.repeat)
         ld, t_ld = timed(lambda: fim_logdet(fim), settings.repeat)
-        row.update(fim_logdet=ld, fim_time=t_ld, fim_build_time=t_build)
-        row.update(gap_ub_rel=(b.ub - b.lb) / b.lb, gap_fim_rel=(ld - b.lb) / b.lb,
+        row.update(fim_logdet=ld, fim_variant=fim.variant, rotation_weight=settings.rotation_model, fim_time=t_ld,
+                   fim_build_time=t_build)
+        row.update(gap_ub_rel=None if b.ub is None else (b.ub - b.lb) / b.lb, gap_fim_rel=(ld - b.lb) / b.lb,
                    parse_time=t_parse)
         if not est.certified:
             row["status"] = "uncertified"
@@ -137,7 +154,7 @@ def build_rows(names: Sequence[str], settings: TableSettings, jobs: int = 1,
 
 # ---- views -------------------------------------------------------------------------
 MAIN_COLUMNS = ["dataset", "poses", "edges", "fim_logdet", "fim_time", "ub", "ub_time", "lb", "lb_time",
-                "ub_lambda", "gap_ub_rel", "gap_fim_rel", "objective", "solve_time", "status"]
+                "ub_lambda", "gap_ub_rel", "gap_fim_rel", "objective", "solve_time", "fim_variant", "status"]
 BUILD_COLUMNS = ["dataset", "fim_build_time", "laplacians_build_time", "build_ratio", "status"]
 HEADERS = {
     "poses": "# Poses", "edges": "# Meas.", "fim_logdet": "FIM logdet", "fim_time": "FIM t [s]",
@@ -145,7 +162,7 @@ HEADERS = {
     "gap_ub_rel": "(ub-lb)/lb", "gap_fim_rel": "(FIM-lb)/lb", "objective": "objective F*",
     "solve_time": "solve t [s]", "fim_build_time": "whole FIM [s]",
     "laplacians_build_time": "weighted Laplacians [s]", "build_ratio": "FIM/Lapl.",
-    "paper_name": "paper name",
+    "paper_name": "paper name", "fim_variant": "FIM variant",
 }
 for _c, _h in (("fim_logdet", "FIM"), ("ub", "ub"), ("lb", "lb"), ("fim_build_time", "whole FIM"),
                ("laplacians_build_time", "Laplacians")):
@@ -169,6 +186,7 @@ def table_rows(rows: Iterable[dict], table: int, compare_paper: bool = False) ->
         if r.get("dim") is None and not _belongs_missing(r["dataset"], dim):
             continue
         v = {c: r.get(c) for c in cols}
+        v.update({f"{c}_status": r[f"{c}_status"] for c in cols if f"{c}_status" in r})
         if table in (3, 4) and r.get("fim_build_time") and r.get("laplacians_build_time"):
             v["build_ratio"] = r["fim_build_time"] / r["laplacians_build_time"]
         if compare_paper:
@@ -195,13 +213,16 @@ def _belongs_missing(name: str, dim: int) -> bool:
     return entry is None or entry.dim == dim
 
 
-def footnote(table: int, rotation_model: str) -> str | None:
-    if table in (2, 4):
-        if rotation_model == "table2":
-            return ("3D rotation weight: w = 0.5515*kappa^2, an EMPIRICAL fit to the published Table II, "
-                    "NOT eq. (59).")
-        return TABLE_II_FOOTNOTE
-    return None
+def footnote(table: int, rotation_model: str, fim_variant: str = "consistent") -> str | None:
+    """The note printed once, under Table II: how its numbers relate to the printed table."""
+    if table != 2:
+        return None
+    if rotation_model == "table2" and fim_variant == "eq64":
+        return TABLE_II_PUBLISHED_FOOTNOTE
+    if rotation_model == "table2":
+        return TABLE_II_FIT_FOOTNOTE.format(variant="model's (consistent)" if fim_variant == "consistent"
+                                            else "eq. (64) as printed")
+    return TABLE_II_FOOTNOTE
 
 
 def failed(rows: Iterable[dict], requested: Sequence[str] | None) -> list[dict]:

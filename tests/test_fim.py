@@ -18,6 +18,7 @@ from posecrb.lie import exp_so3, rot2
 from posecrb.noise import rotation_weight
 
 from .conftest import make_random_graph
+from .numerics import assert_within, logdet_atol, psd_sum_tolerance, sum_atol
 
 
 def perturbed(rot: np.ndarray, dim: int, delta: np.ndarray) -> np.ndarray:
@@ -36,9 +37,11 @@ def residuals(graph, rot, trans) -> np.ndarray:
     return np.concatenate(out)
 
 
-def dense_reference(graph, rot, trans, anchor: int, h: float = 1e-6) -> np.ndarray:
-    """J^T W J from central differences over the free variables ([translations; rotations],
-    eq. 42/64 order) + the reduced rotation Laplacian (x) I_dr from a loop over edges."""
+def dense_reference(graph, rot, trans, anchor: int, h: float = 1e-6, with_error: bool = False):
+    """Eq. (64) as printed: J^T W J from central differences over the free variables
+    ([translations; rotations], eq. 42/64 order) + the reduced rotation Laplacian (x) I_dr from a
+    loop over edges. ``with_error``: also the relative 2-norm error bound of
+    ``dense_model_fisher``."""
     d = graph.dim
     dr = 1 if d == 2 else 3
     free = [k for k in range(graph.n) if k != anchor]
@@ -61,6 +64,8 @@ def dense_reference(graph, rot, trans, anchor: int, h: float = 1e-6) -> np.ndarr
     jac = np.stack(cols, axis=1)
     wdiag = np.repeat(graph.tau, d)
     f = jac.T @ (wdiag[:, None] * jac)
+    rel = _fd_error(jac, wdiag, max(np.abs(residuals(graph, rot, trans)).max(), np.abs(graph.trans).max(),
+                                    np.abs(trans).max()), h, f)
     w = rotation_weight(graph.kappa, d)
     pos = {k: t for t, k in enumerate(free)}
     for e in range(graph.m):
@@ -75,7 +80,15 @@ def dense_reference(graph, rot, trans, anchor: int, h: float = 1e-6) -> np.ndarr
             if ri is not None and rj is not None:
                 f[ri, rj] -= w[e]
                 f[rj, ri] -= w[e]
-    return f
+    return (f, rel * np.linalg.norm(jac.T @ (wdiag[:, None] * jac), 2) / np.linalg.norm(f, 2)) if with_error else f
+
+
+def _fd_error(jac, weights, r_max, h, f) -> float:
+    """Relative 2-norm error bound of ``J^T W J`` from central differences (``dense_model_fisher``)."""
+    from .numerics import EPS, MARGIN
+
+    d_jac = np.sqrt(jac.size) * EPS * r_max / h
+    return MARGIN * 2 * weights.max() * np.linalg.norm(jac, 2) * d_jac / np.linalg.norm(f, 2)
 
 
 def _body_perturbed(rot: np.ndarray, dim: int, delta: np.ndarray) -> np.ndarray:
@@ -93,13 +106,18 @@ def _rotation_coords(mat: np.ndarray, dim: int) -> np.ndarray:
     return np.sqrt(2.0) * Rotation.from_matrix(mat).as_rotvec()
 
 
-def dense_model_fisher(graph, rot, trans, anchor: int, h: float = 1e-6) -> np.ndarray:
+def dense_model_fisher(graph, rot, trans, anchor: int, h: float = 1e-6, with_error: bool = False):
     """Fisher information J^T W J of the model's mean function, from central differences,
     every pose perturbed in its body frame (x_k + dx, R_k Exp(delta)), order [translations;
     rotations]. Per edge: translation residual R_i^T (x_j - x_i) - p_ij (weight tau I_d) and
     rotation residual Log(Rbar_ij^T R_i^T R_j) in the E_k coordinates (weight w I_dr, eq. 39-41 /
     59), with Rbar_ij = R_i^T R_j at the estimate itself: the noise-free measurement, where the
-    Jacobian of the residual is that of the mean function, as the Fisher information needs."""
+    Jacobian of the residual is that of the mean function, as the Fisher information needs.
+
+    ``with_error=True`` also returns a bound on the relative 2-norm error of the result: central
+    differences of residuals of size at most R carry a rounding error ``eps R / h`` per Jacobian
+    entry (the truncation error, h^2 times a third derivative, is far smaller for h = 1e-6), so
+    ``||dF|| <= 2 ||W|| ||J|| ||dJ||_F`` relative to ``||F||``, times ``MARGIN``."""
     d = graph.dim
     dr = 1 if d == 2 else 3
     rbar = [rot[i].T @ rot[j] for i, j in zip(graph.src, graph.dst)]
@@ -130,7 +148,11 @@ def dense_model_fisher(graph, rot, trans, anchor: int, h: float = 1e-6) -> np.nd
     jac = np.stack(cols, axis=1)
     w = rotation_weight(graph.kappa, d)
     weights = np.concatenate([np.concatenate([np.full(d, t), np.full(dr, v)]) for t, v in zip(graph.tau, w)])
-    return jac.T @ (weights[:, None] * jac)
+    f = jac.T @ (weights[:, None] * jac)
+    if not with_error:
+        return f
+    r_max = max(np.abs(residual(rot, trans)).max(), np.abs(graph.trans).max(), np.abs(trans).max())
+    return f, _fd_error(jac, weights, r_max, h, f)
 
 
 @pytest.mark.parametrize("dim", [2, 3])
@@ -139,12 +161,12 @@ def test_fim_matches_finite_difference_jacobians(dim, seed):
     rng = np.random.default_rng(seed)
     g = make_random_graph(rng, n=7, extra=5, dim=dim, parallel=2)
     anchor = int(rng.integers(0, g.n))
-    fim = paper_fim(g, g.vertex_rot, g.vertex_trans, anchor=anchor)
+    fim = paper_fim(g, g.vertex_rot, g.vertex_trans, anchor=anchor, variant="eq64")
     assert fim.variant == "eq64"
-    ref = dense_reference(g, g.vertex_rot, g.vertex_trans, anchor)
+    ref, rel = dense_reference(g, g.vertex_rot, g.vertex_trans, anchor, with_error=True)
     got = fim.matrix.toarray()
-    np.testing.assert_allclose(got, got.T, atol=0)
-    np.testing.assert_allclose(got, ref, rtol=1e-6, atol=1e-6 * np.abs(ref).max())
+    assert_within(got, got.T, psd_sum_tolerance(got, g.m + 2), "symmetry")
+    assert_within(got, ref, rel * np.linalg.norm(ref, 2), "eq. (64) vs finite differences")
     assert fim.anchor_id == g.ids[anchor]
     np.testing.assert_array_equal(fim.pose_ids, np.delete(g.ids, anchor))
 
@@ -157,30 +179,30 @@ def test_consistent_variant_is_the_fisher_information_of_the_model(dim, seed):
     rng = np.random.default_rng(100 + seed)
     g = make_random_graph(rng, n=7, extra=5, dim=dim, parallel=2)
     anchor = int(rng.integers(0, g.n))
-    fim = paper_fim(g, g.vertex_rot, g.vertex_trans, anchor=anchor, variant="consistent")
-    assert fim.variant == "consistent"
-    ref = dense_model_fisher(g, g.vertex_rot, g.vertex_trans, anchor)
+    fim = paper_fim(g, g.vertex_rot, g.vertex_trans, anchor=anchor)
+    assert fim.variant == "consistent"            # the default
+    ref, rel = dense_model_fisher(g, g.vertex_rot, g.vertex_trans, anchor, with_error=True)
     got = fim.matrix.toarray()
-    np.testing.assert_allclose(got, got.T, atol=0)
-    np.testing.assert_allclose(got, ref, rtol=1e-6, atol=1e-6 * np.abs(ref).max())
-    eq64 = paper_fim(g, g.vertex_rot, g.vertex_trans, anchor=anchor).matrix.toarray()
+    assert_within(got, got.T, psd_sum_tolerance(got, g.m + 2), "symmetry")
+    assert_within(got, ref, rel * np.linalg.norm(ref, 2), "consistent FIM vs finite differences")
+    eq64 = paper_fim(g, g.vertex_rot, g.vertex_trans, anchor=anchor, variant="eq64").matrix.toarray()
     if dim == 3:
         # eq. (64) as printed is NOT the model's information once poses are rotated relative to
         # each other; the variants differ in the rotation coupling only (same trace)
         # (the off-diagonal difference is w (R_i^T R_j - I), on the scale of the rotation weights)
         assert np.abs(eq64 - ref).max() > 0.1 * rotation_weight(g.kappa, 3).max()
-        assert np.abs(eq64 - ref).max() > 1e3 * 1e-6 * np.abs(ref).max()
+        assert np.abs(eq64 - ref).max() > 1e3 * rel * np.linalg.norm(ref, 2)
         k = (g.n - 1) * 3
-        np.testing.assert_array_equal(got[:, :k], eq64[:, :k])
-        assert np.trace(got) == pytest.approx(np.trace(eq64), rel=1e-13)
+        np.testing.assert_array_equal(got[:, :k], eq64[:, :k])   # same assembly code, same order
+        assert np.trace(got) == pytest.approx(np.trace(eq64), abs=sum_atol(np.diag(got)))
 
 
 @pytest.mark.parametrize("seed", [0, 1])
 def test_2d_variants_are_identical(seed):
     g = make_random_graph(np.random.default_rng(seed), n=9, dim=2)
     for anchor in (0, 4):
-        a = paper_fim(g, g.vertex_rot, g.vertex_trans, anchor=anchor)
-        b = paper_fim(g, g.vertex_rot, g.vertex_trans, anchor=anchor, variant="consistent")
+        a = paper_fim(g, g.vertex_rot, g.vertex_trans, anchor=anchor, variant="eq64")
+        b = paper_fim(g, g.vertex_rot, g.vertex_trans, anchor=anchor)
         assert (a.variant, b.variant) == ("eq64", "consistent")
         np.testing.assert_array_equal(a.matrix.indptr, b.matrix.indptr)
         np.testing.assert_array_equal(a.matrix.indices, b.matrix.indices)
@@ -200,7 +222,7 @@ def test_psi_blocks_3d_match_eq63():
     rng = np.random.default_rng(11)
     g = make_random_graph(rng, n=6, extra=4, dim=3, parallel=1)
     rot, trans = g.vertex_rot, g.vertex_trans
-    fim = paper_fim(g, rot, trans, anchor=0)
+    fim = paper_fim(g, rot, trans, anchor=0, variant="eq64")
     rb = fim.rotation_block().toarray()
     w = rotation_weight(g.kappa, 3)
     for k in range(1, g.n):
@@ -213,7 +235,8 @@ def test_psi_blocks_3d_match_eq63():
             if k in (g.src[e], g.dst[e]):
                 lap += w[e]
         blk = rb[3 * (k - 1):3 * k, 3 * (k - 1):3 * k]
-        np.testing.assert_allclose(blk, psi + lap * np.eye(3), rtol=1e-12, atol=1e-12)
+        ref = psi + lap * np.eye(3)
+        assert_within(blk, ref, psd_sum_tolerance(ref, g.m + 1), f"pose {k}")
 
 
 @pytest.mark.parametrize("dim", [2, 3])
@@ -237,16 +260,17 @@ def test_logdet_and_trace_match_dense(dim, variant):
     fim = paper_fim(g, g.vertex_rot, g.vertex_trans, variant=variant)
     dense = fim.matrix.toarray()
     if variant == "consistent":   # the reference matrix itself from finite differences of the model
-        np.testing.assert_allclose(dense, dense_model_fisher(g, g.vertex_rot, g.vertex_trans, 0),
-                                   rtol=1e-6, atol=1e-6 * np.abs(dense).max())
+        ref_f, rel = dense_model_fisher(g, g.vertex_rot, g.vertex_trans, 0, with_error=True)
+        assert_within(dense, ref_f, rel * np.linalg.norm(ref_f, 2), "consistent FIM vs finite differences")
     sign, ref = np.linalg.slogdet(dense)
     assert sign > 0
     sym = fim_symbolic(fim)
-    assert fim_logdet(fim, sym) == pytest.approx(ref, rel=1e-10)
+    assert fim_logdet(fim, sym) == pytest.approx(ref, abs=logdet_atol(dense))
     # the symbolic analysis depends only on the pattern: reuse it at another estimate
-    other = paper_fim(g, g.vertex_rot, g.vertex_trans * 1.5, variant=variant)
-    assert fim_logdet(other, sym) == pytest.approx(np.linalg.slogdet(other.matrix.toarray())[1], rel=1e-10)
-    assert trace_fim(fim) == pytest.approx(np.trace(dense), rel=1e-12)
+    other = paper_fim(g, g.vertex_rot, g.vertex_trans * 1.5, variant=variant).matrix.toarray()
+    assert fim_logdet(paper_fim(g, g.vertex_rot, g.vertex_trans * 1.5, variant=variant), sym) == pytest.approx(
+        np.linalg.slogdet(other)[1], abs=logdet_atol(other))
+    assert trace_fim(fim) == pytest.approx(np.trace(dense), abs=sum_atol(np.diag(dense)))
 
 
 @pytest.mark.parametrize("dim", [2, 3])
@@ -258,7 +282,11 @@ def test_t_opt_approx_equals_trace_at_a_noise_free_estimate(dim):
     g = replace(g, trans=p)
     for anchor in (0, 3):
         fim = paper_fim(g, rot, trans, anchor=anchor)
-        assert t_optimality(g, anchor)[1] == pytest.approx(np.trace(fim.matrix.toarray()), rel=1e-12)
+        diag = fim.matrix.diagonal()
+        # the same sum of non-negative terms in two orders, from p_ij and from x_j - x_i (equal
+        # up to rounding of the einsum that built p)
+        assert t_optimality(g, anchor)[1] == pytest.approx(diag.sum(), abs=sum_atol(diag) + sum_atol(
+            g.tau * np.einsum("ma,ma->m", p, p)))
 
 
 def test_intel_table1_logdet(shared_datasets):
@@ -336,18 +364,20 @@ def test_cli_fim_paper_json_and_npz(dim, variant, g2o_file, tmp_path, capsys):
     assert code == 0
     row = json.loads(out)
     g = load(path)
-    assert row["fim_variant"] == (variant or "eq64")
-    if variant == "consistent":
-        dense = dense_model_fisher(g, g.vertex_rot, g.vertex_trans, 2)
-        dense = (dense + dense.T) / 2
+    assert row["fim_variant"] == (variant or "consistent")
+    if variant == "eq64":
+        dense, rel = dense_reference(g, g.vertex_rot, g.vertex_trans, 2, with_error=True)
     else:
-        dense = dense_reference(g, g.vertex_rot, g.vertex_trans, 2)
+        dense, rel = dense_model_fisher(g, g.vertex_rot, g.vertex_trans, 2, with_error=True)
+        dense = (dense + dense.T) / 2
     assert row["size"] == dense.shape[0] and row["anchors"] == [int(ids[2])]
-    assert row["logdet"] == pytest.approx(np.linalg.slogdet(dense)[1], rel=1e-7)
-    assert row["trace"] == pytest.approx(np.trace(dense), rel=1e-7)
+    # a relative 2-norm perturbation rel of F moves log det by at most n rel cond(F)
+    n = dense.shape[0]
+    assert row["logdet"] == pytest.approx(np.linalg.slogdet(dense)[1], abs=n * rel * np.linalg.cond(dense))
+    assert row["trace"] == pytest.approx(np.trace(dense), abs=n * rel * np.linalg.norm(dense, 2))
     assert row["estimate"]["source"] == "vertices"
     saved = sp.load_npz(npz)
-    np.testing.assert_allclose(saved.toarray(), dense, rtol=1e-6, atol=1e-6 * np.abs(dense).max())
+    assert_within(saved.toarray(), dense, rel * np.linalg.norm(dense, 2), "saved FIM")
     z = np.load(npz)
     assert z["row_pose_id"].size == dense.shape[0] and int(ids[2]) not in set(z["row_pose_id"].tolist())
     assert list(z["coordinate_names"]) == (["x", "y", "theta"] if dim == 2 else
@@ -357,11 +387,49 @@ def test_cli_fim_paper_json_and_npz(dim, variant, g2o_file, tmp_path, capsys):
 def test_cli_fim_sed_reports_rank_and_nullity(g2o_file, capsys):
     import json
 
-    code, out, _ = run_cli(["fim", str(g2o_file(2, seed=3)), "--model", "sed", "--estimate", "vertices",
-                            "--format", "json"], capsys)
+    code, out, err = run_cli(["fim", str(g2o_file(2, seed=3)), "--model", "sed", "--estimate", "vertices",
+                              "--format", "json"], capsys)
     assert code == 0
     row = json.loads(out)
     assert row["nullity"] == 3 and row["rank"] == row["size"] - 3
+    assert row["logdet"] is not None and "logdet_status" not in row and "warning" not in err
+
+
+@pytest.mark.parametrize("dim", [2, 3])
+def test_cli_fim_sed_near_singular_bridge_is_a_status(dim, tmp_path, capsys):
+    """Two clusters joined by one edge of information 1e-14: the SE(d) FIM is numerically singular.
+    logdet is null with a status naming the edge and its line, a warning on stderr; the
+    numerical nullity is above q x components (checked against dense eigenvalues)."""
+    import json
+
+    from posecrb.io import load, write_g2o
+    from posecrb.sed import sed_fim
+
+    from .test_crlb import _bridge_graph
+
+    path = tmp_path / "bridge.g2o"
+    write_g2o(_bridge_graph(dim, 1e-14), path)
+    code, out, err = run_cli(["fim", str(path), "--model", "sed", "--estimate", "vertices", "--format", "json"],
+                             capsys)
+    assert code == 0
+    row = json.loads(out)
+    q = 3 if dim == 2 else 6
+    assert row["logdet"] is None
+    st = row["logdet_status"]
+    assert st["status"] == "unavailable" and "numerically singular" in st["reason"]
+    g = load(path)
+    weak_line = int(g.edge_lines[np.argmin(np.linalg.eigvalsh(g.info)[:, 0])])
+    assert f"edge 3 -> 4, line {weak_line}" in st["reason"] and st["hint"]
+    assert row["expected_nullity"] == q and row["nullity"] > q
+    assert "warning" in err and "log det of the SE(d) FIM not available" in err
+    # independent: dense eigenvalues of F put more than q of them below n eps lambda_max
+    f = sed_fim(g, g.vertex_rot, g.vertex_trans).matrix.toarray()
+    ev = np.linalg.eigvalsh(f)
+    assert np.sum(ev < f.shape[0] * np.finfo(float).eps * ev[-1]) > q
+    code, out, _ = run_cli(["fim", str(path), "--model", "sed", "--estimate", "vertices"], capsys)
+    assert code == 0 and "n/a (numerically singular" in out
+    code, _, err = run_cli(["crlb", str(path), "--model", "sed", "--estimate", "vertices"], capsys)
+    assert code == 1 and "numerically singular" in err and "Traceback" not in err
 
 
 def test_cli_fim_variant_with_sed_is_a_usage_error(g2o_file, capsys):

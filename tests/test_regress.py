@@ -15,6 +15,7 @@ def test_expected_file_covers_the_ci_subset():
     assert set(CI_SUBSET) <= set(stored)
     for name in CI_SUBSET:
         assert {"sha256", "lb", "ub", "ub_lambda", "fim_logdet", "objective", "trace_crlb"} <= set(stored[name])
+        assert stored[name]["fim_variant"] == "consistent"   # the default FIM: the model's
 
 
 def test_ci_subset_has_no_drift(shared_datasets, capfd):
@@ -50,3 +51,22 @@ def test_tolerances():
 
 def test_default_expected_path_exists():
     assert default_expected_path().is_file()
+
+
+def test_changed_fim_variant_is_reported_not_compared():
+    diffs = compare("x", {"fim_variant": "eq64", "fim_logdet": 1.0}, {"fim_variant": "consistent", "fim_logdet": 2.0})
+    assert [(d.quantity, d.ok) for d in diffs] == [("fim_variant", False)]
+    same = compare("x", {"fim_variant": "consistent", "fim_logdet": 1.0, "lb": 1.0},
+                   {"fim_variant": "consistent", "fim_logdet": 1.0, "lb": 1.0})
+    assert all(d.ok for d in same)
+    assert {d.quantity: d.fim_variant for d in same} == {"fim_logdet": "consistent", "lb": None}
+
+
+def test_save_expected_is_atomic_and_leaves_no_temporary(tmp_path):
+    from posecrb.regress import save_expected
+
+    target = tmp_path / "expected.json"
+    target.write_text("{}")
+    save_expected({"version": 1, "datasets": {"a": {"lb": 1.0}}}, target)
+    assert json.loads(target.read_text())["datasets"]["a"]["lb"] == 1.0
+    assert [p.name for p in tmp_path.iterdir()] == ["expected.json"]

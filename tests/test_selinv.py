@@ -9,6 +9,8 @@ from posecrb.errors import NotPositiveDefinite
 from posecrb.linalg import cholesky
 from posecrb.selinv import diagonal_inverse, inverse_block_diagonal, trace_inverse
 
+from .numerics import assert_within, inverse_entry_atol, trace_inverse_rtol
+
 
 def random_sparse_spd(rng: np.random.Generator, n: int, density: float) -> sp.csc_matrix:
     """A random sparse SPD matrix: B B^T + shift, B sparse with random pattern."""
@@ -28,14 +30,14 @@ def dense_blocks(a: np.ndarray, block: int) -> np.ndarray:
 def test_block_diagonal_matches_dense_inverse(n, density, block, seed):
     a = random_sparse_spd(np.random.default_rng(seed), n, density)
     got = inverse_block_diagonal(a, block)
-    np.testing.assert_allclose(got, dense_blocks(a.toarray(), block), rtol=1e-9, atol=1e-12)
+    assert_within(got, dense_blocks(a.toarray(), block), inverse_entry_atol(a.toarray()), "blocks")
 
 
 def test_trace_and_diagonal():
     a = random_sparse_spd(np.random.default_rng(5), 80, 0.04)
     inv = np.linalg.inv(a.toarray())
-    assert trace_inverse(a) == pytest.approx(np.trace(inv), rel=1e-11)
-    np.testing.assert_allclose(diagonal_inverse(a), np.diag(inv), rtol=1e-10)
+    assert trace_inverse(a) == pytest.approx(np.trace(inv), rel=trace_inverse_rtol(a.toarray()))
+    assert_within(diagonal_inverse(a), np.diag(inv), inverse_entry_atol(a.toarray()), "diagonal")
 
 
 def test_large_dense_supernode():
@@ -45,7 +47,7 @@ def test_large_dense_supernode():
     b = rng.normal(size=(150, 150))
     a = b @ b.T / 150 + np.eye(150)
     got = inverse_block_diagonal(sp.csc_matrix(a), 5)
-    np.testing.assert_allclose(got, dense_blocks(a, 5), rtol=1e-9, atol=1e-12)
+    assert_within(got, dense_blocks(a, 5), inverse_entry_atol(a), "blocks")
 
 
 def test_block_tridiagonal_chain():
@@ -55,7 +57,7 @@ def test_block_tridiagonal_chain():
     blk = np.array([[2.0, 0.5, 0.1], [0.5, 1.0, 0.2], [0.1, 0.2, 3.0]])
     a = (sp.kron(lap, blk) + sp.identity(3 * n) * 0.01).tocsc()
     got = inverse_block_diagonal(a, 3)
-    np.testing.assert_allclose(got, dense_blocks(a.toarray(), 3), rtol=1e-8, atol=1e-12)
+    assert_within(got, dense_blocks(a.toarray(), 3), inverse_entry_atol(a.toarray()), "blocks")
 
 
 def test_reuses_given_factor_and_pads_when_pattern_lacks_blocks():
@@ -64,10 +66,11 @@ def test_reuses_given_factor_and_pads_when_pattern_lacks_blocks():
     a = sp.diags(np.arange(1.0, 13.0)).tocsc()
     f = cholesky(a)
     got = inverse_block_diagonal(a, 3, factor=f)
-    np.testing.assert_allclose(got, dense_blocks(a.toarray(), 3), atol=1e-15)
+    # diagonal: 1/a_ii, correctly rounded up to the square root and division of the factor
+    np.testing.assert_allclose(got, dense_blocks(a.toarray(), 3), rtol=4 * np.finfo(float).eps, atol=0)
     b = random_sparse_spd(np.random.default_rng(9), 40, 0.2)
     got = inverse_block_diagonal(b, 4, factor=cholesky(b))
-    np.testing.assert_allclose(got, dense_blocks(b.toarray(), 4), rtol=1e-9, atol=1e-12)
+    assert_within(got, dense_blocks(b.toarray(), 4), inverse_entry_atol(b.toarray()), "blocks")
 
 
 def test_not_positive_definite():

@@ -16,7 +16,10 @@ computed that way. posecrb normalises quaternions by default (DESIGN.md section 
   1e-6 relative decrease and certifies with a 1e-3 tolerance).
 - the default normalised reading differs from the references by what the quaternion
   normalisation changes: tinyGrid3D -1.1e-6, cubicle -1.1e-5, parking-garage +3.1e-5 (the
-  other datasets stay within 1e-6, 2D files are unaffected).
+  other datasets stay within 1e-6, 2D files are unaffected). The test does not pin these
+  numbers (they depend on where each solver stops): it brackets the move between the two
+  certified optima by the change of the objective at either estimate, widened by the two
+  certified suboptimality bounds (tests/numerics.py).
 
 The expected objective at an estimate is evaluated here independently of posecrb: the g2o
 text is split by hand, R~ comes from Eigen's formula written out, tau and kappa from the
@@ -30,6 +33,8 @@ import pytest
 from posecrb.io import load
 from posecrb.sesync import solve
 
+from .numerics import objective_atol, suboptimality_bound
+
 REFERENCE = {
     "CSAIL": 31.703715992, "MIT": 61.154116091, "intel": 52.348227593, "kitti_05": 276.51437895,
     "manhattan": 6431.3913895, "kitti_02": 108.35114045, "kitti_00": 125.69351454, "city10000": 638.62462187,
@@ -37,12 +42,19 @@ REFERENCE = {
     "parking-garage": 1.2624855350, "sphere2500": 1687.0056783, "sphere_bignoise_vertex3": 2961756.5055,
     "torus3D": 24227.041546, "cubicle": 717.13404328,
 }
-# SE-Sync reading: (low, high) relative error bounds where 1e-6 does not hold (see the docstring).
-KNOWN_RAW = {"parking-garage": (-1.2e-6, 0.0)}
-# Normalised reading: the datasets whose value moves by more than 1e-6 with the normalisation.
-KNOWN_NORMALIZED = {"tinyGrid3D": (-1.2e-6, -1.0e-6), "cubicle": (-1.2e-5, -1.0e-5),
-                    "parking-garage": (3.0e-5, 3.2e-5)}
+# SE-Sync stops its trust region at a 1e-6 relative decrease: a reference more than that above
+# our certified value must be shown not to be the minimum (a feasible estimate below it).
+SESYNC_STOP = 1e-6
+# Normalised reading: the 3D datasets whose optimum moves by more than 1e-6 with the normalisation.
+KNOWN_NORMALIZED = ["tinyGrid3D", "cubicle", "parking-garage"]
 TORO = ["csail.toro", "w100.graph", "sphere_smallnoise.graph", "sphere_bignoise.graph", "w10000.graph"]
+
+
+def print_rounding(value: float) -> float:
+    """Half a unit of the last digit of a value as typed in (REFERENCE literals: SE-Sync's printout)."""
+    from decimal import Decimal
+
+    return 0.5 * 10.0 ** Decimal(repr(value)).as_tuple().exponent
 
 
 def eigen_to_rotation_matrix(qx, qy, qz, qw):
@@ -90,30 +102,52 @@ def sesync_objective(path, rot, trans, quaternions):
 @pytest.mark.parametrize("name", list(REFERENCE))
 def test_g2o_dataset_sesync_reading_matches_reference(shared_datasets, name):
     path = shared_datasets / f"{name}.g2o"
-    res = solve(load(path, quaternions="raw"))
+    g = load(path, quaternions="raw")
+    res = solve(g)
     assert res.certified, res.reason
-    # The reference form |R_i|^2 + |R_j|^2 - 2 tr(...) loses ~eps * 2d * sum(kappa) to cancellation
+    # The reference form |R_i|^2 + |R_j|^2 - 2 tr(...) loses ~eps * 4d * sum(kappa) to cancellation
     # (2D kitti_*: sum kappa ~ 5e9, ~1e-9 relative); posecrb sums without cancelling.
+    d = res.rot.shape[1]
+    atol = objective_atol(g.kappa, d, res.objective)
     expected = sesync_objective(path, res.rot, res.trans, "raw")
-    assert expected == pytest.approx(res.objective, rel=1e-8 if res.rot.shape[1] == 2 else 1e-11)
-    lo, hi = KNOWN_RAW.get(name, (-1e-6, 1e-6))
-    assert lo <= (res.objective - REFERENCE[name]) / REFERENCE[name] <= hi
-    if name in KNOWN_RAW:   # a feasible estimate below the reference: the reference is not the minimum
-        np.testing.assert_allclose(res.rot @ np.swapaxes(res.rot, 1, 2), np.broadcast_to(np.eye(3), res.rot.shape),
-                                   atol=1e-12)
-        np.testing.assert_allclose(np.linalg.det(res.rot), 1.0, atol=1e-12)
-        assert expected < REFERENCE[name]
+    assert expected == pytest.approx(res.objective, abs=atol)
+    # The reference is the objective at a feasible point, hence >= F* >= our value - our certified
+    # suboptimality: ours can exceed it only by that bound plus the rounding of both evaluations.
+    assert res.objective - REFERENCE[name] <= suboptimality_bound(res, g.n, d) + 2 * atol + print_rounding(
+        REFERENCE[name])
+    if res.objective < REFERENCE[name] * (1 - SESYNC_STOP):
+        # more than SE-Sync's stopping tolerance below it: the reference is not the minimum; show a
+        # feasible estimate (rotations in SO(3)) whose independent evaluation is below it
+        np.testing.assert_allclose(res.rot @ np.swapaxes(res.rot, 1, 2), np.broadcast_to(np.eye(d), res.rot.shape),
+                                   atol=10 * d * np.finfo(float).eps)
+        np.testing.assert_allclose(np.linalg.det(res.rot), 1.0, atol=10 * d * np.finfo(float).eps)
+        assert expected + atol < REFERENCE[name]
 
 
-@pytest.mark.parametrize("name", list(KNOWN_NORMALIZED))
+@pytest.mark.parametrize("name", KNOWN_NORMALIZED)
 def test_g2o_dataset_normalized_reading(shared_datasets, name):
-    """posecrb's default reading: certified, and off the reference by the normalisation alone."""
+    """posecrb's default reading: certified, and moved from the SE-Sync reading's optimum by what the
+    normalisation changes in the objective. With x_n, x_r the two certified estimates and sub_n,
+    sub_r their certified suboptimality bounds, F_n(x_n) - F_r(x_r) lies in
+    [F_n(x_n) - F_r(x_n) - sub_r, F_n(x_r) - F_r(x_r) + sub_n] (each optimum is below the other
+    estimate's value up to its bound); F_n - F_r is evaluated independently (sesync_objective)."""
     path = shared_datasets / f"{name}.g2o"
-    res = solve(load(path))
-    assert res.certified, res.reason
-    assert sesync_objective(path, res.rot, res.trans, "normalize") == pytest.approx(res.objective, rel=1e-11)
-    lo, hi = KNOWN_NORMALIZED[name]
-    assert lo <= (res.objective - REFERENCE[name]) / REFERENCE[name] <= hi
+    gn, gr = load(path), load(path, quaternions="raw")
+    res_n, res_r = solve(gn), solve(gr)
+    assert res_n.certified and res_r.certified, (res_n.reason, res_r.reason)
+    d = res_n.rot.shape[1]
+    atol = objective_atol(gn.kappa, d, res_n.objective) + objective_atol(gr.kappa, d, res_r.objective)
+    f_nn = sesync_objective(path, res_n.rot, res_n.trans, "normalize")
+    assert f_nn == pytest.approx(res_n.objective, abs=atol)
+    f_rn = sesync_objective(path, res_n.rot, res_n.trans, "raw")
+    f_nr = sesync_objective(path, res_r.rot, res_r.trans, "normalize")
+    f_rr = sesync_objective(path, res_r.rot, res_r.trans, "raw")
+    move = res_n.objective - res_r.objective
+    lo = f_nn - f_rn - suboptimality_bound(res_r, gr.n, d) - 2 * atol
+    hi = f_nr - f_rr + suboptimality_bound(res_n, gn.n, d) + 2 * atol
+    assert lo <= move <= hi
+    # these are the datasets where the normalisation matters beyond SE-Sync's stopping tolerance
+    assert abs(f_nn - f_rn) > SESYNC_STOP * res_n.objective
 
 
 @pytest.mark.parametrize("name", TORO)

@@ -18,7 +18,9 @@ from posecrb.sesync.stiefel import lift, random_point
 from posecrb.sesync.synthetic import random_pose_graph, random_rotations
 from posecrb.sesync.trust_region import TROptions, trust_region
 
-# SE-Sync C++ reference optima (issue 3).
+from .numerics import EPS, MARGIN, objective_atol, suboptimality_bound
+
+# SE-Sync C++ reference optima.
 REFERENCE = {"CSAIL": 31.703715992, "tinyGrid3D": 18.519386873, "smallGrid3D": 1025.3980207}
 
 
@@ -41,7 +43,7 @@ def test_noise_free_recovers_truth(dim):
     ta = (t - t[3]) @ R[3]
     np.testing.assert_allclose(res.rot, Ra, atol=1e-9)
     np.testing.assert_allclose(res.trans, ta, atol=1e-9)
-    np.testing.assert_allclose(res.rot[3], np.eye(dim), atol=1e-15)
+    np.testing.assert_allclose(res.rot[3], np.eye(dim), atol=MARGIN * dim * EPS)   # R_a^T R_a, rounded
     assert res.objective < 1e-12
 
 
@@ -52,7 +54,8 @@ def test_random_local_solves_never_beat_certified(dim):
                                 kappa=5.0, tau=2.0)
     best = solve(g)
     assert best.certified
-    assert best.objective == pytest.approx(objective_loop(g, best.rot, best.trans), rel=1e-12)
+    # two summation orders of m non-negative terms
+    assert best.objective == pytest.approx(objective_loop(g, best.rot, best.trans), rel=MARGIN * g.m * EPS)
     assert best.duality_gap >= -1e-9 * max(1.0, best.objective)
     p = Problem.from_graph(g)
     model = RelaxedModel(p)
@@ -131,13 +134,18 @@ def test_real_datasets_match_reference(shared_datasets, name):
     res = solve(g)
     assert res.certified
     ref = REFERENCE[name]
-    # The references read 3D quaternions unnormalised (SE-Sync's reader; see
-    # test_sesync_datasets.py): the default normalised reading of tinyGrid3D sits 1.1e-6 below.
-    assert -1.2e-6 <= (res.objective - ref) / ref <= 1e-6
-    assert res.objective == pytest.approx(objective_loop(g, res.rot, res.trans), rel=1e-10)
-    raw = solve(load(shared_datasets / f"{name}.g2o", quaternions="raw"))
+    assert res.objective == pytest.approx(objective_loop(g, res.rot, res.trans), rel=MARGIN * g.m * EPS)
+    # The references read 3D quaternions unnormalised (SE-Sync's reader; test_sesync_datasets.py
+    # brackets the normalised reading's move): compare that reading. The reference is a feasible
+    # objective value, so ours can exceed it only by our certified suboptimality (plus rounding
+    # and its printed digits); SE-Sync stops at a 1e-6 relative decrease, so it is at most that above.
+    from .test_sesync_datasets import SESYNC_STOP, print_rounding
+
+    gr = load(shared_datasets / f"{name}.g2o", quaternions="raw")
+    raw = solve(gr)
     assert raw.certified
-    assert raw.objective == pytest.approx(ref, rel=1e-8)
+    slack = suboptimality_bound(raw, gr.n, gr.dim) + 2 * objective_atol(gr.kappa, gr.dim, ref) + print_rounding(ref)
+    assert -SESYNC_STOP * ref <= raw.objective - ref <= slack
 
 
 def test_cli_json_and_out(shared_datasets, tmp_path):
@@ -250,7 +258,8 @@ def test_non_orthogonal_measurements_use_sesync_objective(dim):
 
     res = solve(g)
     assert res.certified
-    assert res.objective == pytest.approx(sesync_objective_loop(g, res.rot, res.trans), rel=1e-12)
+    assert res.objective == pytest.approx(sesync_objective_loop(g, res.rot, res.trans),
+                                          abs=objective_atol(g.kappa, dim, res.objective))
     defect = float(np.sum(g.kappa * (dim - np.einsum("eab,eab->e", g.rot, g.rot))))
     assert res.objective - objective_loop(g, res.rot, res.trans) == pytest.approx(defect, rel=1e-9)
     assert res.relaxation_value == pytest.approx(res.objective, rel=1e-9)

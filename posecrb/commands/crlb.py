@@ -9,6 +9,7 @@ import numpy as np
 
 from ..errors import UsageError
 from ..report import print_rows
+from ..status import Status, log_status, put
 from ._common import INT64_MAX, POSE_ID, data_dir_option, format_option
 from .fim import (estimate_option, fim_variant_option, frame_option, load_with_estimate, model_option,
                   resolve_fim_variant, resolve_frame, rotation_weight_option)
@@ -47,8 +48,9 @@ def crlb_result(file: str, data_dir: str | None, model: str, source: str, anchor
                 quotient: bool, poses: bool | list[int], rotation_model: str,
                 fim_variant: str | None = None, frame: str | None = None) -> tuple[dict, list[dict]]:
     """The JSON-ready result and, when per-pose blocks were asked, one row per pose.
-    ``fim_variant``: None (default eq64, with a warning in 3D), "eq64" or "consistent".
-    ``frame``: sed only, None/"world" or "body" (``posecrb.frames``)."""
+    ``fim_variant``: None (default: consistent, the model's Fisher information), "eq64" or
+    "consistent". ``frame``: sed only, None/"world" or "body" (``posecrb.frames``).
+    Doubtful numbers carry a ``<key>_status`` and a warning on stderr."""
     variant = resolve_fim_variant(model, fim_variant)
     frame = resolve_frame(model, frame)
     graph, est, est_info, times = load_with_estimate(file, data_dir, source)
@@ -62,21 +64,24 @@ def crlb_result(file: str, data_dir: str | None, model: str, source: str, anchor
         if len(anchor_ids) > 1:
             raise UsageError("--model paper takes a single --anchor (its graph must be connected)")
         anchor = graph.anchor_index(anchor_ids[0] if anchor_ids else None)
-        if graph.dim == 3 and fim_variant is None:
-            log.warning("eq. (64) as printed mixes rotation frames in 3D (world-frame rotation coupling, "
-                        "body-frame cross terms); --fim-variant consistent gives the Fisher information of "
-                        "the model (the bound the Monte Carlo experiment reaches)")
         res = paper_crlb(graph, est.rot, est.trans, anchor=anchor, per_pose=poses, rotation_model=rotation_model,
                          variant=variant)
         times.update(res.times)
-        row.update({"kind": "anchored", "fim_variant": res.fim_variant, "anchors": [res.anchor_id], "nullity": 0,
-                    "trace_crlb": res.trace_crlb, "mse_bound": res.mse_bound,
-                    "trace_translation": res.trace_translation, "trace_rotation": res.trace_rotation})
+        row.update({"kind": "anchored", "fim_variant": res.fim_variant, "rotation_weight": rotation_model,
+                    "anchors": [res.anchor_id], "nullity": 0})
+        acc = _accuracy(row, res.accuracy, graph.name)
+        for key in ("trace_crlb", "mse_bound", "trace_translation", "trace_rotation"):
+            put(row, key, getattr(res, key), acc)
         if graph.dim == 3:
-            row.update({"trace_crlb_curvature": res.trace_crlb_curvature,
-                        "mse_bound_curvature": res.mse_bound_curvature})
+            st = res.curvature_status if acc.available else acc
+            log_status(log, f"{graph.name}: curvature-corrected CRLB (eq. 68)", res.curvature_status)
+            put(row, "trace_crlb_curvature", res.trace_crlb_curvature, st)
+            put(row, "mse_bound_curvature", res.mse_bound_curvature, st)
+            row["curvature_correction_max"] = res.curvature_correction_max
         row["coordinates"] = res.coordinates
         blocks, curv = res.per_pose, res.per_pose_curvature
+        if not acc.available:
+            blocks = curv = None
     else:
         from ..frames import coordinate_names, sed_crb_in_frame
 
@@ -90,10 +95,15 @@ def crlb_result(file: str, data_dir: str | None, model: str, source: str, anchor
         res = sed_crb_in_frame(graph, est.rot, est.trans, frame, anchors=anchors, quotient=quotient, per_pose=want)
         times.update(res.times)
         row.update({"kind": res.kind, "anchors": [int(graph.ids[a]) for a in res.anchors],
-                    "nullity": res.nullity, "trace_crlb": res.trace_crlb, "mse_bound": res.mse_bound,
-                    "coordinates": coordinate_names(graph.dim, frame)})
+                    "nullity": res.nullity})
+        acc = _accuracy(row, res.accuracy, graph.name)
+        put(row, "trace_crlb", res.trace_crlb, acc)
+        put(row, "mse_bound", res.mse_bound, acc)
+        row["coordinates"] = coordinate_names(graph.dim, frame)
         blocks = None if res.per_pose is None else {int(graph.ids[k]): v for k, v in res.per_pose.items()}
         curv = None
+        if not acc.available:
+            blocks = None
     from ..frames import coordinates_description
 
     row["frame"] = frame
@@ -112,6 +122,16 @@ def crlb_result(file: str, data_dir: str | None, model: str, source: str, anchor
     row["estimate"] = est_info
     row["times"] = times
     return row, per_rows
+
+
+def _accuracy(row: dict, accuracy, name: str) -> Status:
+    """Record the inverse's accuracy estimate in ``row`` (key ``accuracy``), warn on stderr when it
+    is not ok, and return the status that the bound's numbers inherit when it is unavailable."""
+    if accuracy is None:
+        return Status()
+    row["accuracy"] = accuracy.as_json()
+    log_status(log, f"{name}: CRLB", accuracy.status)
+    return accuracy.status if not accuracy.status.available else Status()
 
 
 @click.command("crlb")
@@ -134,9 +154,12 @@ def command(file, model, quotient, anchors, poses, estimate_source, rotation_mod
     """Cramér-Rao lower bound of FILE at an estimate: exact trace, MSE bound, per-pose blocks.
 
     paper: C >= F^{-1} (2D, eq. 67); 3D adds the curvature term of eq. (68)
-    (trace_crlb_curvature). trace_crlb = trace(F^{-1}), mse_bound = trace_crlb / n_p.
-    F is eq. (64) as printed unless --fim-variant consistent (the model's Fisher information;
-    in 3D the two differ, see `posecrb fim --help`).
+    (trace_crlb_curvature; not available, with the reason, where the second-order correction
+    reaches the first-order term). trace_crlb = trace(F^{-1}), mse_bound = trace_crlb / n_p.
+    F is the model's Fisher information (fim_variant=consistent) unless --fim-variant eq64
+    (eq. 64 as printed; in 3D the two differ, see `posecrb fim --help`).
+    accuracy: backward error of sampled solves and the scaled condition number of F, with a
+    warning on stderr when the inverse may carry relative errors above 1e-6.
     sed: the thesis' intrinsic CRB on SE(d)^n, anchored (5.1) or --quotient (5.5).
     Traces and blocks are exact (selected inversion of the sparse Cholesky factor).
     sed --frame world (default): the thesis' coordinates, X_i -> Exp(-delta) X_i about the
@@ -154,9 +177,9 @@ def command(file, model, quotient, anchors, poses, estimate_source, rotation_mod
     summary = {k: (",".join(map(str, v)) if isinstance(v, list) else v)
                for k, v in row.items() if k not in ("per_pose", "per_pose_curvature")}
     if fmt == "table":
-        from ..report import flatten
+        from ..report import key_value_rows
 
-        kv = [{"field": k, "value": v} for k, v in flatten(summary).items()]
+        kv = key_value_rows(summary)
         print_rows(kv, "table", title=f"CRLB ({model}) of {row['dataset']}")
         if per_rows:
             print_rows(per_rows, "table", title="per-pose bound (diagonal)")

@@ -20,6 +20,7 @@ from ..errors import UsageError
 from ..provenance import machine, versions
 from ..report import print_rows, to_csv, to_json
 from ._common import FiniteFloat, anchor_option, data_dir_option, format_option, load_dataset
+from .fim import fim_variant_option
 
 log = logging.getLogger("posecrb")
 
@@ -125,12 +126,11 @@ def command() -> None:
 
 # ---------------------------------------------------------------- crlb
 CRLB_COLUMNS_2D = ["kc", "trials", "mse", "mse_stderr", "mse_bound", "ratio", "mse_trans", "mse_rot",
-                   "uncertified"]
+                   "uncertified", "fim_variant"]
 CRLB_COLUMNS_3D = ["kc", "trials", "mse", "mse_stderr", "mse_bound", "mse_bound_curvature", "ratio",
-                   "mse_bound_model", "mse_bound_model_curvature", "ratio_model", "uncertified"]
+                   "ratio_curvature", "mse_trans", "mse_rot", "uncertified", "fim_variant"]
 CRLB_HEADERS = {"mse_stderr": "± s.e.", "mse_bound": "CRLB/n_p", "mse_bound_curvature": "CRLB+curv/n_p",
-                "mse_bound_model": "CRLB model/n_p", "mse_bound_model_curvature": "model+curv/n_p",
-                "ratio": "MSE/CRLB", "ratio_model": "MSE/CRLB model"}
+                "ratio": "MSE/CRLB", "ratio_curvature": "MSE/(CRLB+curv)", "fim_variant": "FIM variant"}
 
 
 @command.command("crlb", short_help="Monte Carlo MSE vs CRLB over noise levels (paper Fig. 6/7).")
@@ -146,17 +146,18 @@ CRLB_HEADERS = {"mse_stderr": "± s.e.", "mse_bound": "CRLB/n_p", "mse_bound_cur
 @click.option("--tau", type=FiniteFloat(min=1e-12, max=1e12), default=None,
               help="Base translation precision 1/delta^2 for every edge instead of the file's (Fig. 6: 140).")
 @anchor_option
+@fim_variant_option
 @data_dir_option
 @_run_options("default 100; --quick: 20")
-def crlb_cmd(file, kc_spec, scale, kappa, tau, anchor, data_dir, trials, seed, jobs, executor, scheduler,
-             plot_path, out_dir, quick, fmt):
+def crlb_cmd(file, kc_spec, scale, kappa, tau, anchor, fim_variant, data_dir, trials, seed, jobs, executor,
+             scheduler, plot_path, out_dir, quick, fmt):
     """Fig. 6/7: MSE per pose of the certified MLE vs trace(CRLB)/n_p over noise levels k_c.
 
     Ground truth is the certified solution of FILE. Each trial regenerates every measurement by
     eq. (80) at the level k_c, solves it, and measures the error in the FIM's coordinates
-    (anchor aligned; 2D angle, 3D sqrt2*Log). Columns: ratio = MSE / paper CRLB (eq. 67 / 68);
-    in 3D also ratio_model = MSE / CRLB of the frame-consistent Fisher information of the simulated
-    model (`posecrb crlb --fim-variant consistent`).
+    (anchor aligned; 2D angle, 3D sqrt2*Log). Columns: ratio = MSE / CRLB (eq. 67 / 68) of the
+    simulated model's Fisher information (fim_variant=consistent), or of eq. (64) as printed
+    with --fim-variant eq64; ratio_curvature with the curvature term (3D).
     """
     from ..experiments.crlb_sweep import crlb_sweep, parse_levels
 
@@ -169,10 +170,19 @@ def crlb_cmd(file, kc_spec, scale, kappa, tau, anchor, data_dir, trials, seed, j
     t0 = time.perf_counter()
     with _progress(len(kcs) * trials, f"{graph.name}: trials") as cb:
         res = crlb_sweep(graph, kcs, trials, seed, scale=scale, tau=tau, kappa=kappa, anchor=anchor_idx,
-                         progress=cb, **ex)
+                         progress=cb, fim_variant=fim_variant or "consistent", **ex)
     elapsed = time.perf_counter() - t0
     if not res.truth_certified:
         log.warning("the ground truth (solution of %s) is not certified", graph.name)
+    for lv in res.levels:
+        if lv.accuracy and lv.accuracy["status"] != "ok":
+            log.warning("k_c = %g: CRLB %s: %s", lv.kc,
+                        "not available" if lv.accuracy["status"] == "unavailable" else "doubtful",
+                        lv.accuracy["reason"])
+        if lv.curvature_status:
+            log.warning("k_c = %g: curvature-corrected CRLB (eq. 68) %s: %s", lv.kc,
+                        "not available" if lv.curvature_status["status"] == "unavailable" else "doubtful",
+                        lv.curvature_status["reason"])
     bad = sum(lv.uncertified for lv in res.levels)
     if bad:
         log.warning("%d trial solve(s) were not certified (counted in the MSE)", bad)
@@ -191,7 +201,8 @@ def crlb_cmd(file, kc_spec, scale, kappa, tau, anchor, data_dir, trials, seed, j
                   for kc, d in res.trial_data.items() for t in range(len(d["sq_trans"]))]
     settings = {"file": graph.path, "sha256": graph.sha256, "dataset": graph.name, "dim": graph.dim,
                 "poses": graph.n, "edges": graph.m, "anchor": res.anchor_id, "kc": kcs, "trials": trials,
-                "seed": seed, "scale": scale, "kappa": kappa, "tau": tau, "quick": quick, **ex,
+                "seed": seed, "scale": scale, "kappa": kappa, "tau": tau, "quick": quick,
+                "fim_variant": res.fim_variant, **ex,
                 "truth_certified": res.truth_certified, "truth_objective": res.truth_objective}
     _write_out(out_dir, "crlb", settings, rows, res.seeds, elapsed, {"trials": trial_rows})
 

@@ -11,6 +11,7 @@ from ..errors import UsageError
 from ..fim import FIM_VARIANTS
 from ..noise import ROTATION_WEIGHT_MODELS
 from ..report import print_rows
+from ..status import OK, log_status, put
 from ._common import POSE_ID, data_dir_option, estimate_inputs, format_option, load_dataset
 
 log = logging.getLogger("posecrb")
@@ -34,10 +35,10 @@ rotation_weight_option = click.option(
 
 fim_variant_option = click.option(
     "--fim-variant", "fim_variant", type=click.Choice(FIM_VARIANTS), default=None,
-    help="Paper model: eq64 is eq. (64) as printed (reproduces the paper's tables); consistent is the "
-         "Fisher information of the same noise model, with the 3D rotation coupling in the body frame "
-         "like the rest of eq. (64) (the bound the Monte Carlo MSE reaches). Same matrix in 2D.  "
-         "[default: eq64]")
+    help="Paper model, 3D: consistent is the Fisher information of the model the data follow "
+         "(rotation coupling -w R_i^T R_j; the bound the Monte Carlo MSE reaches); eq64 is eq. (64) "
+         "exactly as printed (coupling -w I), labelled fim_variant=eq64 in every output. Same matrix "
+         "in 2D.  [default: consistent]")
 
 
 frame_option = click.option(
@@ -63,7 +64,7 @@ def resolve_fim_variant(model: str, fim_variant: str | None) -> str:
     """The paper FIM variant to use; ``--fim-variant`` with ``--model sed`` is a usage error."""
     if fim_variant is not None and model != "paper":
         raise UsageError("--fim-variant applies to --model paper")
-    return fim_variant or "eq64"
+    return fim_variant or "consistent"
 
 
 def load_with_estimate(file: str, data_dir: str | None, source: str):
@@ -167,9 +168,12 @@ def fim_row(file: str, data_dir: str | None, model: str, source: str, anchor_id:
         names = coordinate_names(graph.dim, frame)
         layout = "poses (rotation first)" if frame == "world" else f"poses (GTSAM order: {', '.join(names)})"
         row.update({"anchors": [int(graph.ids[a]) for a in anchors], "layout": layout,
-                    "size": int(matrix.shape[0]), "nnz": int(matrix.nnz), "logdet": ld,
-                    "trace": float(matrix.diagonal().sum()), "rank": fim.rank, "nullity": fim.nullity,
+                    "size": int(matrix.shape[0]), "nnz": int(matrix.nnz)})
+        put(row, "logdet", ld, fim.logdet_status if anchor_id is None else OK)
+        row.update({"trace": float(matrix.diagonal().sum()), "rank": fim.rank, "nullity": fim.nullity,
                     "expected_nullity": fim.q * fim.components})
+        if anchor_id is None:
+            log_status(log, f"{graph.name}: log det of the SE(d) FIM", fim.logdet_status)
         if save:
             save_npz(save, matrix, np.repeat(graph.ids, fim.q), np.tile(np.arange(fim.q), graph.n),
                      names, "sed", row["anchors"], frame=frame)
@@ -204,25 +208,23 @@ def command(file, model, estimate_source, anchor, rotation_model, fim_variant, f
 
     paper: anchored FIM of eq. (42) (2D) / (64) (3D), rows [translations; rotations]
     (rotation coordinates: angle in 2D, along G_k/sqrt(2) in 3D); logdet = D-optimality,
-    trace = T-optimality (eq. 69/70), t_opt_approx = eq. (72); --fim-variant consistent gives
-    the frame-consistent Fisher information of the model instead of eq. (64) as printed. sed: thesis FIM on SE(d)^n
-    (size n q, pose-major), rank and nullity (nullity = q x components,
-    Th. 4.8.1) and the log-det with one anchor per component; --frame world (default, the
-    thesis' coordinates, rotation first) or body (GTSAM's and g2o's, F_body = M^-T F M^-1,
-    M = blkdiag(-P Ad_{X_i^-1})): trace and the saved matrix change, log-det, rank and
-    nullity do not. JSON: frame, coordinates_description.
+    trace = T-optimality (eq. 69/70), t_opt_approx = eq. (72). In 3D the default is the
+    model's Fisher information (fim_variant=consistent); --fim-variant eq64 gives eq. (64)
+    exactly as printed. sed: thesis FIM on SE(d)^n (size n q, pose-major), rank and nullity
+    (nullity = q x components, Th. 4.8.1) and the log-det with one anchor per component; a
+    numerically singular FIM has logdet null with a logdet_status and a warning. --frame world
+    (default, the thesis' coordinates, rotation first) or body (GTSAM's and g2o's,
+    F_body = M^-T F M^-1, M = blkdiag(-P Ad_{X_i^-1})): trace and the saved matrix change,
+    log-det, rank and nullity do not. JSON: frame, coordinates_description.
     """
     row = fim_row(file, data_dir, model, estimate_source, anchor, rotation_model, save, fim_variant, frame)
     if fmt != "json":
         row = {k: (",".join(map(str, v)) if isinstance(v, list) else v) for k, v in row.items()}
     if fmt == "table":
-        kv = [{"field": k, "value": v} for k, v in _flat(row).items()]
+        from ..report import key_value_rows
+
+        kv = key_value_rows(row)
         print_rows(kv, "table", title=f"FIM ({model}) of {row['dataset']}")
     else:
         print_rows([row], fmt)
 
-
-def _flat(row: dict) -> dict:
-    from ..report import flatten
-
-    return flatten(row)

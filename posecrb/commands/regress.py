@@ -25,8 +25,9 @@ log = logging.getLogger("posecrb")
 @format_option()
 def command(names, update, expected_path, all_rows, data_dir, fmt):
     """Recompute lb, ub, ub_lambda (tolerance 1e-9 relative) and fim_logdet, objective, trace_crlb
-    at the certified optimum (1e-6) and compare them with the expected file. Exits 1 on any
-    drift or changed input checksum. A dataset not found is skipped with a warning unless it
+    at the certified optimum (1e-6; from the model's Fisher information, fim_variant=consistent,
+    recorded in the file) and compare them with the expected file. Exits 1 on any drift, changed
+    FIM variant or changed input checksum. A dataset not found is skipped with a warning unless it
     was named with --datasets."""
     if update:   # the file is rewritten at the end (atomically): check that it can be, first
         from ..io import check_output_file

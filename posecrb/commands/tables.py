@@ -14,7 +14,7 @@ from ..errors import PosecrbError
 from ..noise import ROTATION_WEIGHT_MODELS
 from ..report import to_csv, to_json, to_markdown
 from ..tables import (HEADERS, TITLES, TableSettings, build_rows, dataset_names, dataset_row, failed,
-                      footnote, run_record, table_rows, to_latex)
+                      footnote, published_settings, run_record, table_rows, to_latex)
 from ._common import data_dir_option
 
 log = logging.getLogger("posecrb")
@@ -31,7 +31,7 @@ def _progress(total: int):
                     console=Console(stderr=True), transient=True, disable=not sys.stderr.isatty())
 
 
-def _render(rows, tables, fmt, compare, rotation_model) -> str:
+def _render(rows, tables, fmt, compare, settings: TableSettings) -> str:
     parts = []
     if fmt == "json":
         return to_json({"rows": rows, "tables": {ROMAN[t]: table_rows(rows, t, compare)[0] for t in tables}})
@@ -39,7 +39,7 @@ def _render(rows, tables, fmt, compare, rotation_model) -> str:
         return to_csv(rows)
     for t in tables:
         trs, cols = table_rows(rows, t, compare)
-        note = footnote(t, rotation_model)
+        note = footnote(t, settings.rotation_model, settings.fim_variant)
         if fmt == "markdown":
             parts.append(f"### {TITLES[t]}\n\n" + to_markdown(trs, cols, HEADERS) + (f"\n{note}\n" if note else ""))
         elif fmt == "latex":
@@ -62,16 +62,22 @@ def _render(rows, tables, fmt, compare, rotation_model) -> str:
 @click.option("--out", "out_dir", type=click.Path(file_okay=False), default=None,
               help="Also write every format and run.json (versions, CPU, sha256, settings) to DIR.")
 @click.option("--compare-paper", is_flag=True, help="Add the paper's printed values and relative differences.")
-@click.option("--rotation-weight", "rotation_model", type=click.Choice(ROTATION_WEIGHT_MODELS), default="eq59",
-              show_default=True, help="3D rotation weight: eq. (59), or table2 = 0.5515*kappa^2, an EMPIRICAL "
-                                      "fit reproducing the published Table II (not eq. 59).")
+@click.option("--rotation-weight", "rotation_model", type=click.Choice(ROTATION_WEIGHT_MODELS), default=None,
+              help="3D rotation weight: eq. (59), or table2 = 0.5515*kappa^2, an EMPIRICAL "
+                   "fit reproducing the published Table II (not eq. 59).  [default: eq59]")
+@click.option("--as-published", is_flag=True,
+              help="Reproduce the printed Table II: eq. (64) exactly as printed (fim_variant=eq64) with the "
+                   "empirical rotation weight table2. Without it the 3D rows are the model's quantities "
+                   "(eq. 59, the model's Fisher information). 2D rows are the same either way.")
 @data_dir_option
-def command(all_, tables, names, repeat, jobs, fmt, out_dir, compare_paper, rotation_model, data_dir):
+def command(all_, tables, names, repeat, jobs, fmt, out_dir, compare_paper, rotation_model, as_published, data_dir):
     """Rebuild the paper's Tables I-IV: FIM log-det at the certified optimum, ub and lb with their
     times (I/II) and the construction time of the whole FIM vs the weighted Laplacians (III/IV).
 
     Beyond the paper: ub_lambda, the relative gaps (ub-lb)/lb and (FIM-lb)/lb, the certified
-    objective and the solve time. A dataset that is not found is a row with status `not found`
+    objective and the solve time. The 3D rows are the model's quantities (eq. 59 rotation weight,
+    the model's Fisher information) and differ from the printed Table II by design;
+    --as-published reproduces its FIM and lb columns (eq. 64 as printed, weight 0.5515*kappa^2). A dataset that is not found is a row with status `not found`
     (fetch it with `posecrb datasets fetch NAME`); a failed factorization or an uncertified solve
     is a row with that status and makes the command exit 1 after printing everything.
     """
@@ -83,7 +89,12 @@ def command(all_, tables, names, repeat, jobs, fmt, out_dir, compare_paper, rota
 
         check_output_dir(out_dir, requested or [], OUT_FILES, option="--out")
     tables = sorted(set(tables)) or [1, 2, 3, 4]
-    settings = TableSettings(repeat=repeat, rotation_model=rotation_model, data_dir=data_dir)
+    if as_published:
+        if rotation_model not in (None, "table2"):
+            raise click.UsageError("--as-published uses --rotation-weight table2 (the fit to the printed Table II)")
+        settings = published_settings(repeat=repeat, data_dir=data_dir)
+    else:
+        settings = TableSettings(repeat=repeat, rotation_model=rotation_model or "eq59", data_dir=data_dir)
     todo = dataset_names(requested, data_dir)
 
     with _progress(len(todo)) as progress:
@@ -116,9 +127,10 @@ def command(all_, tables, names, repeat, jobs, fmt, out_dir, compare_paper, rota
         console = Console(width=None if sys.stdout.isatty() else 250)
         for t in tables:
             trs, cols = table_rows(rows, t, compare_paper)
-            console.print(to_rich_table(trs, cols, TITLES[t], HEADERS, caption=footnote(t, rotation_model)))
+            console.print(to_rich_table(trs, cols, TITLES[t], HEADERS,
+                                        caption=footnote(t, settings.rotation_model, settings.fim_variant)))
     else:
-        click.echo(_render(rows, tables, fmt, compare_paper, rotation_model), nl=False)
+        click.echo(_render(rows, tables, fmt, compare_paper, settings), nl=False)
 
     if out_dir:
         from ..io.files import write_text

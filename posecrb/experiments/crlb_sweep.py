@@ -20,10 +20,10 @@ precisions), and measures the error in the FIM's own tangent coordinates:
 
 MSE per pose = mean over trials of the squared error summed over poses, divided
 by n_p; it is compared to ``trace(CRLB) / n_p`` with the FIM of the *scaled* noise
-model evaluated at the truth (3D: with and without the curvature term of eq. 68),
-both the paper's FIM as printed (eq. 42 / 64, ``ratio``) and the frame-consistent Fisher
-information of the simulated model (``ratio_model``: ``posecrb.fim.paper_fim`` with
-``variant="consistent"``; the module docstring of ``posecrb.fim`` says why they differ in 3D).
+model evaluated at the truth (3D: with and without the curvature term of eq. 68).
+The FIM is the Fisher information of the simulated model by default (``fim_variant=
+"consistent"``); ``fim_variant="eq64"`` compares with eq. (64) as printed instead (the module
+docstring of ``posecrb.fim`` says why they differ in 3D). Every row names its variant.
 """
 from __future__ import annotations
 
@@ -122,19 +122,22 @@ class CrlbLevel:
     mse_stderr: float
     mse_trans: float
     mse_rot: float
-    mse_bound: float                    # paper CRLB: trace(F^{-1}) / n_p, F of eq. (42) / (64)
+    mse_bound: float                    # trace(F^{-1}) / n_p of the chosen FIM variant
     mse_bound_trans: float
     mse_bound_rot: float
-    mse_bound_curvature: float | None   # 3D: eq. (68) trace / n_p
+    mse_bound_curvature: float | None   # 3D: eq. (68) trace / n_p; None where eq. (68) does not hold
     ratio: float                        # mse / mse_bound
     ratio_curvature: float | None
-    mse_bound_model: float              # variant="consistent" FIM of the simulated model (= paper in 2D)
-    mse_bound_model_curvature: float | None
-    ratio_model: float
     uncertified: int                    # trials whose solve was not certified (still counted)
+    fim_variant: str = "consistent"
+    curvature_status: dict | None = None  # posecrb.status JSON when eq. (68) is not ok at this level
+    accuracy: dict | None = None          # posecrb.crlb.InverseAccuracy of the bound (JSON form)
 
     def row(self) -> dict:
-        return dict(vars(self))
+        r = dict(vars(self))
+        if r["curvature_status"] is None:
+            r.pop("curvature_status")
+        return r
 
 
 @dataclass
@@ -155,14 +158,14 @@ class CrlbSweepResult:
     trial_data: dict[float, dict[str, np.ndarray]] = field(default_factory=dict, repr=False)
     seeds: list[dict] = field(default_factory=list)
     elapsed: float = 0.0
+    fim_variant: str = "consistent"
 
     def rows(self) -> list[dict]:
         rows = []
         for lv in self.levels:
             r = lv.row()
-            if self.dim == 2:     # flat space, and the consistent FIM is the paper's
-                for k in ("mse_bound_curvature", "ratio_curvature", "mse_bound_model",
-                          "mse_bound_model_curvature", "ratio_model"):
+            if self.dim == 2:     # flat space: no curvature term
+                for k in ("mse_bound_curvature", "ratio_curvature"):
                     r.pop(k)
             rows.append(r)
         return rows
@@ -183,27 +186,23 @@ def _crlb_trial(context: dict, task: Task) -> dict:
             "certified": bool(res.certified), "objective": float(res.objective)}
 
 
-def _bounds(graph: PoseGraph, rot, trans, anchor: int, kc: float, scale: str, tau, kappa) -> dict:
-    """Bounds per pose of the scaled noise model at the truth.
-
-    ``mse_bound*``: the paper's CRLB (``posecrb.crlb.paper_crlb``: eq. 67, 3D eq. 68 from
-    eq. 64 as printed, ``variant="eq64"``); ``mse_bound_model*``: the same from the
-    frame-consistent Fisher information of the simulated model (``variant="consistent"``),
-    which differs from the paper's in 3D only.
-    """
+def _bounds(graph: PoseGraph, rot, trans, anchor: int, kc: float, scale: str, tau, kappa,
+            variant: str = "consistent") -> dict:
+    """Bounds per pose of the scaled noise model at the truth (``posecrb.crlb.paper_crlb``:
+    eq. 67, 3D eq. 68) from the FIM ``variant``: the simulated model's Fisher information
+    (``"consistent"``) or eq. (64) as printed (``"eq64"``); the same matrix in 2D."""
     from ..crlb import paper_crlb
     from ..noise import noise_model_graph
 
     model = noise_model_graph(graph, kc, scale, tau, kappa)
     n_p = graph.n - 1
-    out = {}
-    for prefix, variant in (("mse_bound", "eq64"), ("mse_bound_model", "consistent")):
-        res = paper_crlb(model, rot, trans, anchor=anchor, variant=variant)
-        out[prefix] = float(res.trace_crlb) / n_p
-        out[prefix + "_trans"] = float(res.trace_translation) / n_p
-        out[prefix + "_rot"] = float(res.trace_rotation) / n_p
-        curv = res.trace_crlb_curvature if graph.dim == 3 else None
-        out[prefix + "_curvature"] = None if curv is None else float(curv) / n_p
+    res = paper_crlb(model, rot, trans, anchor=anchor, variant=variant)
+    out = {"mse_bound": float(res.trace_crlb) / n_p, "mse_bound_trans": float(res.trace_translation) / n_p,
+           "mse_bound_rot": float(res.trace_rotation) / n_p}
+    curv = res.trace_crlb_curvature if graph.dim == 3 else None
+    out["mse_bound_curvature"] = None if curv is None else float(curv) / n_p
+    out["curvature_status"] = None if res.curvature_status.ok else res.curvature_status.as_json()
+    out["accuracy"] = None if res.accuracy is None else res.accuracy.as_json()
     return out
 
 
@@ -212,20 +211,24 @@ def crlb_sweep(graph: PoseGraph, kcs: Sequence[float], trials: int = 100, seed: 
                anchor: int | None = None, truth: tuple[np.ndarray, np.ndarray] | None = None,
                solver_options: dict | None = None, executor: str = "serial", jobs: int = 1,
                scheduler: str | None = None, client=None,
-               progress: Callable[[int], None] | None = None) -> CrlbSweepResult:
+               progress: Callable[[int], None] | None = None, fim_variant: str = "consistent") -> CrlbSweepResult:
     """Fig. 6/7: MSE of the certified MLE vs trace(CRLB)/n_p for each k_c in ``kcs``.
 
     ``anchor`` is an internal index (default 0, the smallest id). ``truth`` defaults
     to the certified solution of ``graph`` itself. Trials of level k_c are seeded by
     ``SeedSequence(seed, spawn_key=(level_key(k_c),)).spawn(trials)``, so a level's
     numbers do not depend on the other levels requested nor on the executor.
+    ``fim_variant``: the FIM the bound inverts (``posecrb.fim.FIM_VARIANTS``).
     """
+    from ..fim import FIM_VARIANTS
     from ..noise import NOISE_SCALES
     from ..sesync import solve
 
     t0 = time.perf_counter()
     if scale not in NOISE_SCALES:
         raise UsageError(f"--scale must be one of {', '.join(NOISE_SCALES)}")
+    if fim_variant not in FIM_VARIANTS:
+        raise UsageError(f"--fim-variant must be one of {', '.join(FIM_VARIANTS)}")
     if trials < 2:
         raise UsageError("--trials must be >= 2 (the MSE needs a standard error)")
     graph.require_connected()
@@ -253,18 +256,17 @@ def crlb_sweep(graph: PoseGraph, kcs: Sequence[float], trials: int = 100, seed: 
         data[kc] = {"sq_trans": sq_t, "sq_rot": sq_r, "certified": cert,
                     "objective": np.array([r["objective"] for r in rs])}
         mse, se = mean_and_stderr((sq_t + sq_r) / n_p)
-        b = _bounds(graph, rot, trans, anchor, kc, scale, tau, kappa)
+        b = _bounds(graph, rot, trans, anchor, kc, scale, tau, kappa, fim_variant)
         curv = b["mse_bound_curvature"]
         levels.append(CrlbLevel(
             kc=kc, trials=len(rs), mse=mse, mse_stderr=se, mse_trans=float(sq_t.mean() / n_p),
             mse_rot=float(sq_r.mean() / n_p), mse_bound=b["mse_bound"], mse_bound_trans=b["mse_bound_trans"],
             mse_bound_rot=b["mse_bound_rot"], mse_bound_curvature=curv, ratio=mse / b["mse_bound"],
-            ratio_curvature=None if curv is None else mse / curv, mse_bound_model=b["mse_bound_model"],
-            mse_bound_model_curvature=b["mse_bound_model_curvature"], ratio_model=mse / b["mse_bound_model"],
-            uncertified=int((~cert).sum())))
+            ratio_curvature=None if curv is None else mse / curv, uncertified=int((~cert).sum()),
+            fim_variant=fim_variant, curvature_status=b["curvature_status"], accuracy=b["accuracy"]))
     return CrlbSweepResult(
         dataset=graph.name, dim=graph.dim, n=graph.n, m=graph.m, anchor_id=int(graph.ids[anchor]),
         scale=scale, tau=tau, kappa=kappa, trials=trials, seed=seed, truth_certified=truth_certified,
         truth_objective=truth_objective, levels=levels, trial_data=data,
         seeds=[{"kc": k, "entropy": int(seed), "spawn_key": [level_key(k)], "children": trials} for k in kcs],
-        elapsed=time.perf_counter() - t0)
+        elapsed=time.perf_counter() - t0, fim_variant=fim_variant)
