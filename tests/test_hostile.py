@@ -102,6 +102,11 @@ def leftovers(odir: Path, allowed: set[str]) -> list[str]:
     return sorted(found)
 
 
+# Accepted inputs whose result for one command is numerically unavailable (the same for the
+# clean twin): information spanning 1e12..1e-3 on every edge makes the SE(d) FIM singular to
+# working precision (relative eigenvalue 1e-15), so its inverse is refused.
+NUMERICALLY_UNAVAILABLE = {("information_diag_1e12_1e-3", "crlb-sed"): "numerically singular"}
+
 _clean_cache: dict[tuple[str, str], dict[str, float]] = {}
 
 
@@ -128,6 +133,13 @@ def test_accepted_hostile_input_gives_the_numbers_of_the_clean_graph(tmp_path, t
     odir.mkdir()
     build, allowed = COMMANDS[command]
     rc, out, err = run_cli(build(str(f), odir), capsys)
+    if (name, command) in NUMERICALLY_UNAVAILABLE:
+        # The reader accepts the file; the quantity itself is beyond double precision, which is an
+        # error with the reason and the offending edge's line, never a number.
+        assert rc == 1, out
+        assert NUMERICALLY_UNAVAILABLE[name, command] in err and "line " in err, err
+        assert "Traceback" not in err
+        return
     assert rc == 0, err
     got = _numbers(command, out, odir)
     want = _clean_numbers(case, command, tmp_path_factory, capsys)
