@@ -7,12 +7,16 @@ For every dataset (the SE-Sync g2o files, or the NAMEs given) and noisy 3D grids
   FIM  the anchored paper FIM (posecrb.fim.paper_fim, pose-major layout) at the file's vertices
        (an odometry estimate for edge-only files: the pattern, hence the ordering's cost, does not
        depend on the estimate): one analysis, one factorization, the log-det;
+  Mred the solver's sparse matrix M_red(s) = [[L_red, V_red], [V_red^T, C + s I]] (posecrb.sesync.problem:
+       its factor is the trust-region preconditioner, refactored with -Lambda at every accepted
+       iterate, and the certificate test), at the base shift s = gershgorin / 1e6: one analysis, one
+       factorization (a solve runs one analysis and about 8-10 factorizations of this pattern);
 with each CHOLMOD ordering scikit-sparse's ``analyze(ordering_method=...)`` accepts here:
   natural, amd, colamd, metis, nesdis, default (CHOLMOD's choice: AMD, METIS when AMD's fill is
   poor), best (CHOLMOD tries several and keeps the least fill);
-and for the FIM also pose-level orderings expanded to the q x q blocks (amd/poses, metis/poses,
-nesdis/poses: the pose graph's reduced Laplacian is ordered, which is the pattern the lb step
-already analyses, and the FIM is permuted with it and factored with the natural ordering).
+and for the FIM and Mred also pose-level orderings expanded to each pose's rows (amd/poses,
+metis/poses, nesdis/poses: the pose graph's reduced Laplacian is ordered, which is the pattern the
+lb step already analyses, and the matrix is permuted with it and factored with the natural ordering).
 Note: CHOLMOD applies COLAMD only to unsymmetric input; for a symmetric matrix its "colamd"
 ordering is AMD (the nnz(L) columns show it).
 
@@ -20,7 +24,8 @@ Per (matrix, ordering): analysis time, factorization time, their total (median o
 a warm-up; a single run when the first takes longer than --slow seconds), nnz(L) and the fill
 ratio nnz(L) / nnz(tril(A)). Then, per matrix, the fastest ordering, and the summed time of each
 fixed choice over all matrices against the per-matrix best (the data for `--ordering auto`).
-The natural ordering is skipped above --natural-max rows (its fill is quadratic in the bandwidth).
+The natural ordering is skipped above --natural-max rows (its fill is quadratic in the bandwidth)
+and for Mred (translations first, then rotations: its natural order fills almost completely).
 
 Usage: python benchmarks/orderings.py [--repeat K] [--huge] [--grids3 N,N] [--grids2 N,N]
                                       [--no-real] [--data-dir DIR] [--slow S] [NAME ...]
@@ -33,6 +38,7 @@ import statistics
 import sys
 import time
 from dataclasses import dataclass
+from types import SimpleNamespace
 
 import numpy as np
 from _common import data_dir, print_header, suite_files
@@ -95,18 +101,31 @@ def _expanded(perm: np.ndarray, q: int) -> np.ndarray:
     return (perm[:, None] * q + np.arange(q)[None, :]).ravel()
 
 
-def time_fim(fim, pose_pattern, ordering: str, repeat: int, slow: float) -> Timing:
-    """One analysis + factorization of the FIM (pose-major layout) with ``ordering``."""
+def _mred_expanded(p: np.ndarray, n: int, d: int) -> np.ndarray:
+    """M_red's rows pose by pose in the order of the reduced poses ``p`` (pose k + 1 for entry k),
+    the anchor (pose 0: rotation rows only) last. Row layout: n - 1 translation rows (poses
+    1..n-1), then d rotation rows per pose 0..n-1."""
+    poses = np.concatenate([p + 1, [0]])
+    rows = np.full((n, 1 + d), -1, dtype=np.int64)
+    rows[:, 0] = np.where(poses > 0, poses - 1, -1)
+    rows[:, 1:] = (n - 1) + poses[:, None] * d + np.arange(d)[None, :]
+    flat = rows.ravel()
+    return flat[flat >= 0]
+
+
+def time_fim(fim, pose_pattern, ordering: str, repeat: int, slow: float, expand=None) -> Timing:
+    """One analysis + factorization of the FIM (pose-major layout), or of the matrix ``fim`` with
+    the pose-order expansion ``expand``, with ``ordering``."""
     from sksparse.cholmod import analyze
 
     a = fim.matrix
-    q = fim.q
+    q = getattr(fim, "q", None)
 
     def run():
         t0 = time.perf_counter()
         if ordering.endswith("/poses"):
             p = analyze(pose_pattern, ordering_method=ordering.split("/")[0]).P()
-            perm = _expanded(p, q)
+            perm = _expanded(p, q) if expand is None else expand(p)
             ap = a[perm][:, perm].tocsc()
             sym = analyze(ap, ordering_method="natural")
         else:
@@ -144,6 +163,7 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--slow", type=float, default=2.0, help="seconds; slower configurations run once")
     ap.add_argument("--natural-max", type=int, default=20000, help="skip natural above this many rows")
     ap.add_argument("--orderings", default=",".join(CHOLMOD_ORDERINGS + POSE_ORDERINGS))
+    ap.add_argument("--matrices", default="lb,FIM,Mred")
     args = ap.parse_args(argv)
     logging.getLogger("posecrb").setLevel(logging.ERROR)
 
@@ -152,6 +172,7 @@ def main(argv: list[str] | None = None) -> int:
     from posecrb import load
     from posecrb.bounds import weighted_laplacians
     from posecrb.fim import paper_fim
+    from posecrb.sesync.problem import Problem
 
     orderings = [o for o in args.orderings.split(",") if o]
     items = [] if args.no_real else [(p.stem, p) for p in suite_files(data_dir(args.data_dir), args.names)]
@@ -180,18 +201,31 @@ def main(argv: list[str] | None = None) -> int:
                 print(f"{name:24s} disconnected, skipped")
                 continue
             lap = weighted_laplacians(g)
-            rot, trans = estimate_for(g)
-            fim = paper_fim(g, rot, trans).to_layout("poses")
-            for matrix, a in (("lb", lap.l_tau), ("FIM", fim.matrix)):
+            mats = []
+            if "lb" in args.matrices:
+                mats.append(("lb", lap.l_tau, None))
+            if "FIM" in args.matrices:
+                rot, trans = estimate_for(g)
+                fim = paper_fim(g, rot, trans).to_layout("poses")
+                mats.append(("FIM", fim.matrix, fim))
+            if "Mred" in args.matrices:
+                prob = Problem.from_graph(g)
+                mred = SimpleNamespace(matrix=prob.full_matrix(None, prob.gershgorin_max() / 1e6))
+                mats.append(("Mred", mred.matrix, mred))
+                del prob
+            for matrix, a, obj in mats:
                 nnz_tril = int((a.nnz + a.shape[0]) // 2)
                 rows: dict[str, Timing] = {}
                 for o in orderings:
                     if o.endswith("/poses") and matrix == "lb":
                         continue
-                    if o == "natural" and a.shape[0] > args.natural_max:
-                        continue
-                    rows[o] = (time_lb(lap, o, args.repeat, args.slow) if matrix == "lb"
-                               else time_fim(fim, lap.l_tau, o, args.repeat, args.slow))
+                    if o == "natural" and (a.shape[0] > args.natural_max or matrix == "Mred"):
+                        continue  # Mred's rows are not pose-major: its natural order is a full band
+                    if matrix == "lb":
+                        rows[o] = time_lb(lap, o, args.repeat, args.slow)
+                    else:
+                        expand = (lambda p, n=g.n, d=g.dim: _mred_expanded(p, n, d)) if matrix == "Mred" else None
+                        rows[o] = time_fim(obj, lap.l_tau, o, args.repeat, args.slow, expand)
                 ref = rows.get("amd")
                 lds = [t.logdet for t in rows.values()]
                 spread = (max(lds) - min(lds)) / max(1.0, abs(statistics.median(lds)))
@@ -213,7 +247,7 @@ def main(argv: list[str] | None = None) -> int:
     print()
     print("summed time of each fixed choice over the matrices where it ran, against the per-matrix best "
           "(the oracle) over the same matrices:")
-    for matrix in ("lb", "FIM"):
+    for matrix in ("lb", "FIM", "Mred"):
         sel = [r for r in table if r["matrix"] == matrix]
         for o in orderings:
             have = [r for r in sel if o in r["times"]]
