@@ -14,7 +14,8 @@ exponent of time (and memory) against poses. `--repeat 1` is passed to bounds so
 once (its own default repeats for its timing columns).
 
 A run is skipped when the fit over the smaller grids (exponent 1.5 from a single point) predicts
-more than --budget seconds or --max-mem GB; a run exceeding 2x the budget or the memory cap is killed.
+more than --budget seconds or --max-mem GB (--no-predict: never); a run exceeding 2x the budget or
+the memory cap is killed.
 
 Goals: 2D 10^5 solve <= 15 s and <= 1.5 GB; 3D 2.2*10^4 solve <= 20 s and FIM log-det <= 3 s;
 bounds --estimate none exponent <= 1.2 up to 10^6 2D poses within 24 GB.
@@ -115,6 +116,8 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--commands", default=",".join(COMMANDS))
     ap.add_argument("--budget", type=float, default=300.0, help="seconds; skip runs predicted to take longer")
     ap.add_argument("--max-mem", type=float, default=8.0, help="GB; skip runs predicted to need more, kill above")
+    ap.add_argument("--no-predict", action="store_true",
+                    help="run every size (still killed above 2x the budget or the memory cap)")
     ap.add_argument("--repeat", type=int, default=1)
     ap.add_argument("--threads", type=int, default=1)
     ap.add_argument("--posecrb", default=None)
@@ -157,7 +160,7 @@ def main(argv: list[str] | None = None) -> int:
                 hist = results.get((d, c), [])
                 t_pred = predict([(h[0], h[1]) for h in hist], n)
                 m_pred = predict([(h[0], h[2]) for h in hist], n)
-                if t_pred > args.budget or m_pred > max_rss:
+                if not args.no_predict and (t_pred > args.budget or m_pred > max_rss):
                     skipped.append((c, t_pred, m_pred))
                     continue
                 if c == "sesync":
