@@ -1,0 +1,276 @@
+"""Fill-reducing orderings for the lb and FIM log-det factorizations (in-process, CHOLMOD).
+
+For every dataset (the SE-Sync g2o files, or the NAMEs given) and noisy 3D grids (2*10^3 and
+2*10^4 poses, 10^5 with --huge; --grids2 adds 2D grids), factors
+  lb   the reduced Laplacians L_tau and L_w (posecrb.bounds.weighted_laplacians): one symbolic
+       analysis and two numeric factorizations with log-dets, as compute_bounds' lb does;
+  FIM  the anchored paper FIM (posecrb.fim.paper_fim, pose-major layout) at the file's vertices
+       (an odometry estimate for edge-only files: the pattern, hence the ordering's cost, does not
+       depend on the estimate): one analysis, one factorization, the log-det;
+  Mred the solver's sparse matrix M_red(s) = [[L_red, V_red], [V_red^T, C + s I]] (posecrb.sesync.problem:
+       its factor is the trust-region preconditioner, refactored with -Lambda at every accepted
+       iterate, and the certificate test), at the base shift s = gershgorin / 1e6: one analysis, one
+       factorization (a solve runs one analysis and about 8-10 factorizations of this pattern);
+with each CHOLMOD ordering scikit-sparse's ``analyze(ordering_method=...)`` accepts here:
+  natural, amd, colamd, metis, nesdis, default (CHOLMOD's choice: AMD, METIS when AMD's fill is
+  poor), best (CHOLMOD tries several and keeps the least fill);
+and for the FIM and Mred also pose-level orderings expanded to each pose's rows (amd/poses,
+metis/poses, nesdis/poses: the pose graph's reduced Laplacian is ordered, which is the pattern the
+lb step already analyses, and the matrix is permuted with it and factored with the natural ordering).
+Note: CHOLMOD applies COLAMD only to unsymmetric input; for a symmetric matrix its "colamd"
+ordering is AMD (the nnz(L) columns show it).
+
+Per (matrix, ordering): analysis time, factorization time, their total (median of --repeat after
+a warm-up; a single run when the first takes longer than --slow seconds), nnz(L) and the fill
+ratio nnz(L) / nnz(tril(A)). Then, per matrix, the fastest ordering, and the summed time of each
+fixed choice over all matrices against the per-matrix best (the data for `--ordering auto`).
+The natural ordering is skipped above --natural-max rows (its fill is quadratic in the bandwidth)
+and for Mred (translations first, then rotations: its natural order fills almost completely).
+
+Usage: python benchmarks/orderings.py [--repeat K] [--huge] [--grids3 N,N] [--grids2 N,N]
+                                      [--no-real] [--data-dir DIR] [--slow S] [NAME ...]
+"""
+from __future__ import annotations
+
+import argparse
+import logging
+import statistics
+import sys
+import time
+from dataclasses import dataclass
+from types import SimpleNamespace
+
+import numpy as np
+from _common import data_dir, print_header, suite_files
+from grids import grid_file
+
+CHOLMOD_ORDERINGS = ["natural", "amd", "colamd", "metis", "nesdis", "default", "best"]
+POSE_ORDERINGS = ["amd/poses", "metis/poses", "nesdis/poses"]
+
+
+@dataclass
+class Timing:
+    analyze: float
+    factor: float
+    nnz_l: int
+    flops: float
+    logdet: float
+
+    @property
+    def total(self) -> float:
+        return self.analyze + self.factor
+
+
+def _fill(f) -> tuple[int, float]:
+    """nnz(L) and the factorization's flop count sum_j c_j^2 (c_j = nnz of column j of L): the
+    machine-independent cost of an ordering, steady where the timings of a shared machine are not."""
+    L = f.L()
+    c = np.diff(L.indptr).astype(float)
+    return int(L.nnz), float(np.dot(c, c))
+
+
+def _measure(run, repeat: int, slow: float) -> list[tuple[float, float, object]]:
+    first = run()
+    if first[0] + first[1] > slow or repeat <= 1:
+        return [first]
+    return [run() for _ in range(repeat)]
+
+
+def time_lb(lap, ordering: str, repeat: int, slow: float) -> Timing:
+    """One analysis of L_tau's pattern, factorizations of L_tau and L_w (Algorithm 1)."""
+    from sksparse.cholmod import analyze
+
+    def run():
+        t0 = time.perf_counter()
+        sym = analyze(lap.l_tau, ordering_method=ordering)
+        t1 = time.perf_counter()
+        f_tau = sym.cholesky(lap.l_tau)
+        ld = f_tau.logdet()
+        f_w = sym.cholesky(lap.l_w)
+        ld += f_w.logdet()
+        t2 = time.perf_counter()
+        return t1 - t0, t2 - t1, (f_w, ld)
+
+    runs = _measure(run, repeat, slow)
+    f_w, ld = runs[-1][2]
+    return Timing(statistics.median(r[0] for r in runs), statistics.median(r[1] for r in runs),
+                  *_fill(f_w), float(ld))
+
+
+def _expanded(perm: np.ndarray, q: int) -> np.ndarray:
+    return (perm[:, None] * q + np.arange(q)[None, :]).ravel()
+
+
+def _mred_expanded(p: np.ndarray, n: int, d: int) -> np.ndarray:
+    """M_red's rows pose by pose in the order of the reduced poses ``p`` (pose k + 1 for entry k),
+    the anchor (pose 0: rotation rows only) last. Row layout: n - 1 translation rows (poses
+    1..n-1), then d rotation rows per pose 0..n-1."""
+    poses = np.concatenate([p + 1, [0]])
+    rows = np.full((n, 1 + d), -1, dtype=np.int64)
+    rows[:, 0] = np.where(poses > 0, poses - 1, -1)
+    rows[:, 1:] = (n - 1) + poses[:, None] * d + np.arange(d)[None, :]
+    flat = rows.ravel()
+    return flat[flat >= 0]
+
+
+def time_fim(fim, pose_pattern, ordering: str, repeat: int, slow: float, expand=None) -> Timing:
+    """One analysis + factorization of the FIM (pose-major layout), or of the matrix ``fim`` with
+    the pose-order expansion ``expand``, with ``ordering``."""
+    from sksparse.cholmod import analyze
+
+    a = fim.matrix
+    q = getattr(fim, "q", None)
+
+    def run():
+        t0 = time.perf_counter()
+        if ordering.endswith("/poses"):
+            p = analyze(pose_pattern, ordering_method=ordering.split("/")[0]).P()
+            perm = _expanded(p, q) if expand is None else expand(p)
+            ap = a[perm][:, perm].tocsc()
+            sym = analyze(ap, ordering_method="natural")
+        else:
+            ap = a
+            sym = analyze(a, ordering_method=ordering)
+        t1 = time.perf_counter()
+        f = sym.cholesky(ap)
+        ld = f.logdet()
+        t2 = time.perf_counter()
+        return t1 - t0, t2 - t1, (f, ld)
+
+    runs = _measure(run, repeat, slow)
+    f, ld = runs[-1][2]
+    return Timing(statistics.median(r[0] for r in runs), statistics.median(r[1] for r in runs),
+                  *_fill(f), float(ld))
+
+
+def estimate_for(graph):
+    if graph.has_vertices:
+        return graph.vertex_rot, graph.vertex_trans
+    from fim import odometry_estimate  # benchmarks/fim.py
+
+    return odometry_estimate(graph)
+
+
+def main(argv: list[str] | None = None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("names", nargs="*")
+    ap.add_argument("--data-dir", default=None)
+    ap.add_argument("--no-real", action="store_true", help="grids only")
+    ap.add_argument("--grids3", default="2000,20000", help="3D grid pose counts ('' for none)")
+    ap.add_argument("--grids2", default="", help="2D grid pose counts, e.g. 10000,100000")
+    ap.add_argument("--huge", action="store_true", help="add a 10^5-pose 3D grid")
+    ap.add_argument("--repeat", type=int, default=3)
+    ap.add_argument("--slow", type=float, default=2.0, help="seconds; slower configurations run once")
+    ap.add_argument("--natural-max", type=int, default=20000, help="skip natural above this many rows")
+    ap.add_argument("--orderings", default=",".join(CHOLMOD_ORDERINGS + POSE_ORDERINGS))
+    ap.add_argument("--matrices", default="lb,FIM,Mred")
+    args = ap.parse_args(argv)
+    logging.getLogger("posecrb").setLevel(logging.ERROR)
+
+    from threadpoolctl import threadpool_limits
+
+    from posecrb import load
+    from posecrb.bounds import weighted_laplacians
+    from posecrb.fim import paper_fim
+    from posecrb.sesync.problem import Problem
+
+    orderings = [o for o in args.orderings.split(",") if o]
+    items = [] if args.no_real else [(p.stem, p) for p in suite_files(data_dir(args.data_dir), args.names)]
+    g3 = [int(x) for x in args.grids3.split(",") if x] + ([100_000] if args.huge else [])
+    g2 = [int(x) for x in args.grids2.split(",") if x]
+    items += [(f"grid3D-{n}", None, 3, n) for n in g3] + [(f"grid2D-{n}", None, 2, n) for n in g2]
+    print_header("fill-reducing orderings: lb and FIM log-det factorizations (in-process, CHOLMOD)", None, [
+        (f"median of {args.repeat} after a warm-up (one run above {args.slow:g} s); BLAS single-threaded; "
+         "times in seconds; fill = nnz(L) / nnz(tril(A))")])
+    print(f"{'dataset':24s} {'dim':>3s} {'poses':>6s} {'matrix':6s} {'rows':>7s} {'nnz(trilA)':>10s} "
+          f"{'ordering':13s} {'analyze':>8s} {'factor':>8s} {'total':>8s} {'nnz(L)':>10s} {'fill':>6s} {'Mflop':>9s} "
+          f"{'vs amd':>6s}")
+    table: list[dict] = []
+    with threadpool_limits(1):
+        for item in items:
+            if item[1] is None:
+                name, _, dim, n = item
+                path = grid_file(dim, n)
+            else:
+                name, path = item
+                if not path.is_file():
+                    print(f"{name:24s} missing: {path}")
+                    continue
+            g = load(path)
+            if g.n_components != 1:
+                print(f"{name:24s} disconnected, skipped")
+                continue
+            lap = weighted_laplacians(g)
+            mats = []
+            if "lb" in args.matrices:
+                mats.append(("lb", lap.l_tau, None))
+            if "FIM" in args.matrices:
+                rot, trans = estimate_for(g)
+                fim = paper_fim(g, rot, trans).to_layout("poses")
+                mats.append(("FIM", fim.matrix, fim))
+            if "Mred" in args.matrices:
+                prob = Problem.from_graph(g)
+                mred = SimpleNamespace(matrix=prob.full_matrix(None, prob.gershgorin_max() / 1e6))
+                mats.append(("Mred", mred.matrix, mred))
+                del prob
+            for matrix, a, obj in mats:
+                nnz_tril = int((a.nnz + a.shape[0]) // 2)
+                rows: dict[str, Timing] = {}
+                for o in orderings:
+                    if o.endswith("/poses") and matrix == "lb":
+                        continue
+                    if o == "natural" and (a.shape[0] > args.natural_max or matrix == "Mred"):
+                        continue  # Mred's rows are not pose-major: its natural order is a full band
+                    if matrix == "lb":
+                        rows[o] = time_lb(lap, o, args.repeat, args.slow)
+                    else:
+                        expand = (lambda p, n=g.n, d=g.dim: _mred_expanded(p, n, d)) if matrix == "Mred" else None
+                        rows[o] = time_fim(obj, lap.l_tau, o, args.repeat, args.slow, expand)
+                ref = rows.get("amd")
+                lds = [t.logdet for t in rows.values()]
+                spread = (max(lds) - min(lds)) / max(1.0, abs(statistics.median(lds)))
+                for o, t in rows.items():
+                    print(f"{name:24s} {g.dim:3d} {g.n:6d} {matrix:6s} {a.shape[0]:7d} {nnz_tril:10d} {o:13s} "
+                          f"{t.analyze:8.4f} {t.factor:8.4f} {t.total:8.4f} {t.nnz_l:10d} "
+                          f"{t.nnz_l / nnz_tril:6.2f} {t.flops / 1e6:9.1f} "
+                          f"{t.total / ref.total if ref else float('nan'):6.2f}",
+                          flush=True)
+                best = min(rows, key=lambda o: rows[o].total)
+                least = min(rows, key=lambda o: rows[o].flops)
+                print(f"{'':24s} -> fastest: {best}; fewest flops: {least}; log-dets agree to {spread:.1e} "
+                      "relative", flush=True)
+                table.append({"name": name, "dim": g.dim, "n": g.n, "matrix": matrix, "rows": a.shape[0],
+                              "times": {o: t.total for o, t in rows.items()},
+                              "flops": {o: t.flops for o, t in rows.items()}, "best": best})
+    if not table:
+        return 0
+    print()
+    print("summed time of each fixed choice over the matrices where it ran, against the per-matrix best "
+          "(the oracle) over the same matrices:")
+    for matrix in ("lb", "FIM", "Mred"):
+        sel = [r for r in table if r["matrix"] == matrix]
+        for o in orderings:
+            have = [r for r in sel if o in r["times"]]
+            if not have:
+                continue
+            tot = sum(r["times"][o] for r in have)
+            oracle = sum(r["times"][r["best"]] for r in have)
+            wins = sum(r["best"] == o for r in have)
+            print(f"  {matrix:4s} {o:13s} {tot:9.3f} s over {len(have):2d} matrices (oracle {oracle:9.3f} s, "
+                  f"x{tot / oracle:5.2f}); fastest on {wins}")
+    print()
+    keys = [o for o in orderings if o not in ("natural", "colamd", "best")]
+    for what in ("times", "flops"):
+        print(f"per matrix, {'time' if what == 'times' else 'flop count'} relative to amd (by matrix size; "
+              "the crossing point is the rule for auto):")
+        print(f"  {'dataset':24s} {'dim':>3s} {'matrix':6s} {'rows':>7s} " + " ".join(f"{o:>12s}" for o in keys))
+        for r in sorted(table, key=lambda r: (r["matrix"], r["dim"], r["rows"])):
+            amd = r[what].get("amd")
+            cells = [f"{r[what][o] / amd:12.2f}" if o in r[what] and amd else f"{'-':>12s}" for o in keys]
+            print(f"  {r['name']:24s} {r['dim']:3d} {r['matrix']:6s} {r['rows']:7d} " + " ".join(cells))
+        print()
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
