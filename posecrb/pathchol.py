@@ -225,6 +225,52 @@ def woodbury_downdate(h, u, rows, valid, alive, z, inv):  # pragma: no cover - c
                 h[f, a, b] -= v
 
 
+@njit(cache=True, nogil=True)
+def _solve1(indptr, indices, lval, parent, iperm, rows, valid, u, mark):  # pragma: no cover - compiled
+    """``_solve`` for one column (Laplacian blocks): 1-D work vector, no inner loop over columns."""
+    p = u.shape[0]
+    n = indptr.shape[0] - 1
+    y = np.zeros(n)
+    nv = 0
+    for a in range(p):
+        if valid[a]:
+            nv += 1
+    starts = np.empty(nv, np.int64)
+    t = 0
+    for a in range(p):
+        if valid[a]:
+            starts[t] = iperm[rows[a]]
+            y[starts[t]] += u[a, 0]
+            t += 1
+    path = _reach(parent, starts, mark, 1)
+    for j in path:
+        yj = y[j] / lval[indptr[j]]
+        y[j] = yj
+        for q in range(indptr[j] + 1, indptr[j + 1]):
+            y[indices[q]] -= lval[q] * yj
+    for j in range(n - 1, -1, -1):
+        acc = y[j]
+        for q in range(indptr[j] + 1, indptr[j + 1]):
+            acc -= lval[q] * y[indices[q]]
+        y[j] = acc / lval[indptr[j]]
+    return y
+
+
+@njit(cache=True, nogil=True)
+def woodbury_downdate1(h, u, rows, valid, alive, z, inv):  # pragma: no cover - compiled
+    """``woodbury_downdate`` for one column: ``h_f -= inv (u_f . z[rows_f])^2``."""
+    c, p, _ = u.shape
+    s = inv[0, 0]
+    for f in range(c):
+        if not alive[f]:
+            continue
+        acc = 0.0
+        for t in range(p):
+            if valid[f, t]:
+                acc += u[f, t, 0] * z[rows[f, t], 0]
+        h[f, 0, 0] -= s * acc * acc
+
+
 class PathFactor:
     """``P A P^T = L L^T`` held as a CSC lower factor (from a CHOLMOD factor), for path solves
     and in-place rank-one updates with the pattern fixed."""
@@ -266,6 +312,12 @@ class PathFactor:
 
     def solve(self, rows: np.ndarray, valid: np.ndarray, u: np.ndarray) -> np.ndarray:
         """``A^{-1} U`` (n, r) in the original order for one edge's rows (p,), valid (p,), U (p, r)."""
+        if u.shape[1] == 1:
+            y = _solve1(self.indptr, self.indices, self.lval, self.parent, self.iperm,
+                        np.ascontiguousarray(rows, dtype=np.int64), np.ascontiguousarray(valid),
+                        np.ascontiguousarray(u, dtype=np.float64), self._mark)
+            self._mark[:] = 0
+            return y[self.iperm][:, None]
         y = _solve(self.indptr, self.indices, self.lval, self.parent, self.iperm,
                    np.ascontiguousarray(rows, dtype=np.int64), np.ascontiguousarray(valid),
                    np.ascontiguousarray(u, dtype=np.float64), self._mark)

@@ -580,7 +580,7 @@ def _incremental_greedy(obj: LogDetObjective, x: np.ndarray, cand: np.ndarray, k
     pass over the candidates replace re-evaluations: the argmax is the exact greedy choice (ties:
     the first edge in the file). Every ``refresh_every`` steps the factor is recomputed and every
     H re-derived by selected inversion, so rounding in the updates cannot accumulate."""
-    from .pathchol import logdet_eye_plus, woodbury_downdate
+    from .pathchol import logdet_eye_plus, woodbury_downdate, woodbury_downdate1
 
     refresh_every = refresh_every or REFRESH_EVERY
     state = obj.evaluate(x)
@@ -615,7 +615,8 @@ def _incremental_greedy(obj: LogDetObjective, x: np.ndarray, cand: np.ndarray, k
             solves += 1
             he = h[pos]
             inv = np.linalg.inv(np.eye(he.shape[0]) + 0.5 * (he + he.T))
-            woodbury_downdate(h, uc, rc, vc, alive, np.ascontiguousarray(z), inv)
+            (woodbury_downdate1 if inv.shape[0] == 1 else woodbury_downdate)(
+                h, uc, rc, vc, alive, np.ascontiguousarray(z), inv)
         eng.add(e)
     return np.array(chosen, dtype=np.int64), GreedyStats(solves, refreshes, len(chosen), "exact")
 
