@@ -475,3 +475,78 @@ def test_small_grid_fim_value_is_the_consistent_fim_logdet(shared_datasets):
     est = get_estimate(g, "solve")
     f = paper_fim(pruned_graph(g, res.kept_edges), est.rot, est.trans, 0, variant="consistent")
     assert res.value == pytest.approx(fim_logdet(f), rel=1e-10)
+
+
+# ----------------------------------------------------------------------------- sparsify experiment
+def test_alignment_and_trajectory_errors_closed_forms():
+    from scipy.spatial.transform import Rotation
+
+    from posecrb.experiments.sparsify import align, trajectory_error
+
+    rng = np.random.default_rng(0)
+    n = 9
+    rot = random_rotations(rng, n, 3)
+    trans = rng.normal(size=(n, 3))
+    g_rot = Rotation.random(random_state=1).as_matrix()
+    g_t = rng.normal(size=3)
+    moved_rot, moved_trans = g_rot @ rot, trans @ g_rot.T + g_t
+    r, t = align(moved_trans, trans)
+    ref, _ = Rotation.align_vectors(trans - trans.mean(0), moved_trans - moved_trans.mean(0))
+    assert np.allclose(r, ref.as_matrix(), atol=1e-10)
+    err = trajectory_error(moved_rot, moved_trans, rot, trans)
+    assert max(vars(err).values()) < 1e-6
+    # one translation moved by v: two relative translations change by |v| each
+    v = np.array([0.3, -0.1, 0.2])
+    tr2 = trans.copy()
+    tr2[4] += v
+    err = trajectory_error(rot, tr2, rot, trans)
+    assert err.rpe_trans == pytest.approx(np.sqrt(2 * v @ v / (n - 1)), rel=1e-12)
+    assert err.rpe_rot_deg < 1e-6
+    # one orientation turned by a: the two relative rotations around it change by a
+    a = 0.05
+    rot2_ = rot.copy()
+    rot2_[4] = rot[4] @ Rotation.from_rotvec([0.0, 0.0, a]).as_matrix()
+    err = trajectory_error(rot2_, trans, rot, trans)
+    assert err.rpe_rot_deg == pytest.approx(np.degrees(a * np.sqrt(2 / (n - 1))), rel=1e-9)
+
+
+def test_sparsify_experiment_rows_and_executors():
+    from posecrb.experiments.sparsify import sparsify_experiment
+
+    g = chain_graph(np.random.default_rng(31), n=14, extra=12, dim=2)
+    methods = "greedy,relax,fiedler-relax,random,naive,fim-greedy"
+    res = sparsify_experiment(g, ["3", "100%"], methods, max_iter=30)
+    assert len(res.rows) == 12
+    full = [r for r in res.rows if r["budget_spec"] == "100%"]
+    for r in full:   # every candidate kept: the full graph again
+        assert r["tree"] == pytest.approx(res.reference["tree"], rel=1e-12)
+        assert r["ate_trans"] < 1e-5 and r["certified"]
+    for r in res.rows:
+        sel = select_edges(g, r["budget_spec"], objective=r["objective"], method=r["method"].split("-")[-1],
+                           max_iter=30, reference=from_reference(g))
+        assert r["value"] == pytest.approx(sel.value, rel=1e-9)
+    par = sparsify_experiment(g, ["3", "100%"], methods, max_iter=30, executor="local", jobs=2)
+    keys = [k for k in res.rows[0] if not k.startswith("time")]
+    assert [[r[k] for k in keys] for r in par.rows] == [[r[k] for k in keys] for r in res.rows]
+
+
+def from_reference(g):
+    from posecrb.estimate import get_estimate
+
+    return get_estimate(g, "solve")
+
+
+def test_cli_experiment_sparsify_writes_run_record(g2o_path, tmp_path, capsys):
+    out = tmp_path / "run"
+    code, text, err = run_cli(["experiment", "sparsify", str(g2o_path), "--budgets", "2,50%", "--methods",
+                               "greedy,naive", "--format", "json", "--out", str(out)], capsys)
+    assert code == 0, err
+    rows = json.loads(text)
+    assert [(r["budget_spec"], r["method"]) for r in rows] == [("2", "greedy"), ("2", "naive"),
+                                                                ("50%", "greedy"), ("50%", "naive")]
+    run = json.loads((out / "run.json").read_text())
+    assert run["experiment"] == "sparsify" and run["settings"]["candidates"] == 12
+    assert (out / "sparsify.png").stat().st_size > 0 and (out / "rows.csv").exists()
+    assert not list(out.glob("*.tmp"))
+    rc, _, err = run_cli(["experiment", "sparsify", str(g2o_path), "--methods", "greedy,bogus"], capsys)
+    assert rc == 2 and "bogus" in err
