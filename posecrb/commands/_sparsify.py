@@ -20,7 +20,7 @@ COLUMNS = ["budget_spec", "budget", "method", "value", "upper_bound", "certified
            "fiedler", "fim_logdet", "crlb_trace", "certified", "ate_trans", "ate_rot_deg", "rpe_trans",
            "rpe_rot_deg"]
 HEADERS = {"budget_spec": "budget", "budget": "K", "upper_bound": "upper bound", "certified_ratio": "cert. ratio",
-           "time_select": "time [s]", "tree": "tree lb (75)", "fiedler": "λ2", "fim_logdet": "FIM logdet",
+           "time_select": "time (s)", "tree": "tree lb (75)", "fiedler": "λ2", "fim_logdet": "FIM logdet",
            "crlb_trace": "tr CRLB", "certified": "cert.", "ate_trans": "ATE t", "ate_rot_deg": "ATE R [°]",
            "rpe_trans": "RPE t", "rpe_rot_deg": "RPE R [°]"}
 

@@ -39,7 +39,7 @@ def _summary(d: dict) -> list[dict]:
         e = d["estimate"]
         rows.append(("estimate", f"{e['source']}" + ("" if e["certified"] is None else
                                                      (", certified" if e["certified"] else ", NOT certified"))))
-    rows.append(("time [s]", ", ".join(f"{k} {v:.3g}" for k, v in d["times"].items())))
+    rows.append(("time (s)", ", ".join(f"{k} {v:.3g}" for k, v in d["times"].items())))
     return [{"quantity": k, "value": v} for k, v in rows]
 
 
