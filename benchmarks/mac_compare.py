@@ -29,7 +29,12 @@ import numpy as np
 
 from posecrb import datasets, load
 from posecrb.experiments.sparsify import _evaluate, trajectory_error
-from posecrb.select import FiedlerObjective, parse_budget, pruned_graph, select_edges, split_edges
+from posecrb.select import (
+    FiedlerObjective,
+    parse_budget,
+    select_edges,
+    split_edges,
+)
 from posecrb.sesync import solve
 
 DATASETS = ("intel", "city10000", "ais2klinik", "kitti_02", "kitti_05", "sphere2500")
@@ -116,7 +121,8 @@ def main() -> None:
                      ci=g.src[cand], cj=g.dst[cand], cw=g.kappa[cand], ks=np.array(ks), posecrb=sel)
             res_path = os.path.join(tmp, "mac.json")
             subprocess.run([mac_python, "-c", DRIVER, prob, res_path], check=True)
-            mac_out = json.load(open(res_path))
+            with open(res_path) as fh:
+                mac_out = json.load(fh)
         lam = FiedlerObjective(g, g.kappa, 0)
         for b, k, r, t, m in zip(budgets, ks, ours, t_ours, mac_out):
             mac_keep = np.union1d(split.fixed, cand[m["selected"]])

@@ -54,7 +54,7 @@ import numpy as np
 import scipy.sparse as sp
 from scipy.sparse.csgraph import connected_components, minimum_spanning_tree
 
-from .errors import DisconnectedGraph, ParseError, PosecrbError, UsageError
+from .errors import ParseError, PosecrbError, UsageError
 from .graph import PoseGraph
 from .laplacian import laplacian, reduced_index
 from .linalg import SymbolicCholesky
@@ -103,7 +103,7 @@ def parse_budget(spec: str | int, n_candidates: int) -> int:
         pct = float(m.group(1))
         if not 0 < pct <= 100:
             raise UsageError(f"--budget {text}: a percentage must be in (0, 100]")
-        k = int(math.floor(pct / 100.0 * n_candidates + 1e-9))
+        k = math.floor(pct / 100.0 * n_candidates + 1e-9)
         if k < 1:
             raise UsageError(f"--budget {text} of {n_candidates} candidate edge(s) rounds down to 0 edges")
         return k
@@ -237,7 +237,7 @@ class _Block:
     U: np.ndarray          # (m, p, r)
 
     def __post_init__(self):
-        m, p, r = self.U.shape
+        p = self.U.shape[1]
         self.G = np.einsum("mpa,mqa->mpq", self.U, self.U)
         rr = np.repeat(self.rows, p, axis=1).ravel()
         cc = np.tile(self.rows, (1, p)).ravel()
@@ -251,7 +251,7 @@ class _Block:
         method = "metis" if self.size >= _METIS_FROM else "default"
         try:
             self.symbolic = SymbolicCholesky(pattern, mode="auto", ordering_method=method)
-        except Exception:  # pragma: no cover - CHOLMOD without METIS
+        except Exception:  # noqa: BLE001  # pragma: no cover - CHOLMOD without METIS
             self.symbolic = SymbolicCholesky(pattern)
 
     def _csc(self, data: np.ndarray) -> sp.csc_matrix:
@@ -314,7 +314,7 @@ class _Block:
     def h_projected(self, factor, x: np.ndarray, edges: np.ndarray, k: int, rng: np.random.Generator) -> np.ndarray:
         """Johnson-Lindenstrauss estimate of ``H_e``: with ``M = W W^T``, ``W = [sqrt(x_e) U_e]``,
         ``H_e = ||W^T M^{-1} U_e||^2 ~ ||Q W^T M^{-1} U_e||^2`` for a k-row Gaussian Q (k solves)."""
-        m, p, r = self.U.shape
+        m, _, r = self.U.shape
         q = rng.standard_normal((m, r, k)) / np.sqrt(k)
         wq = np.zeros((self.size, k))
         contrib = np.einsum("mpr,mrk->mpk", np.sqrt(x)[:, None, None] * self.U, q)
@@ -485,7 +485,7 @@ class FiedlerObjective:
         it up to the eigensolver's tolerance squared)."""
         if self._block is None:
             lap = laplacian(self.n, self.src, self.dst, x * self.w).toarray()
-            vals, vecs = np.linalg.eigh(lap)
+            _, vecs = np.linalg.eigh(lap)
             val, v = self._rayleigh(x, vecs[:, 1])
             return _State(np.array(x, float), val, v)
         from scipy.sparse.linalg import LinearOperator, eigsh

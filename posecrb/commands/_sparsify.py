@@ -74,8 +74,13 @@ def sparsify_cmd(file, budgets, methods, objective, fixed, certify, max_iter, se
     """Per budget and method: the selection's objective value, upper bound and certified ratio,
     its tree bound, lambda_2, FIM log-det and CRLB trace (at the full graph's optimum), and the
     pruned graph's certified optimum (ATE/RPE against the full graph's optimum, aligned)."""
-    from ..experiments.sparsify import (DEFAULT_BUDGETS, DEFAULT_METHODS, QUICK_BUDGETS, plot_sparsify,
-                                        sparsify_experiment)
+    from ..experiments.sparsify import (
+        DEFAULT_BUDGETS,
+        DEFAULT_METHODS,
+        QUICK_BUDGETS,
+        plot_sparsify,
+        sparsify_experiment,
+    )
     from .experiment import _executor, _plot_target, _progress
 
     ex = _executor(executor, jobs, scheduler)

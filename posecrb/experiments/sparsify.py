@@ -21,10 +21,9 @@ objective explicitly. Selections run as independent tasks on the Monte Carlo eng
 """
 from __future__ import annotations
 
-import math
 import re
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
-from typing import Callable, Sequence
 
 import numpy as np
 
