@@ -29,9 +29,13 @@ and in L_w (c = d_r); for ``fim`` ``U_e`` is the edge's ``q`` columns of ``J^T O
 Every ``H_e`` for all candidates at once comes from one selected inversion (Takahashi
 recurrences, ``posecrb.selinv``) of a factor whose pattern is that of the FULL graph: the
 matrices are assembled with explicit zeros for unselected edges, so one CHOLMOD analysis
-serves every subset and the pattern holds every candidate's (i, j) block. Greedy re-evaluates
-a stale gain with one solve against the current factor and adds an edge by a CHOLMOD
-rank-r update (``update_inplace``), never refactorising per candidate.
+serves every subset and the pattern holds every candidate's (i, j) block. The greedy keeps every
+``H_f`` exact from step to step by the Woodbury identity (one solve ``M^{-1} U_e`` per accepted
+edge, posecrb.pathchol) and updates the factor in place by rank-one updates along the
+elimination-tree path of the edge, never refactorising per candidate; the textbook lazy greedy
+(priority queue, stale gains re-evaluated by path solves, optionally seeded by random
+projections) is kept as ``strategy="lazy"``. The submodular bound is the smallest Minoux bound
+over the final set and ~64 of the greedy's intermediate sets.
 
 The fiedler objective is concave in x but not submodular; its greedy is MAC's GreedyEig
 (candidates evaluated in the order of the supergradient bound ``R(v) + g_e``) and its
@@ -965,9 +969,13 @@ def select_edges(graph: PoseGraph, budget: str | int, *, objective: str = "tree"
     weight, MAC's baseline). ``certify``: also run the relaxation for a bound (greedy, random,
     naive; relax always has one). Log-det objectives always report the submodular bound.
     ``estimate`` (fim only): "solve" (certified optimum of the full graph), "vertices" or a
-    file; ``reference`` an already computed ``posecrb.estimate.Estimate``. ``gains``: "exact"
-    (selected inversion), "jl" (random projections, initial greedy queue only) or "auto".
-    ``max_iter``/``tol``: Frank-Wolfe limits (default 100 for log-det, 20 for fiedler as MAC).
+    file; ``reference`` an already computed ``posecrb.estimate.Estimate``. ``strategy`` (log-det
+    greedy): "incremental" (every gain exact at every step), "lazy" (priority queue) or "auto"
+    (incremental unless candidates x budget is huge). ``gains`` (lazy only): "exact" (selected
+    inversion), "jl" (random projections seed the queue) or "auto" (jl above 50000 candidates).
+    ``engine``: "path" (posecrb.pathchol) or "cholmod" (CHOLMOD update_inplace and whole-factor
+    solves, for comparison). ``max_iter``/``tol``: Frank-Wolfe limits (default 100 for the
+    log-dets, 20 for fiedler as MAC). ``split``: precomputed fixed/candidate edges.
     """
     t_total = time.perf_counter()
     if objective not in OBJECTIVES:
