@@ -1047,6 +1047,10 @@ def select_edges(graph: PoseGraph, budget: str | int, *, objective: str = "tree"
         order = chosen
         chosen = np.sort(chosen)
     elif method == "greedy":
+        if k * graph.n > 2_000_000:
+            log.warning("%s: the lambda_2 greedy (MAC's GreedyEig) solves at least one eigenproblem of %d poses "
+                        "per selected edge (%d); this takes long, fiedler-relax is the scalable method",
+                        graph.name, graph.n, k)
         chosen, gstats = _greedy_fiedler(obj, base.copy(), cand, k)
         stats.update(gstats)
         order = chosen
