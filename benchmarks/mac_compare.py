@@ -4,9 +4,10 @@ MAC is not a dependency: set POSECRB_MAC_PYTHON to a Python interpreter that can
 (for instance a virtual environment with MAC installed from its public repository); without it
 this script prints why and exits 0. Both sides get the same odometry chain as fixed edges and the
 same loop closures as candidates, weighted by the Langevin concentration kappa (MAC's weights).
-MAC runs its own protocol (``examples/g2o_experiment.py``): the naive top-K start, 20
+MAC runs its own protocol (``examples/g2o_experiment.py``): the naive top-K start (argpartition order among equal weights), 20
 Frank-Wolfe iterations, TRACEMIN-Fiedler with Cholesky, "nearest" rounding. posecrb runs
-``fiedler-relax`` with the same weights, start, step rule and iteration count.
+``fiedler-relax`` with the same weights, naive start (ties at random, seeded), step rule and
+iteration count, rounded by top-K and Madow.
 
 Printed per dataset and budget: time and lambda_2 of each (lambda_2 evaluated by MAC's own
 ``evaluate_objective`` for both selections, and by posecrb), the upper bound each reports, and for

@@ -821,6 +821,12 @@ def frank_wolfe(obj, x_full: np.ndarray, cand: np.ndarray, k: int, start: np.nda
                       converged=converged, step=step, history=hist)
 
 
+def _heaviest(weights: np.ndarray, k: int, rng: np.random.Generator) -> np.ndarray:
+    """Positions of the k largest weights, ties broken at random (seeded): on datasets with one
+    noise level for every edge this is a random selection, not the first k in the file."""
+    return np.lexsort((rng.permutation(weights.size), -weights))[:k]
+
+
 def madow(weights: np.ndarray, k: int, rng: np.random.Generator) -> np.ndarray:
     """Madow's systematic sampling: K distinct positions, position e with probability weights[e]
     (weights in [0, 1] summing to K): one uniform u, the points u, u + 1, ..., u + K - 1 on the
@@ -966,7 +972,7 @@ def select_edges(graph: PoseGraph, budget: str | int, *, objective: str = "tree"
     ``budget``: K or "P%" of the candidates. ``method``: ``greedy`` (lazy greedy; MAC's
     GreedyEig for fiedler), ``relax`` (Frank-Wolfe on the relaxation, rounded by top-K and by
     Madow sampling, the better kept), ``random`` (seeded), ``naive`` (the K heaviest by rotation
-    weight, MAC's baseline). ``certify``: also run the relaxation for a bound (greedy, random,
+    weight, MAC's baseline; ties at random). ``certify``: also run the relaxation for a bound (greedy, random,
     naive; relax always has one). Log-det objectives always report the submodular bound.
     ``estimate`` (fim only): "solve" (certified optimum of the full graph), "vertices" or a
     file; ``reference`` an already computed ``posecrb.estimate.Estimate``. ``strategy`` (log-det
@@ -1030,7 +1036,7 @@ def select_edges(graph: PoseGraph, budget: str | int, *, objective: str = "tree"
     elif method == "random":
         chosen = np.sort(rng.choice(cand, size=k, replace=False))
     elif method == "naive":
-        chosen = np.sort(cand[_top_k(w_rot[cand], k)])
+        chosen = np.sort(cand[_heaviest(w_rot[cand], k, rng)])
     elif method == "greedy" and obj.kind == "logdet":
         strategy = _pick_strategy(strategy, cand.size, k, obj)
         mode = gains
@@ -1058,7 +1064,7 @@ def select_edges(graph: PoseGraph, budget: str | int, *, objective: str = "tree"
     else:  # relax
         if obj.kind == "fiedler":
             start = np.zeros(cand.size)
-            start[_top_k(w_rot[cand], k)] = 1.0      # MAC's initial point: the naive selection
+            start[_heaviest(w_rot[cand], k, rng)] = 1.0   # MAC's initial point: the naive selection
             relax = frank_wolfe(obj, base, cand, k, start, max_iter=max_iter, tol=tol,
                                 base_value=base_state.value, step="2/(t+2)")
         else:
