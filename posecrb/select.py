@@ -88,6 +88,8 @@ JL_PROJECTIONS = 64
 # unless candidates x budget x (per-edge work) exceeds this, then lazy.
 _INCREMENTAL_WORK = 2e9
 STRATEGIES = ("auto", "incremental", "lazy")
+# The relaxation is rounded by top-K and by this many seeded Madow draws; the best is kept.
+MADOW_DRAWS = 8
 # Dense eigensolver for lambda_2 up to this many poses.
 _DENSE_EIG_UP_TO = 300
 
@@ -969,11 +971,11 @@ def select_edges(graph: PoseGraph, budget: str | int, *, objective: str = "tree"
                  reference=None, engine: str = "path", strategy: str = "auto") -> SelectionResult:
     """Choose ``budget`` candidate edges maximising ``objective`` (module docstring).
 
-    ``budget``: K or "P%" of the candidates. ``method``: ``greedy`` (lazy greedy; MAC's
+    ``budget``: K or "P%" of the candidates. ``method``: ``greedy`` (exact greedy; MAC's
     GreedyEig for fiedler), ``relax`` (Frank-Wolfe on the relaxation, rounded by top-K and by
-    Madow sampling, the better kept), ``random`` (seeded), ``naive`` (the K heaviest by rotation
-    weight, MAC's baseline; ties at random). ``certify``: also run the relaxation for a bound (greedy, random,
-    naive; relax always has one). Log-det objectives always report the submodular bound.
+    MADOW_DRAWS seeded Madow draws, the best kept), ``random`` (seeded), ``naive`` (the K
+    heaviest by rotation weight, MAC's baseline; ties at random). ``certify``: also run the
+    relaxation for a bound (greedy, random, naive; relax always has one). Log-det objectives always report the submodular bound.
     ``estimate`` (fim only): "solve" (certified optimum of the full graph), "vertices" or a
     file; ``reference`` an already computed ``posecrb.estimate.Estimate``. ``strategy`` (log-det
     greedy): "incremental" (every gain exact at every step), "lazy" (priority queue) or "auto"
@@ -1072,13 +1074,14 @@ def select_edges(graph: PoseGraph, budget: str | int, *, objective: str = "tree"
             relax = frank_wolfe(obj, base, cand, k, start, max_iter=max_iter, tol=tol,
                                 base_value=base_state.value)
         pick_top = _top_k(relax.weights, k, tiebreak=w_rot[cand])
-        pick_madow = madow(relax.weights, k, rng)
+        picks = [("top-k", pick_top)] + [(f"madow-{i + 1}", madow(relax.weights, k, rng))
+                                         for i in range(MADOW_DRAWS)]
         vals = {}
-        for name, pick in (("top-k", pick_top), ("madow", pick_madow)):
+        for name, pick in picks:
             xx = base.copy()
             xx[cand[pick]] = 1.0
             vals[name] = (obj.value(xx), pick)
-        rounding = max(vals, key=lambda n: (vals[n][0], n == "top-k"))
+        rounding = max(vals, key=lambda n: (vals[n][0], n == "top-k"))   # first best; top-k wins ties
         chosen = np.sort(cand[vals[rounding][1]])
         stats["rounding_values"] = {n: v for n, (v, _) in vals.items()}
     times["select"] = time.perf_counter() - t0
