@@ -271,6 +271,88 @@ def woodbury_downdate1(h, u, rows, valid, alive, z, inv):  # pragma: no cover - 
         h[f, 0, 0] -= s * acc * acc
 
 
+@njit(cache=True, nogil=True)
+def scalar_greedy_steps(indptr, indices, lval, parent, prow, valid, u, h, alive, nsteps, mult, update_last,
+                        mark, y):  # pragma: no cover - compiled
+    """``nsteps`` steps of the incremental greedy for one Laplacian block, fused (no Python per step).
+
+    prow (c, p): permuted rows of the candidates' U; u (c, p); h (c,) current ``U_f^T M^{-1} U_f``
+    (-inf once chosen); alive (c,). Per step: the argmax of h (first on ties), then
+    ``z = M^{-1} u_e`` (forward along the reach, backward over all columns), the Woodbury
+    downdate ``h_f -= (u_f . z)^2 / (1 + h_e)`` of every alive f, and the rank-one update of L.
+    Returns the chosen positions and their gains ``mult * log1p(h_e)``."""
+    c, p = u.shape
+    n = indptr.shape[0] - 1
+    chosen = np.empty(nsteps, np.int64)
+    gains = np.empty(nsteps)
+    starts = np.empty(p, np.int64)
+    for step in range(nsteps):
+        pos = -1
+        best = -np.inf
+        for f in range(c):
+            if alive[f] and h[f] > best:
+                best = h[f]
+                pos = f
+        he = max(h[pos], 0.0)
+        chosen[step] = pos
+        gains[step] = mult * np.log1p(he)
+        alive[pos] = False
+        h[pos] = -np.inf
+        if step == nsteps - 1 and not update_last:
+            break
+        # z = M^{-1} u_e in permuted order
+        for j in range(n):
+            y[j] = 0.0
+        nv = 0
+        for a in range(p):
+            if valid[pos, a]:
+                starts[nv] = prow[pos, a]
+                y[prow[pos, a]] += u[pos, a]
+                nv += 1
+        stamp = step + 1
+        path = _reach(parent, starts[:nv], mark, stamp)
+        for j in path:
+            yj = y[j] / lval[indptr[j]]
+            y[j] = yj
+            for q in range(indptr[j] + 1, indptr[j + 1]):
+                y[indices[q]] -= lval[q] * yj
+        for j in range(n - 1, -1, -1):
+            acc = y[j]
+            for q in range(indptr[j] + 1, indptr[j + 1]):
+                acc -= lval[q] * y[indices[q]]
+            y[j] = acc / lval[indptr[j]]
+        inv = 1.0 / (1.0 + he)
+        for f in range(c):
+            if alive[f]:
+                acc = 0.0
+                for t in range(p):
+                    if valid[f, t]:
+                        acc += u[f, t] * y[prow[f, t]]
+                h[f] -= inv * acc * acc
+        # L L^T + u_e u_e^T along the same path (y is reused as the work vector)
+        for j in path:
+            y[j] = 0.0
+        for a in range(p):
+            if valid[pos, a]:
+                y[prow[pos, a]] += u[pos, a]
+        for j in path:
+            wj = y[j]
+            if wj == 0.0:
+                continue
+            q0 = indptr[j]
+            ljj = lval[q0]
+            rr = np.sqrt(ljj * ljj + wj * wj)
+            cc = rr / ljj
+            ss = wj / ljj
+            lval[q0] = rr
+            for q in range(q0 + 1, indptr[j + 1]):
+                i = indices[q]
+                lval[q] = (lval[q] + ss * y[i]) / cc
+                y[i] = cc * y[i] - ss * lval[q]
+            y[j] = 0.0
+    return chosen, gains
+
+
 class PathFactor:
     """``P A P^T = L L^T`` held as a CSC lower factor (from a CHOLMOD factor), for path solves
     and in-place rank-one updates with the pattern fixed."""

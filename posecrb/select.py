@@ -590,6 +590,8 @@ def _incremental_greedy(obj: LogDetObjective, x: np.ndarray, cand: np.ndarray, k
     from .pathchol import logdet_eye_plus, woodbury_downdate, woodbury_downdate1
 
     refresh_every = refresh_every or REFRESH_EVERY
+    if engine == "path" and len(obj.blocks) == 1 and obj.blocks[0].U.shape[2] == 1:
+        return _incremental_greedy_scalar(obj, x, cand, k, refresh_every)
     state = obj.evaluate(x)
     hs = [b.h_selected(f, cand) for b, f in zip(obj.blocks, state.data)]
     local = [(np.ascontiguousarray(b.U[cand]), np.ascontiguousarray(b.rows[cand]),
@@ -653,6 +655,53 @@ def _incremental_greedy(obj: LogDetObjective, x: np.ndarray, cand: np.ndarray, k
                 h, uc, rc, vc, alive, np.ascontiguousarray(z), inv)
         eng.add(e)
     return np.array(chosen, dtype=np.int64), GreedyStats(solves, refreshes, len(chosen), "exact", online)
+
+
+def _incremental_greedy_scalar(obj: LogDetObjective, x: np.ndarray, cand: np.ndarray, k: int,
+                               refresh_every: int) -> tuple[np.ndarray, GreedyStats]:
+    """``_incremental_greedy`` for one Laplacian block with the path engine, every step of a
+    stretch fused into one compiled call (posecrb.pathchol.scalar_greedy_steps); Python only
+    between stretches: Minoux's bound on ~64 prefixes and a refresh every ``refresh_every`` steps."""
+    from .pathchol import PathFactor, scalar_greedy_steps
+
+    b = obj.blocks[0]
+    uc = np.ascontiguousarray(b.U[cand][:, :, 0])
+    rc = b.rows[cand]
+    vc = np.ascontiguousarray(b.valid[cand])
+    alive = np.ones(cand.size, dtype=bool)
+    every = max(1, k // 64)
+    chosen: list[np.ndarray] = []
+    online = math.inf
+    refreshes = solves = 0
+    step = 0
+    h = pf = prow = None
+    value = 0.0
+    while step < k:
+        if step % refresh_every == 0:
+            state = obj.evaluate(x)
+            value = state.value
+            h = np.full(cand.size, -np.inf)
+            idx = np.flatnonzero(alive)
+            h[idx] = b.h_selected(state.data[0], cand[idx])[:, 0, 0]
+            pf = PathFactor(state.data[0])
+            prow = np.ascontiguousarray(pf.iperm[rc])
+            refreshes += 1
+        if step % every == 0:
+            top = b.mult * np.log1p(np.maximum(h[alive], 0.0))
+            online = min(online, value + (float(np.partition(top, top.size - k)[top.size - k:].sum())
+                                          if top.size > k else float(top.sum())))
+        stop = min(k, (step // every + 1) * every, (step // refresh_every + 1) * refresh_every)
+        update_last = stop < k and stop % refresh_every != 0
+        pf._mark[:] = 0
+        pos, gains = scalar_greedy_steps(pf.indptr, pf.indices, pf.lval, pf.parent, prow, vc, uc, h, alive,
+                                         stop - step, b.mult, update_last, pf._mark, np.zeros(pf.n))
+        pf._mark[:] = 0
+        x[cand[pos]] = 1.0
+        chosen.append(cand[pos])
+        value += float(gains.sum())
+        solves += stop - step - (0 if update_last else 1)
+        step = stop
+    return np.concatenate(chosen), GreedyStats(solves, refreshes, k, "exact", online)
 
 
 def _pick_strategy(strategy: str, n_cand: int, k: int, obj: LogDetObjective) -> str:
