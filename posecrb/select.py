@@ -209,20 +209,21 @@ def _fixed_from_file(graph: PoseGraph, path: str) -> np.ndarray:
         tok = line.split("#", 1)[0].split()
         if not tok:
             continue
-        if len(tok) != 2 or not all(re.fullmatch(r"[0-9]+", t) for t in tok):
+        if len(tok) != 2 or not all(re.fullmatch(r"[0-9]{1,18}", t) for t in tok):
             raise ParseError(path, k, f"expected two pose ids 'i j', got {line.strip()!r}")
         pairs.append((int(tok[0]), int(tok[1])))
         where.append(k)
     if not pairs:
         raise ParseError(path, None, "no pose-id pairs in the fixed-edge file")
     p = np.array(pairs, dtype=np.int64)
-    lo_id, hi_id = np.minimum(p[:, 0], p[:, 1]), np.maximum(p[:, 0], p[:, 1])
-    e_lo = graph.ids[np.minimum(graph.src, graph.dst)]
-    e_hi = graph.ids[np.maximum(graph.src, graph.dst)]
-    big = int(graph.ids.max()) + 1
-    ekey = e_lo * big + e_hi
-    pkey = np.where((lo_id < big) & (hi_id < big), lo_id * big + hi_id, -1)
-    known = np.isin(pkey, ekey)
+    # pose ids -> internal indices (ids are sorted); unknown ids make the pair unknown
+    pos = np.minimum(np.searchsorted(graph.ids, p), graph.n - 1)
+    known = (graph.ids[pos] == p).all(axis=1)
+    lo, hi = np.minimum(pos[:, 0], pos[:, 1]), np.maximum(pos[:, 0], pos[:, 1])
+    n = graph.n
+    ekey = np.minimum(graph.src, graph.dst) * n + np.maximum(graph.src, graph.dst)
+    pkey = np.where(known, lo * n + hi, -1)
+    known &= np.isin(pkey, ekey)
     if not known.all():
         k = int(np.flatnonzero(~known)[0])
         raise ParseError(path, where[k], f"no edge between pose ids {pairs[k][0]} and {pairs[k][1]} in {graph.name}")
