@@ -68,7 +68,7 @@ def _summary(d: dict) -> list[dict]:
                    "different cost profile).")
 @click.option("--jl", is_flag=True,
               help="Seed the lazy greedy's queue with random-projection estimates of the gains (implies --lazy; "
-                   "the default for more than 50000 candidates).")
+                   "the lazy greedy's default above 50000 candidates).")
 @click.option("--exact", is_flag=True, help="Never use random projections.")
 @click.option("--estimate", default="solve", show_default=True, metavar="solve|vertices|FILE",
               help="fim objective: the estimate at which the FIM is evaluated (default the certified optimum "
