@@ -286,3 +286,9 @@ def octagon_cmd(radius, trials, seed, jobs, executor, scheduler, plot_path, out_
                 "corr_trace_degree": res.corr_trace_degree, "corr_logdet_degree": res.corr_logdet_degree,
                 "trace_slope": res.trace_slope, "flagged": res.flagged, "quick": quick, **ex}
     _write_out(out_dir, "octagon", settings, rows, res.seeds, elapsed, {"graphs": res.graph_rows()})
+
+
+# ---------------------------------------------------------------- sparsify (posecrb.commands._sparsify)
+from ._sparsify import sparsify_cmd  # noqa: E402
+
+command.add_command(sparsify_cmd)

@@ -1,0 +1,310 @@
+"""Pose-graph sparsification: what each selection method keeps, and what it costs the SLAM answer.
+
+For every budget (a share of the loop closures, MAC's protocol) and every method, select the
+candidate edges (``posecrb.select``), then solve the pruned graph (fixed + selected edges) with
+the certified solver and compare it with the full graph:
+
+* the method's own objective value, the upper bound on the best K-subset and the certified
+  ratio ``(value - base) / (upper_bound - base)``, and the selection time;
+* the same selection under the three objectives: the eq. (75) tree bound, lambda_2 of the
+  rotation-weighted Laplacian (MAC's), and ``logdet F`` / ``trace F^{-1}`` (the CRLB trace) of
+  the pruned graph's frame-consistent Fisher information at the full graph's certified optimum
+  (one common point for every method, so only the edges differ);
+* the pruned graph's certified optimum: its objective, its certificate, and its ATE (rigid
+  alignment of the positions, Horn/Umeyama without scale; translation RMSE and rotation RMSE)
+  and RPE (consecutive poses; translation and rotation RMSE) against the full graph's optimum.
+
+Methods are ``[objective-]method``: ``greedy``, ``relax``, ``random``, ``naive`` use
+``objective`` (default tree); ``fiedler-relax`` is MAC's method, ``fim-greedy`` etc. name the
+objective explicitly. Selections run as independent tasks on the Monte Carlo engine
+(``posecrb.montecarlo``): serial, local processes or Dask, identical results for a given seed.
+"""
+from __future__ import annotations
+
+import re
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from ..errors import UsageError
+from ..graph import PoseGraph
+from ..montecarlo import Task, make_tasks, run_tasks
+
+DEFAULT_BUDGETS = tuple(f"{p}%" for p in range(10, 101, 10))
+QUICK_BUDGETS = ("20%", "50%")
+DEFAULT_METHODS = ("greedy", "relax", "fiedler-relax", "random", "naive")
+
+
+def parse_budgets(spec: str | Sequence[str]) -> list[str]:
+    """Comma-separated budgets, each K or P% (checked against the candidates later)."""
+    parts = spec.split(",") if isinstance(spec, str) else list(spec)
+    out = []
+    for p in (str(x).strip() for x in parts):
+        if not p:
+            continue
+        if not re.fullmatch(r"[0-9]+(\.[0-9]*)?%|[0-9]+", p):
+            raise UsageError(f"--budgets: {p!r} is neither K nor P%")
+        if p not in out:
+            out.append(p)
+    if not out:
+        raise UsageError("--budgets needs at least one budget")
+    return out
+
+
+def parse_methods(spec: str | Sequence[str], objective: str = "tree") -> list[tuple[str, str, str]]:
+    """``[objective-]method`` labels -> (label, objective, method)."""
+    from ..select import METHODS, OBJECTIVES
+
+    parts = spec.split(",") if isinstance(spec, str) else list(spec)
+    out = []
+    for label in (str(x).strip() for x in parts):
+        if not label:
+            continue
+        obj, _, meth = label.rpartition("-")
+        obj = obj or objective
+        if obj not in OBJECTIVES or meth not in METHODS:
+            raise UsageError(f"--methods: {label!r} is not [objective-]method with objective in "
+                             f"{', '.join(OBJECTIVES)} and method in {', '.join(METHODS)}")
+        if label not in [o[0] for o in out]:
+            out.append((label, obj, meth))
+    if not out:
+        raise UsageError("--methods needs at least one method")
+    return out
+
+
+# ---------------------------------------------------------------- trajectory errors
+def _angles(r: np.ndarray) -> np.ndarray:
+    """Rotation angles of (k, d, d) rotations, robust at 0 and pi: atan2(sin, cos)."""
+    d = r.shape[-1]
+    skew = r - np.swapaxes(r, -1, -2)
+    sin = np.sqrt(np.einsum("kab,kab->k", skew, skew)) / (2.0 * np.sqrt(2.0))
+    cos = (np.trace(r, axis1=1, axis2=2) - (d - 2)) / 2.0
+    return np.arctan2(sin, cos)
+
+
+def align(trans: np.ndarray, ref: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Rigid (R, t) minimising sum ||R p_i + t - q_i||^2 (Horn / Umeyama, no scale, det R = +1)."""
+    mp, mq = trans.mean(0), ref.mean(0)
+    cov = (ref - mq).T @ (trans - mp)
+    u, _, vt = np.linalg.svd(cov)
+    s = np.eye(trans.shape[1])
+    s[-1, -1] = np.sign(np.linalg.det(u @ vt)) or 1.0
+    rot = u @ s @ vt
+    return rot, mq - rot @ mp
+
+
+@dataclass(frozen=True)
+class TrajectoryError:
+    ate_trans: float      # RMSE of aligned positions
+    ate_rot_deg: float    # RMSE of the aligned orientations' angles
+    rpe_trans: float      # RMSE over consecutive poses of the relative-translation error
+    rpe_rot_deg: float    # RMSE over consecutive poses of the relative-rotation angle
+
+
+def trajectory_error(rot: np.ndarray, trans: np.ndarray, ref_rot: np.ndarray, ref_trans: np.ndarray
+                     ) -> TrajectoryError:
+    """ATE after rigid alignment and RPE (delta = 1 pose, in id order) of an estimate against a reference."""
+    ra, ta = align(trans, ref_trans)
+    pos = trans @ ra.T + ta
+    ate_t = float(np.sqrt(np.mean(np.sum((pos - ref_trans) ** 2, axis=1))))
+    rel = np.swapaxes(ref_rot, 1, 2) @ (ra[None] @ rot)
+    ate_r = float(np.degrees(np.sqrt(np.mean(_angles(rel) ** 2))))
+    r_est = np.swapaxes(rot[:-1], 1, 2) @ rot[1:]
+    t_est = np.einsum("kba,kb->ka", rot[:-1], trans[1:] - trans[:-1])
+    r_ref = np.swapaxes(ref_rot[:-1], 1, 2) @ ref_rot[1:]
+    t_ref = np.einsum("kba,kb->ka", ref_rot[:-1], ref_trans[1:] - ref_trans[:-1])
+    err_r = np.swapaxes(r_ref, 1, 2) @ r_est
+    err_t = np.einsum("kba,kb->ka", r_ref, t_est - t_ref)
+    rpe_t = float(np.sqrt(np.mean(np.sum(err_t ** 2, axis=1))))
+    rpe_r = float(np.degrees(np.sqrt(np.mean(_angles(err_r) ** 2))))
+    return TrajectoryError(ate_t, ate_r, rpe_t, rpe_r)
+
+
+# ---------------------------------------------------------------- one selection and its consequences
+@dataclass(frozen=True)
+class SparsifyRow:
+    budget_spec: str
+    budget: int
+    percent: float              # budget / candidates * 100
+    method: str
+    objective: str
+    value: float
+    base_value: float
+    upper_bound: float | None
+    certified_ratio: float | None
+    rounding: str | None
+    time_select: float          # selection + bounds, seconds
+    tree: float                 # eq. (75) lower bound of the pruned graph
+    fiedler: float              # lambda_2 of its rotation-weighted Laplacian
+    fim_logdet: float           # logdet F of the pruned graph at the full graph's optimum
+    crlb_trace: float           # trace F^{-1} there
+    solve_objective: float
+    certified: bool
+    ate_trans: float
+    ate_rot_deg: float
+    rpe_trans: float
+    rpe_rot_deg: float
+    time_solve: float
+    edges: int                  # kept edges
+
+
+def _evaluate(context: dict, keep_mask: np.ndarray) -> dict:
+    """Objective-independent measures of the kept edges (weights over all edges)."""
+    from ..fim import paper_fim
+    from ..linalg import SymbolicCholesky
+    from ..select import FiedlerObjective, pruned_graph, tree_objective
+    from ..selinv import trace_inverse
+
+    graph: PoseGraph = context["graph"]
+    ref = context["reference"]
+    anchor = context["anchor"]
+    x = keep_mask.astype(float)
+    tree = tree_objective(graph, anchor).value(x)
+    lam = FiedlerObjective(graph, graph.rotation_weight, anchor).value(x)
+    pruned = pruned_graph(graph, np.flatnonzero(keep_mask))
+    fim = paper_fim(pruned, ref.rot, ref.trans, anchor, variant="consistent")
+    f, ld = SymbolicCholesky(fim.matrix).factor_logdet(fim.matrix, "pruned graph FIM")
+    return {"tree": float(tree), "fiedler": float(lam), "fim_logdet": float(ld),
+            "crlb_trace": trace_inverse(fim.matrix, "pruned graph FIM", factor=f), "pruned": pruned}
+
+
+def _sparsify_task(context: dict, task: Task) -> dict:
+    import time
+
+    from ..select import select_edges
+    from ..sesync import solve
+
+    budget, label, objective, method = context["jobs"][task.trial]
+    graph = context["graph"]
+    t0 = time.perf_counter()
+    res = select_edges(graph, budget, objective=objective, method=method, split=context["split"],
+                       reference=context["reference"], certify=context["certify"], seed=context["seed"],
+                       anchor=context["anchor"], max_iter=context["max_iter"])
+    t_sel = time.perf_counter() - t0
+    keep = np.zeros(graph.m, dtype=bool)
+    keep[res.kept_edges] = True
+    ev = _evaluate(context, keep)
+    t0 = time.perf_counter()
+    sol = solve(ev.pop("pruned"), anchor=context["anchor"])
+    t_solve = time.perf_counter() - t0
+    ref = context["reference"]
+    err = trajectory_error(sol.rot, sol.trans, ref.rot, ref.trans)
+    cand = context["split"].candidates.size
+    return vars(SparsifyRow(
+        budget_spec=budget, budget=res.budget, percent=100.0 * res.budget / cand, method=label,
+        objective=objective, value=res.value, base_value=res.base_value, upper_bound=res.upper_bound,
+        certified_ratio=res.certified_ratio, rounding=res.rounding, time_select=t_sel, **ev,
+        solve_objective=float(sol.objective), certified=bool(sol.certified), **vars(err),
+        time_solve=t_solve, edges=int(res.kept_edges.size)))
+
+
+@dataclass
+class SparsifyResult:
+    dataset: str
+    path: str | None
+    sha256: str | None
+    dim: int
+    poses: int
+    edges: int
+    fixed: int
+    fixed_rule: str
+    candidates: int
+    anchor_id: int
+    objective: str
+    reference: dict                 # the full graph: solve objective, certificate, tree, fiedler, fim, crlb;
+                                    # "fixed_only": tree, fiedler, fim, crlb of the fixed edges alone
+    rows: list[dict]
+    budgets: list[str]
+    methods: list[str]
+    seed: int
+    seeds: list[dict] = field(default_factory=list)
+
+    def table_rows(self) -> list[dict]:
+        return self.rows
+
+
+def sparsify_experiment(graph: PoseGraph, budgets: Sequence[str] = DEFAULT_BUDGETS,
+                        methods: Sequence[str] | str = DEFAULT_METHODS, *, objective: str = "tree",
+                        fixed: str = "odometry", seed: int = 0, certify: bool = False,
+                        max_iter: int | None = None, anchor: int = 0, executor: str = "serial", jobs: int = 1,
+                        scheduler: str | None = None, progress: Callable[[int], None] | None = None
+                        ) -> SparsifyResult:
+    """Every (budget, method) pair: selection, bounds, and the pruned graph's certified solution.
+
+    The full graph is solved first (the reference for ATE/RPE and the point of every FIM);
+    raises SolverError when it cannot be certified."""
+    from ..errors import SolverError
+    from ..estimate import Estimate
+    from ..select import parse_budget, split_edges
+    from ..sesync import solve
+
+    budgets = parse_budgets(budgets)
+    triples = parse_methods(methods, objective)
+    split = split_edges(graph, fixed)
+    for b in budgets:
+        parse_budget(b, split.candidates.size)
+    full = solve(graph, anchor=anchor)
+    if not full.certified:
+        raise SolverError(f"{graph.name}: the full graph's optimum is not certified ({full.reason}); "
+                          "it cannot serve as the reference")
+    ref = Estimate(full.rot, full.trans, "solve", True, float(full.objective), float(full.times["total"]))
+    context = {"graph": graph, "split": split, "reference": ref, "anchor": anchor, "seed": seed,
+               "certify": certify, "max_iter": max_iter,
+               "jobs": [(b, label, obj, meth) for b in budgets for (label, obj, meth) in triples]}
+    ev = _evaluate(context, np.ones(graph.m, dtype=bool))
+    ev.pop("pruned")
+    fixed_only = np.zeros(graph.m, dtype=bool)
+    fixed_only[split.fixed] = True
+    base = _evaluate(context, fixed_only)
+    base.pop("pruned")
+    reference = {"solve_objective": float(full.objective), "certified": True, "time_solve": full.times["total"], **ev,
+                 "fixed_only": base}
+    tasks = make_tasks(seed, len(context["jobs"]), [(0,)])
+    rows = run_tasks(_sparsify_task, [context], tasks, executor=executor, jobs=jobs, scheduler=scheduler,
+                     progress=progress)
+    return SparsifyResult(
+        dataset=graph.name, path=graph.path, sha256=graph.sha256, dim=graph.dim, poses=graph.n, edges=graph.m,
+        fixed=int(split.fixed.size), fixed_rule=split.rule, candidates=int(split.candidates.size),
+        anchor_id=int(graph.ids[anchor]), objective=objective, reference=reference, rows=rows,
+        budgets=budgets, methods=[t[0] for t in triples], seed=seed,
+        seeds=[{"task": t.trial, "entropy": int(t.seed.entropy), "spawn_key": list(t.seed.spawn_key)} for t in tasks])
+
+
+def plot_sparsify(result: SparsifyResult, path) -> str:
+    """Share of the full graph's gain in the objective (``(f(S) - f(F)) / (f(all) - f(F))``),
+    lambda_2 and ATE against the budget, one line per method; written atomically."""
+    import os
+
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    fig, axes = plt.subplots(1, 3, figsize=(13.0, 3.8))
+    names = {"tree": "tree bound (eq. 75)", "fim": "logdet FIM", "fiedler": "$\\lambda_2$"}
+    key = "fim_logdet" if result.objective == "fim" else result.objective
+    top, bottom = result.reference[key], result.reference["fixed_only"][key]
+    for label in result.methods:
+        rows = sorted((r for r in result.rows if r["method"] == label), key=lambda r: r["percent"])
+        pct = [r["percent"] for r in rows]
+        axes[0].plot(pct, [(r[key] - bottom) / (top - bottom) for r in rows], marker="o", ms=3, label=label)
+        axes[1].plot(pct, [r["fiedler"] for r in rows], marker="o", ms=3, label=label)
+        axes[2].plot(pct, [r["ate_trans"] for r in rows], marker="o", ms=3, label=label)
+    axes[0].set_ylabel(f"{names[result.objective]}: share of the full gain")
+    axes[1].set_ylabel("algebraic connectivity $\\lambda_2$")
+    axes[2].set_ylabel("ATE translation vs full-graph optimum")
+    axes[2].set_yscale("symlog", linthresh=1e-3)
+    for ax in axes:
+        ax.set_xlabel("% of loop closures kept")
+        ax.grid(True, alpha=0.3)
+    axes[0].legend(fontsize=8)
+    fig.suptitle(f"{result.dataset}: {result.candidates} candidate loop closures, {result.fixed} fixed edges")
+    fig.tight_layout()
+    path = os.fspath(path)
+    os.makedirs(os.path.dirname(os.path.abspath(path)), exist_ok=True)
+    tmp = f"{path}.tmp"
+    fig.savefig(tmp, dpi=100, format="png")
+    plt.close(fig)
+    os.replace(tmp, path)
+    return path
