@@ -8,32 +8,23 @@ gains by selected inversion against random projections, and the fim objective on
 (greedy, with and without the certified solve of the full graph that fixes the estimate).
 Targets: tree greedy on city10000 at 20% <= 2 s; fim greedy on sphere2500 at 20% <= 30 s.
 Timings on a shared machine are provisional.
-Usage: python benchmarks/select.py [--repeat K] [--fim-repeat K] [--skip-engines] [NAME ...]
+Usage: python benchmarks/selection.py [--repeat K] [--fim-repeat K] [--skip-engines] [NAME ...]
 """
 from __future__ import annotations
 
+import argparse
+import logging
 import os
 import sys
+import time
 
-# This script is named like the standard library's ``select`` module (which subprocess, hence
-# scipy, imports). Load the real one before this directory goes on the path for ``_common``.
-_HERE = os.path.dirname(os.path.abspath(__file__))
-sys.path[:] = [p for p in sys.path if os.path.abspath(p or os.curdir) != _HERE]
-import select  # noqa: E402,F401  (the standard library's, cached in sys.modules)
+import numpy as np
 
-sys.path.insert(0, _HERE)
-
-import argparse  # noqa: E402
-import logging  # noqa: E402
-import time  # noqa: E402
-
-import numpy as np  # noqa: E402
-
-from _common import median_time  # noqa: E402
-from posecrb import datasets, load  # noqa: E402
-from posecrb.estimate import get_estimate  # noqa: E402
-from posecrb.select import select_edges, split_edges, tree_objective  # noqa: E402
-from posecrb.timing import timed  # noqa: E402
+from _common import median_time
+from posecrb import datasets, load
+from posecrb.estimate import get_estimate
+from posecrb.select import select_edges, split_edges, tree_objective
+from posecrb.timing import timed
 
 TREE_DATASETS = ("intel", "city10000", "sphere2500")
 BUDGETS = ("10%", "20%", "50%")
