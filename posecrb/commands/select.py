@@ -7,7 +7,7 @@ import click
 
 from ..errors import UsageError
 from ..report import print_rows
-from ._common import anchor_option, data_dir_option, format_option, load_dataset
+from ._common import FiniteFloat, anchor_option, data_dir_option, format_option, load_dataset
 
 log = logging.getLogger("posecrb")
 
@@ -61,7 +61,7 @@ def _summary(d: dict) -> list[dict]:
               help="Also run the relaxation for an upper bound (greedy, random, naive); relax always has it.")
 @click.option("--max-iter", type=click.IntRange(1, 100000), default=None,
               help="Frank-Wolfe iterations (default 100; fiedler 20 as MAC).")
-@click.option("--tol", type=click.FloatRange(min=0, min_open=True), default=1e-3, show_default=True,
+@click.option("--tol", type=FiniteFloat(min=0, min_open=True, max=1), default=1e-3, show_default=True,
               help="Stop Frank-Wolfe when the duality gap is below TOL x (bound - base value).")
 @click.option("--lazy", is_flag=True,
               help="Lazy greedy with a priority queue instead of the incremental greedy (same choice, "
