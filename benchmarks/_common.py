@@ -1,6 +1,6 @@
 """Shared by the benchmark scripts: the timing protocol, the dataset list, whole-process runs.
 
-In-process figures use ``median_time`` (posecrb.timing: one warm-up, then the median of k).
+In-process figures use ``median_time`` (posecrb.core.timing: one warm-up, then the median of k).
 Whole-process figures (``run_process``, ``alternate``) follow the same protocol one level up:
 one untimed warm-up run of every program (page cache, numba's on-disk cache), then k timed
 rounds in which the programs alternate run by run (the order flips every round so neither
@@ -34,8 +34,8 @@ REPO = Path(__file__).resolve().parents[1]
 if str(REPO) not in sys.path:  # run as `python benchmarks/x.py` from anywhere: measure this checkout
     sys.path.insert(0, str(REPO))
 
-from posecrb import datasets
-from posecrb.timing import timed
+from posecrb.datasets import search as datasets
+from posecrb.core.timing import timed
 
 # The 16 g2o files of the SE-Sync benchmark suite, 2D then 3D, each group by size.
 SESYNC_SUITE = ["CSAIL", "MIT", "intel", "kitti_05", "manhattan", "kitti_02", "kitti_00", "city10000",
@@ -45,7 +45,7 @@ THREAD_VARS = ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS", "NU
 
 
 def median_time(fn, repeat: int) -> float:
-    """Median wall time of ``fn`` over ``repeat`` runs after one warm-up (posecrb.timing)."""
+    """Median wall time of ``fn`` over ``repeat`` runs after one warm-up (posecrb.core.timing)."""
     return timed(fn, max(repeat, 2))[1]
 
 

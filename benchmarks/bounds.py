@@ -15,7 +15,7 @@ from sksparse.cholmod import cholesky
 
 from _common import dataset_args, median_time
 from posecrb import load
-from posecrb.bounds import compute_bounds, weighted_laplacians
+from posecrb.models.paper.bounds import compute_bounds, weighted_laplacians
 
 
 

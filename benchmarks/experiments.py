@@ -13,12 +13,12 @@ import numpy as np
 
 
 def main() -> None:
-    from posecrb import datasets
-    from posecrb.errors import DatasetNotFound
+    from posecrb.datasets import search as datasets
+    from posecrb.core.errors import DatasetNotFound
     from posecrb.experiments.crlb_sweep import _crlb_trial, anchor_poses, crlb_sweep, parse_levels
     from posecrb.io import load
-    from posecrb.montecarlo import make_tasks
-    from posecrb.sesync import solve
+    from posecrb.sim.montecarlo import make_tasks
+    from posecrb.solver import solve
 
     ap = argparse.ArgumentParser()
     ap.add_argument("--dataset", default="CSAIL")

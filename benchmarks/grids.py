@@ -2,7 +2,7 @@
 
 A grid of N poses is the full lattice of side ceil(N^(1/d)) (so 10^5 2D poses -> 317^2 = 100,489,
 2*10^4 3D poses -> 28^3 = 21,952) walked in boustrophedon order with a loop closure between every
-pair of lattice neighbours (posecrb.synth.grid), measurements perturbed by the paper's noise model
+pair of lattice neighbours (posecrb.sim.generators.grid), measurements perturbed by the paper's noise model
 with translation std SIGMA and rotation angle std SIGMA (tau = 1/SIGMA^2, kappa = 1/(2 SIGMA^2),
 as `posecrb datasets synth --noise SIGMA`), noise drawn from numpy.random.default_rng(SEED).
 ``--exact`` keeps the pose count as given (the walk is truncated).
@@ -61,7 +61,7 @@ def grid_file(dim: int, poses: int, sigma: float = DEFAULT_SIGMA, seed: int = 0,
     import numpy as np
 
     from posecrb.io import write_g2o
-    from posecrb.synth import grid
+    from posecrb.sim.generators import grid
 
     out_dir.mkdir(parents=True, exist_ok=True)
     graph = grid(dim, side, poses=n, tau=1.0 / sigma ** 2, kappa=1.0 / (2.0 * sigma ** 2), noise=True,

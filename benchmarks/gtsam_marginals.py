@@ -25,8 +25,9 @@ from pathlib import Path
 import numpy as np
 
 from _common import median_time
-from posecrb import datasets, load
-from posecrb.estimate import get_estimate
+from posecrb import load
+from posecrb.datasets import search as datasets
+from posecrb.solver.estimate import get_estimate
 from posecrb.io import write_g2o
 
 GTSAM_SCRIPT = r"""

@@ -28,15 +28,16 @@ import time
 
 import numpy as np
 
-from posecrb import datasets, load
+from posecrb import load
+from posecrb.datasets import search as datasets
 from posecrb.experiments.sparsify import _evaluate, trajectory_error
-from posecrb.select import (
+from posecrb.selection.select import (
     FiedlerObjective,
     parse_budget,
     select_edges,
     split_edges,
 )
-from posecrb.sesync import solve
+from posecrb.solver import solve
 
 DATASETS = ("intel", "city10000", "ais2klinik", "kitti_02", "kitti_05", "sphere2500")
 
@@ -91,7 +92,7 @@ def main() -> None:
     if not mac_python or not os.path.exists(mac_python):
         print("POSECRB_MAC_PYTHON is not set to a Python that can `import mac`: MAC comparison skipped")
         return
-    from posecrb.estimate import Estimate
+    from posecrb.solver.estimate import Estimate
 
     budgets = [b for b in args.budgets.split(",") if b]
     print(f"{'dataset':11s} {'budget':>6s} {'K':>5s} | {'MAC [s]':>8s} {'λ2 MAC':>10s} {'ub MAC':>10s} | "

@@ -2,12 +2,12 @@
 
 For every dataset (the SE-Sync g2o files, or the NAMEs given) and noisy 3D grids (2*10^3 and
 2*10^4 poses, 10^5 with --huge; --grids2 adds 2D grids), factors
-  lb   the reduced Laplacians L_tau and L_w (posecrb.bounds.weighted_laplacians): one symbolic
+  lb   the reduced Laplacians L_tau and L_w (posecrb.models.paper.bounds.weighted_laplacians): one symbolic
        analysis and two numeric factorizations with log-dets, as compute_bounds' lb does;
-  FIM  the anchored paper FIM (posecrb.fim.paper_fim, pose-major layout) at the file's vertices
+  FIM  the anchored paper FIM (posecrb.models.paper.fim.paper_fim, pose-major layout) at the file's vertices
        (an odometry estimate for edge-only files: the pattern, hence the ordering's cost, does not
        depend on the estimate): one analysis, one factorization, the log-det;
-  Mred the solver's sparse matrix M_red(s) = [[L_red, V_red], [V_red^T, C + s I]] (posecrb.sesync.problem:
+  Mred the solver's sparse matrix M_red(s) = [[L_red, V_red], [V_red^T, C + s I]] (posecrb.solver.problem:
        its factor is the trust-region preconditioner, refactored with -Lambda at every accepted
        iterate, and the certificate test), at the base shift s = gershgorin / 1e6: one analysis, one
        factorization (a solve runs one analysis and about 8-10 factorizations of this pattern);
@@ -170,9 +170,9 @@ def main(argv: list[str] | None = None) -> int:
     from threadpoolctl import threadpool_limits
 
     from posecrb import load
-    from posecrb.bounds import weighted_laplacians
-    from posecrb.fim import paper_fim
-    from posecrb.sesync.problem import Problem
+    from posecrb.models.paper.bounds import weighted_laplacians
+    from posecrb.models.paper.fim import paper_fim
+    from posecrb.solver.problem import Problem
 
     orderings = [o for o in args.orderings.split(",") if o]
     items = [] if args.no_real else [(p.stem, p) for p in suite_files(data_dir(args.data_dir), args.names)]

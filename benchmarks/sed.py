@@ -15,7 +15,7 @@ import statistics
 
 from _common import dataset_args, median_time
 from posecrb import load
-from posecrb.sed import sed_crb, sed_fim
+from posecrb.models.thesis.fim import sed_crb, sed_fim
 
 
 

@@ -1,4 +1,4 @@
-"""Measurement selection timings (posecrb.select): greedy, certificate, engines, the fim objective.
+"""Measurement selection timings (posecrb.selection.select): greedy, certificate, engines, the fim objective.
 
 Prints, for intel, city10000 and sphere2500 at 10%, 20% and 50% of the loop closures: the tree
 objective's greedy time (median of REPEAT after a warm-up), its value, the certified ratio from
@@ -21,10 +21,11 @@ import time
 import numpy as np
 
 from _common import median_time
-from posecrb import datasets, load
-from posecrb.estimate import get_estimate
-from posecrb.select import select_edges, split_edges, tree_objective
-from posecrb.timing import timed
+from posecrb import load
+from posecrb.datasets import search as datasets
+from posecrb.solver.estimate import get_estimate
+from posecrb.selection.select import select_edges, split_edges, tree_objective
+from posecrb.core.timing import timed
 
 TREE_DATASETS = ("intel", "city10000", "sphere2500")
 BUDGETS = ("10%", "20%", "50%")

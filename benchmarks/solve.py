@@ -1,4 +1,4 @@
-"""Benchmark of ``posecrb.sesync.solve`` on every shared dataset (issue 3).
+"""Benchmark of ``posecrb.solver.solve`` on every shared dataset (issue 3).
 
 For each dataset: median wall time of parse + solve over --repeat runs (warm-up once when
 repeat > 1; the timed region is ``load(path)`` followed by ``solve(graph)``, excluding the
@@ -26,7 +26,7 @@ import time
 from pathlib import Path
 
 from posecrb.io import load
-from posecrb.sesync import solve
+from posecrb.solver import solve
 
 # (F*, SE-Sync C++ seconds) from issue 3.
 REFERENCE = {

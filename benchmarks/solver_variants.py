@@ -1,10 +1,10 @@
-"""posecrb.sesync.solve with option variants, in-process, per dataset: where the solver's time goes.
+"""posecrb.solver.solve with option variants, in-process, per dataset: where the solver's time goes.
 
 For every dataset (default: the mid-size and large SE-Sync files) runs ``load`` once and then
 ``solve(graph, **variant)`` for each variant, alternating variant by variant, one warm-up round,
 then the median of --repeat rounds; prints total and phase times, trust-region iterations,
 Hessian-vector products, rank, certificate and the objective's relative difference to the
-baseline variant. Variants (keyword arguments of posecrb.sesync.solve):
+baseline variant. Variants (keyword arguments of posecrb.solver.solve):
   base          the defaults
   fixed-precond adaptive_precond=None: the regularised factor (Q + delta I)^-1 built once, as
                 SE-Sync's RegularizedCholesky, instead of (Q - Lambda + s I)^-1 refactored at
@@ -44,14 +44,14 @@ def main(argv: list[str] | None = None) -> int:
     args = ap.parse_args(argv)
     logging.getLogger("posecrb").setLevel(logging.ERROR)
     from posecrb import load
-    from posecrb.sesync import solve
+    from posecrb.solver import solve
 
     variants = [v for v in args.variants.split(",") if v]
     unknown = set(variants) - set(VARIANTS)
     if unknown:
         ap.error(f"unknown variants {sorted(unknown)}; choose from {sorted(VARIANTS)}")
     files = suite_files(data_dir(args.data_dir), args.names or DEFAULT_NAMES)
-    print_header("posecrb.sesync.solve option variants (in-process)", None,
+    print_header("posecrb.solver.solve option variants (in-process)", None,
                  [f"median of {args.repeat} alternating rounds after one warm-up round; times in seconds"])
     print(f"{'dataset':24s} {'variant':14s} {'total':>7s} {'init':>6s} {'optim':>7s} {'verify':>6s} {'its':>4s} "
           f"{'HVPs':>5s} {'rank':>4s} {'cert':>4s} {'objective':>18s} {'rel to base':>11s}")

@@ -1,6 +1,6 @@
 """posecrb: Fisher information, Cramér-Rao bounds and D-optimality bounds for pose-graph SLAM."""
-from .errors import PosecrbError
-from .graph import PoseGraph
+from .core.errors import PosecrbError
+from .core.graph import PoseGraph
 from .io import load
 
 __version__ = "0.1.0"

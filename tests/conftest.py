@@ -6,8 +6,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from posecrb.graph import PoseGraph
-from posecrb.lie import exp_so3, rot2
+from posecrb.core.graph import PoseGraph
+from posecrb.lie.so import exp_so3, rot2
 
 SHARED = Path(__file__).resolve().parents[2] / "shared" / "datasets"
 

@@ -4,8 +4,8 @@ import numpy as np
 import pytest
 
 from posecrb import load
-from posecrb.bounds import compute_bounds
-from posecrb.errors import DisconnectedGraph
+from posecrb.models.paper.bounds import compute_bounds
+from posecrb.core.errors import DisconnectedGraph
 
 from .conftest import make_random_graph
 from .numerics import EPS, MARGIN, logdet_atol, spd_condition, sum_atol
@@ -169,7 +169,7 @@ def test_cli_disconnected_graph_lists_components(tmp_path, capfd):
 def test_tree_lower_bound_of_lambda_min():
     """lambda_min(L_w) >= 1 / trace(L_w^{-1}) >= 1 / sum of tree resistances (dense check), and 0
     when a weight is not positive."""
-    from posecrb.bounds import tree_lambda_min_bound, weighted_laplacians
+    from posecrb.models.paper.bounds import tree_lambda_min_bound, weighted_laplacians
 
     for seed in range(4):
         g = make_random_graph(np.random.default_rng(seed), n=12, extra=9, dim=2 + seed % 2, parallel=2)
@@ -183,7 +183,7 @@ def test_tree_lower_bound_of_lambda_min():
 
 def _wide_weights_graph(dim: int, n: int = 300, seed: int = 10):
     """Random graph with isotropic information spanning 1e-6..1e12 (n > 200: the Lanczos path)."""
-    from posecrb.synth import random_graph
+    from posecrb.sim.generators import random_graph
 
     return random_graph(np.random.default_rng(seed), n, 2 * n, dim, info="isotropic",
                         tau_range=(1e-6, 1e12), kappa_range=(1e-6, 1e12))
@@ -194,7 +194,7 @@ def test_lambda_min_below_double_precision_is_a_status_never_negative(dim):
     """Weights spanning 18 orders of magnitude: lambda_min(L_w) sits below the rounding level
     eps ||L_w|| (so no double-precision method can resolve it); it is reported unavailable, and
     the gap bound uses the certified tree bound (finite, with a warning) instead of 'inf'."""
-    from posecrb.bounds import tree_lambda_min_bound
+    from posecrb.models.paper.bounds import tree_lambda_min_bound
 
     g = _wide_weights_graph(dim)
     b = compute_bounds(g)
@@ -204,7 +204,7 @@ def test_lambda_min_below_double_precision_is_a_status_never_negative(dim):
     assert lap_w == tree_lambda_min_bound(g.n, g.src, g.dst, g.rotation_weight, 0) > 0
     assert np.isfinite(b.gap_bound) and b.gap_bound_status.state == "warning"
     # premise, independently: the rounding level of L_w exceeds that lower bound by far
-    from posecrb.bounds import weighted_laplacians
+    from posecrb.models.paper.bounds import weighted_laplacians
 
     l_w = weighted_laplacians(g).l_w
     assert EPS * abs(l_w).sum(axis=0).max() > lap_w
@@ -212,7 +212,7 @@ def test_lambda_min_below_double_precision_is_a_status_never_negative(dim):
 
 def test_lambda_min_on_the_lanczos_path_matches_dense(shared_datasets):
     """n > 200: shift-invert Lanczos + Rayleigh quotient + inertia check against dense eigvalsh."""
-    from posecrb.bounds import weighted_laplacians
+    from posecrb.models.paper.bounds import weighted_laplacians
 
     g = load(shared_datasets / "MIT.g2o")
     b = compute_bounds(g)

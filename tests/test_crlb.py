@@ -1,4 +1,4 @@
-"""Paper-model CRLB (posecrb.crlb) against dense evaluations of eq. (67) and eq. (68), for both FIM
+"""Paper-model CRLB (posecrb.models.paper.crlb) against dense evaluations of eq. (67) and eq. (68), for both FIM
 variants (the consistent one also against the finite-difference Fisher information of the model),
 its statuses (eq. 68 outside its domain, accuracy of the inverse) and the CLI. Tolerances follow
 from the conditioning of each matrix (tests/numerics.py)."""
@@ -9,9 +9,9 @@ from dataclasses import replace
 import numpy as np
 import pytest
 
-from posecrb.crlb import CURVATURE_WARN, curvature_status, inverse_accuracy, paper_crlb
-from posecrb.errors import DisconnectedGraph, UsageError
-from posecrb.fim import FIM_VARIANTS, paper_fim
+from posecrb.models.paper.crlb import CURVATURE_WARN, curvature_status, inverse_accuracy, paper_crlb
+from posecrb.core.errors import DisconnectedGraph, UsageError
+from posecrb.models.paper.fim import FIM_VARIANTS, paper_fim
 
 from .conftest import make_random_graph
 from .numerics import EPS, MARGIN, assert_within, inverse_entry_atol, spd_condition, trace_inverse_rtol
@@ -176,7 +176,7 @@ def test_inverse_accuracy_against_dense_references():
     the estimator's guaranteed factor n (and in practice much closer)."""
     import scipy.sparse as sp
 
-    from posecrb.linalg import cholesky
+    from posecrb.linalg.cholesky import cholesky
 
     g = make_random_graph(np.random.default_rng(3), n=9, extra=6, dim=3)
     f = paper_fim(g, g.vertex_rot, g.vertex_trans, anchor=0).matrix
@@ -197,9 +197,9 @@ def test_inverse_accuracy_against_dense_references():
 
 def _bridge_graph(dim: int, weak: float):
     """Two 4-pose clusters (tau 100, kappa 1000) joined by one edge of precision ``weak``."""
-    from posecrb.graph import PoseGraph
-    from posecrb.noise import isotropic_information
-    from posecrb.synth import relative_poses, uniform_rotations
+    from posecrb.core.graph import PoseGraph
+    from posecrb.sim.sampling import isotropic_information
+    from posecrb.sim.generators import relative_poses, uniform_rotations
 
     rng = np.random.default_rng(2)
     src, dst = np.array([0, 1, 2, 0, 4, 5, 6, 4, 3]), np.array([1, 2, 3, 2, 5, 6, 7, 6, 4])
@@ -298,7 +298,7 @@ def test_cli_crlb_curvature_unavailable_is_null_with_reason(tmp_path, capsys):
     import json
 
     from posecrb.io import write_g2o
-    from posecrb.synth import grid
+    from posecrb.sim.generators import grid
 
     path = tmp_path / "weak.g2o"
     write_g2o(grid(3, 3, tau=100.0, kappa=1e-6, rng=0), path)

@@ -10,10 +10,10 @@ from pathlib import Path
 
 import pytest
 
-from posecrb import datasets as ds
+from posecrb.datasets import search as ds
 from posecrb.cli import main
 from posecrb.io import load
-from posecrb.manifest import (ManifestError, default_manifest_path, git_blob_file, load_manifest,
+from posecrb.datasets.manifest import (ManifestError, default_manifest_path, git_blob_file, load_manifest,
                               parse_manifest, sha256_file)
 
 REPO = Path(__file__).resolve().parents[1]

@@ -11,11 +11,11 @@ import numpy as np
 import pytest
 from click.testing import CliRunner
 
-from posecrb import synth
-from posecrb.errors import UsageError
+from posecrb.sim import generators as synth
+from posecrb.core.errors import UsageError
 from posecrb.experiments.crlb_sweep import anchor_poses, crlb_sweep, parse_levels, pose_errors, rotation_errors
-from posecrb.fim import paper_fim
-from posecrb.lie import exp_so3, hat3, rot2
+from posecrb.models.paper.fim import paper_fim
+from posecrb.lie.so import exp_so3, hat3, rot2
 
 
 # ---------------------------------------------------------------- crlb sweep
@@ -89,9 +89,9 @@ def test_consistent_fim_is_the_simulated_models_fim():
 def test_sweep_bounds_come_from_the_chosen_variant(variant):
     """mse_bound* = paper_crlb of the scaled noise model with the chosen FIM variant (default:
     the model's Fisher information); the variants differ in 3D."""
-    from posecrb.crlb import paper_crlb
+    from posecrb.models.paper.crlb import paper_crlb
     from posecrb.experiments.crlb_sweep import _bounds
-    from posecrb.noise import noise_model_graph
+    from posecrb.sim.sampling import noise_model_graph
 
     g = synth.grid(3, 2, tau=100.0, kappa=200.0, orientation="random", rng=3)
     rot, trans = anchor_poses(g.vertex_rot, g.vertex_trans, 0)
@@ -137,7 +137,7 @@ def test_crlb_sweep_bit_identical_across_executors():
 # ---------------------------------------------------------------- thesis
 def test_thesis_bounds_and_mle_on_noise_free_data():
     from posecrb.experiments import thesis as th
-    from posecrb.thesis_example import ANCHORS, left_information, thesis_graph, true_poses
+    from posecrb.models.thesis.example import ANCHORS, left_information, thesis_graph, true_poses
 
     fm, anch, quot, nb = th.thesis_bounds(3)
     assert np.allclose(quot, np.linalg.pinv(fm, rcond=1e-10), atol=1e-10 * np.abs(quot).max())
@@ -153,7 +153,7 @@ def test_thesis_bounds_and_mle_on_noise_free_data():
 
 def test_thesis_gradient_matches_finite_differences():
     from posecrb.experiments import thesis as th
-    from posecrb.thesis_example import left_information, sample_graph, true_poses
+    from posecrb.models.thesis.example import left_information, sample_graph, true_poses
 
     g = sample_graph(np.random.default_rng(5), 2)
     omega = np.repeat(left_information(), 2, axis=0)
@@ -211,7 +211,7 @@ def test_octagon_t_vs_d_optimality():
 
 
 def test_octagon_truth_is_the_solver_estimate():
-    from posecrb.sesync import solve
+    from posecrb.solver import solve
 
     g = synth.octagon([(1, 4), (2, 7), (3, 5)], radius=0.1)
     res = solve(g)
@@ -292,7 +292,7 @@ def test_tinygrid3d_mse_reaches_the_default_bound_not_eq64(shared_datasets):
     assert abs(lv.ratio - 1) < 3 * se + 0.05
     # the same truth as the sweep's (its certified solution, anchored), for the eq. (64) bound
     from posecrb.experiments.crlb_sweep import anchor_poses
-    from posecrb.sesync import solve
+    from posecrb.solver import solve
 
     sol = solve(g, anchor=0)
     rot, trans = anchor_poses(sol.rot, sol.trans, 0)

@@ -16,8 +16,8 @@ from pathlib import Path
 import pytest
 
 from posecrb.cli import main
-from posecrb.fetch import FetchError, fetch, fetch_many, target_path
-from posecrb.manifest import load_manifest
+from posecrb.datasets.fetch import FetchError, fetch, fetch_many, target_path
+from posecrb.datasets.manifest import load_manifest
 
 
 class _Handler(http.server.BaseHTTPRequestHandler):
@@ -198,7 +198,7 @@ def test_fetch_many_continues_after_a_failure(server, tmp_path, monkeypatch):
     from dataclasses import replace
 
     entries = [replace(bad, url="https://127.0.0.1:1/never"), good]
-    monkeypatch.setattr("posecrb.fetch._check_url", lambda u, allow_http: None)
+    monkeypatch.setattr("posecrb.datasets.fetch._check_url", lambda u, allow_http: None)
     entries[1] = replace(good, url=f"{url}/tinyGrid3D.g2o")
     res = fetch_many(entries, dest=tmp_path / "dest", manifest=man, timeout=5)
     assert [r.status for r in res] == ["failed", "downloaded"] and res[0].error
@@ -293,7 +293,7 @@ def test_response_larger_than_the_manifest_size_is_aborted(hostile_server, tmp_p
 def test_size_cap_without_a_manifest_size():
     from dataclasses import replace
 
-    from posecrb.fetch import MAX_UNKNOWN_SIZE, size_cap
+    from posecrb.datasets.fetch import MAX_UNKNOWN_SIZE, size_cap
 
     entry = load_manifest().get("intel")
     assert size_cap(entry) == entry.size

@@ -1,7 +1,7 @@
-"""The paper FIM (posecrb.fim) against dense references: finite-difference Jacobians of the
+"""The paper FIM (posecrb.models.paper.fim) against dense references: finite-difference Jacobians of the
 translation residuals, dense loops for the rotation Laplacian and Psi (eq. 41 / 63) for eq. (64)
 as printed; finite-difference Jacobians of the translation AND relative-rotation residuals (scipy's
-rotation vectors, not posecrb.lie) for the frame-consistent Fisher information."""
+rotation vectors, not posecrb.lie.so) for the frame-consistent Fisher information."""
 from __future__ import annotations
 
 from dataclasses import replace
@@ -9,13 +9,13 @@ from dataclasses import replace
 import numpy as np
 import pytest
 
-from posecrb.errors import DisconnectedGraph, NotPositiveDefinite
+from posecrb.core.errors import DisconnectedGraph, NotPositiveDefinite
 from scipy.spatial.transform import Rotation
 
-from posecrb.bounds import t_optimality
-from posecrb.fim import FIM_VARIANTS, fim_logdet, fim_symbolic, paper_fim, trace_fim
-from posecrb.lie import exp_so3, rot2
-from posecrb.noise import rotation_weight
+from posecrb.models.paper.bounds import t_optimality
+from posecrb.models.paper.fim import FIM_VARIANTS, fim_logdet, fim_symbolic, paper_fim, trace_fim
+from posecrb.lie.so import exp_so3, rot2
+from posecrb.sim.sampling import rotation_weight
 
 from .conftest import make_random_graph
 from .numerics import assert_within, logdet_atol, psd_sum_tolerance, sum_atol
@@ -403,7 +403,7 @@ def test_cli_fim_sed_near_singular_bridge_is_a_status(dim, tmp_path, capsys):
     import json
 
     from posecrb.io import load, write_g2o
-    from posecrb.sed import sed_fim
+    from posecrb.models.thesis.fim import sed_fim
 
     from .test_crlb import _bridge_graph
 

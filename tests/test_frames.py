@@ -1,7 +1,7 @@
 """World <-> body frame conversion of the thesis model against a dense finite-difference reference.
 
-The reference never uses posecrb.frames or posecrb.sed: it differentiates the g2o/GTSAM error
-``e_ij = Log(z^{-1} X_i^{-1} X_j)`` (scipy's expm, posecrb.se_lie's checked Log) under body-frame retractions
+The reference never uses posecrb.models.thesis.frames or posecrb.models.thesis.fim: it differentiates the g2o/GTSAM error
+``e_ij = Log(z^{-1} X_i^{-1} X_j)`` (scipy's expm, posecrb.lie.se's checked Log) under body-frame retractions
 ``X_i expm(hat(xi_i))`` with ``xi`` in GTSAM's order (Pose2 (x, y, theta), Pose3 (rotation,
 translation)) and weights it with the file's information matrix reordered the same way: the
 Hessian GTSAM builds, in dense numpy.
@@ -16,11 +16,11 @@ import pytest
 import scipy.sparse as sp
 from scipy.linalg import expm
 
-from posecrb import se_lie as L
-from posecrb.frames import (FRAMES, body_map, convert_covariance_blocks, convert_information, coordinate_names,
+from posecrb.lie import se as L
+from posecrb.models.thesis.frames import (FRAMES, body_map, convert_covariance_blocks, convert_information, coordinate_names,
                             sed_crb_in_frame, world_map)
-from posecrb.graph import PoseGraph
-from posecrb.sed import kernel_basis, sed_crb, sed_fim
+from posecrb.core.graph import PoseGraph
+from posecrb.models.thesis.fim import kernel_basis, sed_crb, sed_fim
 
 from .conftest import make_random_graph
 
@@ -217,7 +217,7 @@ def test_world_frame_is_sed_crb_unchanged():
 
 
 def test_coordinate_names_and_bad_frame():
-    from posecrb.errors import UsageError
+    from posecrb.core.errors import UsageError
 
     assert FRAMES == ("world", "body")
     assert coordinate_names(2, "body") == ["x", "y", "theta"]

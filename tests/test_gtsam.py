@@ -3,7 +3,7 @@
 Runs only where ``gtsam`` imports (``pip install posecrb[gtsam]``). GTSAM builds its own
 Hessian from ``BetweenFactorPose2/3`` (error ``Log(z^{-1} X_i^{-1} X_j)``, body-frame
 retraction, analytic Jacobians) and ``gtsam.Marginals`` inverts it; posecrb's
-``crlb --model sed --frame body`` must give the same per-pose blocks (posecrb.frames).
+``crlb --model sed --frame body`` must give the same per-pose blocks (posecrb.models.thesis.frames).
 
 Gauge: posecrb's anchored bound (thesis 5.1) fixes the anchor pose exactly. On the GTSAM
 side the anchor is not a variable; each of its edges becomes a prior on the other pose
@@ -20,9 +20,9 @@ import pytest
 
 gtsam = pytest.importorskip("gtsam", reason="gtsam is not installed (pip install 'posecrb[gtsam]')")
 
-from posecrb.estimate import get_estimate  # noqa: E402
-from posecrb.frames import sed_crb_in_frame  # noqa: E402
-from posecrb.graph import PoseGraph  # noqa: E402
+from posecrb.solver.estimate import get_estimate  # noqa: E402
+from posecrb.models.thesis.frames import sed_crb_in_frame  # noqa: E402
+from posecrb.core.graph import PoseGraph  # noqa: E402
 from posecrb.io import load  # noqa: E402
 
 from .test_frames import body_fim_reference, consistent_graph, free_dofs, gtsam_information  # noqa: E402

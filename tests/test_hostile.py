@@ -202,7 +202,7 @@ def test_experiment_crlb_on_hostile_input(tmp_path, tmp_path_factory, capsys, na
 @pytest.mark.parametrize("name", ["information_1e308", "ids_beyond_2p53"])
 def test_datasets_verify_parses_hostile_files(tmp_path, capsys, monkeypatch, name):
     """A hostile file under a manifest name on the search path: exit 1 (file:line or checksum)."""
-    import posecrb.datasets as ds
+    import posecrb.datasets.search as ds
 
     d = tmp_path / "data"
     d.mkdir()
@@ -281,7 +281,7 @@ def test_python_m_posecrb_with_runtime_warnings_as_errors(tmp_path, name):
 
 def test_a_runtime_warning_reaches_the_user_as_one_log_line(tmp_path, capsys, monkeypatch):
     """The safety net in main(): a warning nobody silenced at its source becomes one line."""
-    import posecrb.commands.info as info_cmd
+    import posecrb.cli.commands.info as info_cmd
 
     real = info_cmd.graph_info
 
@@ -320,7 +320,7 @@ def _all_params():
 def test_every_float_option_uses_the_validated_type():
     import click
 
-    from posecrb.commands._common import POSE_ID, FiniteFloat
+    from posecrb.cli.options import POSE_ID, FiniteFloat
 
     floats = [(" ".join(path), p.name) for path, p in _all_params() if isinstance(p.type, click.types.FloatParamType)]
     assert floats, "no float option found"
@@ -362,8 +362,8 @@ def test_bad_float_option_values_exit_2(tmp_path, capsys, base, option, value):
 @pytest.mark.timeout(60)
 @pytest.mark.parametrize("tol", [float("nan"), float("inf"), -1.0])
 def test_solver_rejects_a_bad_certificate_tolerance_instead_of_looping(tol):
-    from posecrb.errors import PosecrbError
-    from posecrb.sesync import solve
+    from posecrb.core.errors import PosecrbError
+    from posecrb.solver import solve
 
     f = CASES["crlf_line_ends"].clean
     from posecrb.io import parse_text
@@ -386,7 +386,7 @@ def test_pose_id_options_are_integers_that_fit_int64(tmp_path, capsys):
 
 # ---------------------------------------------------------------- outputs never destroy data
 def test_solve_refuses_to_write_over_its_input(tmp_path, capsys, monkeypatch):
-    import posecrb.commands.solve as solve_cmd
+    import posecrb.cli.commands.solve as solve_cmd
 
     monkeypatch.setattr(solve_cmd, "solve", lambda *a, **k: pytest.fail("solved before checking --out"))
     f = write_clean(CASES["crlf_line_ends"], tmp_path)
@@ -424,20 +424,20 @@ def test_output_locations_are_checked_before_the_work(tmp_path, capsys, monkeypa
     """A 70 s solve ended in `internal error: FileNotFoundError`: now exit 2 at once."""
     import importlib
 
-    import posecrb.estimate
-    import posecrb.regress
-    import posecrb.tables
+    import posecrb.solver.estimate
+    import posecrb.metrics.regress
+    import posecrb.metrics.tables
 
     sweep = importlib.import_module("posecrb.experiments.crlb_sweep")
 
     def forbidden(*a, **k):
         pytest.fail("work started before the output location was checked")
 
-    for mod, name in ((posecrb.estimate, "from_solver"), (posecrb.tables, "build_rows"),
-                      (sweep, "crlb_sweep"), (posecrb.regress, "compute_metrics")):
+    for mod, name in ((posecrb.solver.estimate, "from_solver"), (posecrb.metrics.tables, "build_rows"),
+                      (sweep, "crlb_sweep"), (posecrb.metrics.regress, "compute_metrics")):
         monkeypatch.setattr(mod, name, forbidden)
-    import posecrb.commands.solve as solve_cmd
-    import posecrb.commands.regress as regress_cmd
+    import posecrb.cli.commands.solve as solve_cmd
+    import posecrb.cli.commands.regress as regress_cmd
     monkeypatch.setattr(solve_cmd, "solve", forbidden)
     monkeypatch.setattr(regress_cmd, "compute_metrics", forbidden)
     f = write_clean(CASES["crlf_line_ends"], tmp_path)

@@ -12,7 +12,7 @@ import pytest
 
 from posecrb import load
 from posecrb.cli import main
-from posecrb.errors import ParseError
+from posecrb.core.errors import ParseError
 from posecrb.io import parse_text, write_g2o
 
 INFO2 = "10 1 0 20 0 5"            # g2o upper triangle: I11 I12 I13 I22 I23 I33
@@ -210,7 +210,7 @@ def test_raw_quaternions_leave_2d_and_toro_alone():
 
 
 def test_raw_quaternions_still_reject_zero_and_bad_mode():
-    from posecrb.errors import UsageError
+    from posecrb.core.errors import UsageError
 
     with pytest.raises(ParseError, match="zero quaternion"):
         parse_text(f"EDGE_SE3:QUAT 0 1 0 0 0 0 0 0 0 {INFO3}\n", "z.g2o", quaternions="raw")
@@ -351,7 +351,7 @@ def test_write_g2o_leaves_a_users_tmp_file_alone(tmp_path, random_graph):
 
 @pytest.mark.parametrize("exc_type", [RuntimeError, KeyboardInterrupt])
 def test_failed_write_keeps_the_previous_file_and_no_temporary(tmp_path, exc_type):
-    from posecrb.io.files import atomic_write
+    from posecrb.core.files import atomic_write
 
     f = tmp_path / "result.txt"
     f.write_text("previous\n")
@@ -365,7 +365,7 @@ def test_failed_write_keeps_the_previous_file_and_no_temporary(tmp_path, exc_typ
 def test_fim_npz_write_failure_keeps_the_previous_file(tmp_path, monkeypatch):
     import scipy.sparse as sp
 
-    from posecrb.commands import fim as fim_cmd
+    from posecrb.cli.commands import fim as fim_cmd
 
     target = tmp_path / "f.npz"
     target.write_bytes(b"previous")
@@ -384,7 +384,7 @@ def test_fim_npz_write_failure_keeps_the_previous_file(tmp_path, monkeypatch):
 
 
 def test_atomic_write_permissions(tmp_path):
-    from posecrb.io.files import write_text
+    from posecrb.core.files import write_text
 
     new = write_text(tmp_path / "new.txt", "x")
     umask = os.umask(0)
@@ -408,8 +408,8 @@ def test_sigterm_during_a_write_removes_the_temporary(tmp_path):
     script.write_text(
         "import os, signal, sys, time\n"
         "from posecrb.cli import main\n"
-        "import posecrb.commands.info as info\n"
-        "from posecrb.io.files import atomic_write\n"
+        "import posecrb.cli.commands.info as info\n"
+        "from posecrb.core.files import atomic_write\n"
         "def slow(graph):\n"
         f"    with atomic_write({str(target)!r}) as fh:\n"
         "        fh.write('partial')\n"
@@ -431,8 +431,8 @@ def test_sigterm_during_a_write_removes_the_temporary(tmp_path):
 
 
 def test_ctrl_c_during_a_write_exits_130_and_removes_the_temporary(tmp_path, monkeypatch, capsys):
-    import posecrb.commands.info as info
-    from posecrb.io.files import atomic_write
+    import posecrb.cli.commands.info as info
+    from posecrb.core.files import atomic_write
 
     target = tmp_path / "out" / "result.txt"
     target.parent.mkdir()

@@ -15,9 +15,9 @@ import numpy as np
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
-from posecrb.graph import PoseGraph
+from posecrb.core.graph import PoseGraph
 from posecrb.io import load, write_g2o
-from posecrb.lie import exp_so3, rot2
+from posecrb.lie.so import exp_so3, rot2
 
 EPS = np.finfo(float).eps
 MAX_ID = 2 ** 53  # largest vertex id drawn

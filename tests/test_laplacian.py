@@ -2,7 +2,7 @@
 import numpy as np
 import pytest
 
-from posecrb.laplacian import laplacian, reduced_laplacian
+from posecrb.linalg.laplacian import laplacian, reduced_laplacian
 
 
 def _incidence(n, src, dst):

@@ -20,10 +20,10 @@ from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
 # The library's names for the closed forms, in one place.
-from posecrb.lie import angle2 as so2_log
-from posecrb.lie import exp_so3 as so3_exp
-from posecrb.lie import rot2 as so2_exp
-from posecrb.se_lie import (
+from posecrb.lie.so import angle2 as so2_log
+from posecrb.lie.so import exp_so3 as so3_exp
+from posecrb.lie.so import rot2 as so2_exp
+from posecrb.lie.se import (
     from_homogeneous,
     se2_adjoint,
     se2_exp,

@@ -3,8 +3,8 @@ import numpy as np
 import pytest
 import scipy.sparse as sp
 
-from posecrb.errors import NotPositiveDefinite
-from posecrb.linalg import SymbolicCholesky, lambda_min, logdet
+from posecrb.core.errors import NotPositiveDefinite
+from posecrb.linalg.cholesky import SymbolicCholesky, lambda_min, logdet
 
 from .numerics import EPS, MARGIN, logdet_atol
 

@@ -4,8 +4,8 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from posecrb.errors import UsageError
-from posecrb.montecarlo import (
+from posecrb.core.errors import UsageError
+from posecrb.sim.montecarlo import (
     Task, demo_trial, level_key, make_tasks, mean_and_stderr, run_tasks, seed_record, trial_seeds,
 )
 

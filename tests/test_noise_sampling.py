@@ -2,7 +2,7 @@
 
 References are independent of the samplers: numerically integrated angle
 densities (scipy quad, cross-checked against the Bessel closed forms of the
-normalisers), eq. (59) through posecrb.noise.omega (itself tested against mpmath),
+normalisers), eq. (59) through posecrb.sim.sampling.omega (itself tested against mpmath),
 and plain moment identities.
 """
 from __future__ import annotations
@@ -12,9 +12,9 @@ import pytest
 from scipy import integrate, stats
 from scipy.special import ive
 
-from posecrb.graph import PoseGraph
-from posecrb.lie import angle2, rot2
-from posecrb.noise import (
+from posecrb.core.graph import PoseGraph
+from posecrb.lie.so import angle2, rot2
+from posecrb.sim.sampling import (
     isotropic_information, isotropic_precisions, noise_model_graph, omega, perturb_measurements,
     sample_isotropic_gaussian, sample_langevin_angle_so2, sample_langevin_angle_so3,
     sample_langevin_so2, sample_langevin_so3, sample_se_noise, scaled_precisions,
@@ -154,7 +154,7 @@ def test_perturb_measurements_follows_eq80(dim, scale):
     if dim == 2:
         rot_true = rot2(np.array([0.3, -1.1]))
     else:
-        from posecrb.lie import exp_so3
+        from posecrb.lie.so import exp_so3
         rot_true = exp_so3(np.array([[0.2, -0.4, 0.9], [-1.0, 0.3, 0.1]]))
     trans_true = rng.normal(size=(2, dim))
     p = perturb_measurements(g, rot_true, trans_true, rng, kc=kc, scale=scale)
@@ -193,9 +193,9 @@ def test_scaled_precisions_overrides_and_validation():
 @pytest.mark.parametrize("dim", [2, 3])
 def test_perturb_left_is_left_multiplicative(dim):
     """H = Exp(xi) T  =>  Log(H T^{-1}) = xi (thesis 4.3, Prop. 4.3.2)."""
-    from posecrb.lie import exp_so3
-    from posecrb.noise import perturb_left
-    from posecrb.se_lie import se_compose, se_inverse, se_log
+    from posecrb.lie.so import exp_so3
+    from posecrb.sim.sampling import perturb_left
+    from posecrb.lie.se import se_compose, se_inverse, se_log
 
     rng = np.random.default_rng(9)
     q = 3 if dim == 2 else 6

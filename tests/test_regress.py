@@ -4,7 +4,7 @@ import json
 import pytest
 
 from posecrb.cli import main
-from posecrb.regress import compare, default_expected_path, load_expected
+from posecrb.metrics.regress import compare, default_expected_path, load_expected
 
 # The CI subset (well under the 3-minute budget); `make regress` runs every dataset.
 CI_SUBSET = ["CSAIL", "intel", "MIT", "kitti_05", "tinyGrid3D", "smallGrid3D"]
@@ -63,7 +63,7 @@ def test_changed_fim_variant_is_reported_not_compared():
 
 
 def test_save_expected_is_atomic_and_leaves_no_temporary(tmp_path):
-    from posecrb.regress import save_expected
+    from posecrb.metrics.regress import save_expected
 
     target = tmp_path / "expected.json"
     target.write_text("{}")

@@ -6,8 +6,8 @@ import numpy as np
 import pytest
 from scipy.linalg import expm, logm
 
-from posecrb import se_lie as L
-from posecrb.lie import exp_so3
+from posecrb.lie import se as L
+from posecrb.lie.so import exp_so3
 
 from .numerics import EPS, MARGIN
 

@@ -8,12 +8,12 @@ import numpy as np
 import pytest
 from scipy.linalg import expm
 
-from posecrb import se_lie as L
-from posecrb import thesis_example as te
-from posecrb.errors import NotPositiveDefinite, UsageError
-from posecrb.graph import PoseGraph
+from posecrb.lie import se as L
+from posecrb.models.thesis import example as te
+from posecrb.core.errors import NotPositiveDefinite, UsageError
+from posecrb.core.graph import PoseGraph
 from posecrb.io import load
-from posecrb.sed import edge_residuals, kernel_basis, left_information, sed_crb, sed_fim
+from posecrb.models.thesis.fim import edge_residuals, kernel_basis, left_information, sed_crb, sed_fim
 
 from .conftest import make_random_graph
 from .numerics import (EPS, MARGIN, assert_within, inverse_entry_atol, pinv_entry_atol, pinv_trace_rtol,

@@ -1,4 +1,4 @@
-"""Measurement selection (posecrb.select) against independent dense references and brute force.
+"""Measurement selection (posecrb.selection.select) against independent dense references and brute force.
 
 References: dense Laplacians and Fisher information matrices assembled here edge by edge (the
 FIM's per-edge Jacobians written out from the residuals and checked against the finite-difference
@@ -16,10 +16,10 @@ import numpy as np
 import pytest
 from scipy.special import ive
 
-from posecrb.errors import DisconnectedGraph, ParseError, UsageError
-from posecrb.estimate import from_vertices
-from posecrb.graph import PoseGraph
-from posecrb.select import (
+from posecrb.core.errors import DisconnectedGraph, ParseError, UsageError
+from posecrb.solver.estimate import from_vertices
+from posecrb.core.graph import PoseGraph
+from posecrb.selection.select import (
     DisconnectedFixedSet,
     fim_objective,
     frank_wolfe,
@@ -201,7 +201,7 @@ def test_objectives_match_dense_values_on_random_subsets(dim):
 
 
 def test_fiedler_value_by_lanczos_on_a_large_graph_matches_eigvalsh():
-    from posecrb.select import FiedlerObjective
+    from posecrb.selection.select import FiedlerObjective
 
     rng = np.random.default_rng(6)
     g = chain_graph(rng, n=420, extra=300, dim=2)
@@ -224,7 +224,7 @@ def test_tree_objective_merges_proportional_weights_exactly():
 
 
 def test_tree_value_equals_bounds_lb_on_the_pruned_graph():
-    from posecrb.bounds import compute_bounds
+    from posecrb.models.paper.bounds import compute_bounds
 
     g = chain_graph(np.random.default_rng(4), n=9, extra=10, dim=3)
     res = select_edges(g, 4)
@@ -294,7 +294,7 @@ def test_fused_single_laplacian_greedy_agrees_with_the_other_engines(seed):
 
 @pytest.mark.parametrize("uniform", [False, True])
 def test_incremental_greedy_refresh_does_not_change_the_choice(monkeypatch, uniform):
-    import posecrb.select as sel
+    import posecrb.selection.select as sel
 
     g = chain_graph(np.random.default_rng(3), n=14, extra=40, dim=2, uniform=uniform)
     if uniform:
@@ -493,7 +493,7 @@ def test_cli_fixed_file_errors(g2o_path, tmp_path, capsys):
 
 # ----------------------------------------------------------------------------- real data
 def test_intel_tree_greedy_value_and_certificate(shared_datasets):
-    from posecrb.bounds import compute_bounds
+    from posecrb.models.paper.bounds import compute_bounds
     from posecrb.io import load
 
     g = load(shared_datasets / "intel.g2o")
@@ -505,13 +505,13 @@ def test_intel_tree_greedy_value_and_certificate(shared_datasets):
 
 
 def test_small_grid_fim_value_is_the_consistent_fim_logdet(shared_datasets):
-    from posecrb.fim import fim_logdet, paper_fim
+    from posecrb.models.paper.fim import fim_logdet, paper_fim
     from posecrb.io import load
 
     g = load(shared_datasets / "smallGrid3D.g2o")
     res = select_edges(g, "20%", objective="fim", estimate="solve")
     assert res.estimate["certified"]
-    from posecrb.estimate import get_estimate
+    from posecrb.solver.estimate import get_estimate
 
     est = get_estimate(g, "solve")
     f = paper_fim(pruned_graph(g, res.kept_edges), est.rot, est.trans, 0, variant="consistent")
@@ -572,7 +572,7 @@ def test_sparsify_experiment_rows_and_executors():
 
 
 def from_reference(g):
-    from posecrb.estimate import get_estimate
+    from posecrb.solver.estimate import get_estimate
 
     return get_estimate(g, "solve")
 

@@ -1,13 +1,13 @@
-"""Selected inversion (posecrb.selinv) against numpy's dense inverse."""
+"""Selected inversion (posecrb.linalg.selinv) against numpy's dense inverse."""
 from __future__ import annotations
 
 import numpy as np
 import pytest
 import scipy.sparse as sp
 
-from posecrb.errors import NotPositiveDefinite
-from posecrb.linalg import cholesky
-from posecrb.selinv import diagonal_inverse, inverse_block_diagonal, trace_inverse
+from posecrb.core.errors import NotPositiveDefinite
+from posecrb.linalg.cholesky import cholesky
+from posecrb.linalg.selinv import diagonal_inverse, inverse_block_diagonal, trace_inverse
 
 from .numerics import assert_within, inverse_entry_atol, trace_inverse_rtol
 
@@ -91,7 +91,7 @@ def test_real_fim_blocks_match_sparse_lu_solves(shared_datasets, name, stride):
     """Per-pose blocks of a real FIM's inverse against columns from an independent sparse LU."""
     from scipy.sparse.linalg import splu
 
-    from posecrb.fim import paper_fim
+    from posecrb.models.paper.fim import paper_fim
     from posecrb.io import load
 
     g = load(shared_datasets / name)

@@ -31,7 +31,7 @@ import numpy as np
 import pytest
 
 from posecrb.io import load
-from posecrb.sesync import solve
+from posecrb.solver import solve
 
 from .numerics import objective_atol, suboptimality_bound
 

@@ -8,10 +8,10 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from posecrb.sesync.problem import Problem
-from posecrb.sesync.staircase import RelaxedModel
-from posecrb.sesync.stiefel import project, random_point, remove_vertical, retract
-from posecrb.sesync.synthetic import random_pose_graph
+from posecrb.solver.problem import Problem
+from posecrb.solver.staircase import RelaxedModel
+from posecrb.solver.stiefel import project, random_point, remove_vertical, retract
+from .helpers import random_pose_graph
 
 
 def dense_M(graph):

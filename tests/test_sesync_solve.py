@@ -1,4 +1,4 @@
-"""End-to-end behaviour of the certified solver (posecrb.sesync.solve)."""
+"""End-to-end behaviour of the certified solver (posecrb.solver.solve)."""
 from __future__ import annotations
 
 import json
@@ -7,16 +7,16 @@ import numpy as np
 import pytest
 from click.testing import CliRunner
 
-from posecrb.errors import DisconnectedGraph
-from posecrb.graph import PoseGraph
+from posecrb.core.errors import DisconnectedGraph
+from posecrb.core.graph import PoseGraph
 from posecrb.io import load
-from posecrb.lie import project_to_so, rot2
-from posecrb.sesync import solve
-from posecrb.sesync.problem import Problem
-from posecrb.sesync.staircase import RelaxedModel, verify
-from posecrb.sesync.stiefel import lift, random_point
-from posecrb.sesync.synthetic import random_pose_graph, random_rotations
-from posecrb.sesync.trust_region import TROptions, trust_region
+from posecrb.lie.so import project_to_so, rot2
+from posecrb.solver import solve
+from posecrb.solver.problem import Problem
+from posecrb.solver.staircase import RelaxedModel, verify
+from posecrb.solver.stiefel import lift, random_point
+from .helpers import random_pose_graph, random_rotations
+from posecrb.solver.trust_region import TROptions, trust_region
 
 from .numerics import EPS, MARGIN, objective_atol, suboptimality_bound
 
@@ -171,7 +171,7 @@ def test_cli_json_and_out(shared_datasets, tmp_path):
 def test_cli_uncertified_exit_code(shared_datasets, tmp_path, monkeypatch):
     from dataclasses import replace
 
-    import posecrb.commands.solve as solve_cmd
+    import posecrb.cli.commands.solve as solve_cmd
     from posecrb.cli import main
 
     # An uncertified result (negative tolerances, the old way to force one, are now rejected
@@ -249,7 +249,7 @@ def test_non_orthogonal_measurements_use_sesync_objective(dim):
     state = model.evaluate(Z)
     assert state.f == pytest.approx(relaxed_value_dense(g, Z), rel=1e-12)
     # Riemannian gradient against central differences along a retraction.
-    from posecrb.sesync.stiefel import inner, project, retract
+    from posecrb.solver.stiefel import inner, project, retract
 
     V = project(Z, np.random.default_rng(2).standard_normal(Z.shape))
     h = 1e-5

@@ -9,7 +9,8 @@ from scipy.sparse import coo_matrix
 from scipy.sparse.csgraph import connected_components
 from scipy.spatial.transform import Rotation
 
-from posecrb import load, synth
+from posecrb import load
+from posecrb.sim import generators as synth
 from posecrb.cli import main
 from posecrb.io import write_g2o
 

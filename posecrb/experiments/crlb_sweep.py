@@ -2,7 +2,7 @@
 
 Ground truth: the certified SE-Sync estimate of the dataset (anchored so that the
 anchor pose is the identity). For each noise level k_c, every trial regenerates
-all measurements from the truth by eq. (80) (``posecrb.noise.perturb_measurements``:
+all measurements from the truth by eq. (80) (``posecrb.sim.sampling.perturb_measurements``:
 Langevin rotation noise with concentration ``k_c kappa``, Gaussian translation
 noise with precision ``k_c tau`` for ``scale="both"`` or ``tau`` for
 ``scale="rotation"``), solves the perturbed graph with the certified solver (the
@@ -23,7 +23,7 @@ by n_p; it is compared to ``trace(CRLB) / n_p`` with the FIM of the *scaled* noi
 model evaluated at the truth (3D: with and without the curvature term of eq. 68).
 The FIM is the Fisher information of the simulated model by default (``fim_variant=
 "consistent"``); ``fim_variant="eq64"`` compares with eq. (64) as printed instead (the module
-docstring of ``posecrb.fim`` says why they differ in 3D). Every row names its variant.
+docstring of ``posecrb.models.paper.fim`` says why they differ in 3D). Every row names its variant.
 """
 from __future__ import annotations
 
@@ -35,9 +35,9 @@ from typing import Callable, Sequence
 
 import numpy as np
 
-from ..errors import UsageError
-from ..graph import PoseGraph
-from ..montecarlo import Task, level_key, make_tasks, mean_and_stderr, run_tasks
+from ..core.errors import UsageError
+from ..core.graph import PoseGraph
+from ..sim.montecarlo import Task, level_key, make_tasks, mean_and_stderr, run_tasks
 
 MAX_LEVELS = 1000
 
@@ -98,10 +98,10 @@ def rotation_errors(rot_true: np.ndarray, rot_est: np.ndarray) -> np.ndarray:
     """
     rel = np.swapaxes(rot_true, -1, -2) @ rot_est
     if rot_true.shape[-1] == 2:
-        from ..lie import angle2
+        from ..lie.so import angle2
 
         return angle2(rel)[:, None]
-    from ..se_lie import so3_log
+    from ..lie.se import so3_log
 
     return np.sqrt(2.0) * so3_log(rel)
 
@@ -130,8 +130,8 @@ class CrlbLevel:
     ratio_curvature: float | None
     uncertified: int                    # trials whose solve was not certified (still counted)
     fim_variant: str = "consistent"
-    curvature_status: dict | None = None  # posecrb.status JSON when eq. (68) is not ok at this level
-    accuracy: dict | None = None          # posecrb.crlb.InverseAccuracy of the bound (JSON form)
+    curvature_status: dict | None = None  # posecrb.core.status JSON when eq. (68) is not ok at this level
+    accuracy: dict | None = None          # posecrb.models.paper.crlb.InverseAccuracy of the bound (JSON form)
 
     def row(self) -> dict:
         r = dict(vars(self))
@@ -173,8 +173,8 @@ class CrlbSweepResult:
 
 # ---------------------------------------------------------------- the trial
 def _crlb_trial(context: dict, task: Task) -> dict:
-    from ..noise import perturb_measurements
-    from ..sesync import solve
+    from ..sim.sampling import perturb_measurements
+    from ..solver import solve
 
     rng = task.rng()
     graph = context["graph"]
@@ -188,11 +188,11 @@ def _crlb_trial(context: dict, task: Task) -> dict:
 
 def _bounds(graph: PoseGraph, rot, trans, anchor: int, kc: float, scale: str, tau, kappa,
             variant: str = "consistent") -> dict:
-    """Bounds per pose of the scaled noise model at the truth (``posecrb.crlb.paper_crlb``:
+    """Bounds per pose of the scaled noise model at the truth (``posecrb.models.paper.crlb.paper_crlb``:
     eq. 67, 3D eq. 68) from the FIM ``variant``: the simulated model's Fisher information
     (``"consistent"``) or eq. (64) as printed (``"eq64"``); the same matrix in 2D."""
-    from ..crlb import paper_crlb
-    from ..noise import noise_model_graph
+    from ..models.paper.crlb import paper_crlb
+    from ..sim.sampling import noise_model_graph
 
     model = noise_model_graph(graph, kc, scale, tau, kappa)
     n_p = graph.n - 1
@@ -218,11 +218,11 @@ def crlb_sweep(graph: PoseGraph, kcs: Sequence[float], trials: int = 100, seed: 
     to the certified solution of ``graph`` itself. Trials of level k_c are seeded by
     ``SeedSequence(seed, spawn_key=(level_key(k_c),)).spawn(trials)``, so a level's
     numbers do not depend on the other levels requested nor on the executor.
-    ``fim_variant``: the FIM the bound inverts (``posecrb.fim.FIM_VARIANTS``).
+    ``fim_variant``: the FIM the bound inverts (``posecrb.models.paper.fim.FIM_VARIANTS``).
     """
-    from ..fim import FIM_VARIANTS
-    from ..noise import NOISE_SCALES
-    from ..sesync import solve
+    from ..models.paper.fim import FIM_VARIANTS
+    from ..sim.sampling import NOISE_SCALES
+    from ..solver import solve
 
     t0 = time.perf_counter()
     if scale not in NOISE_SCALES:

@@ -4,7 +4,7 @@ Eight poses on a regular octagon joined by an odometry chain 0-1-...-7, every
 measurement with ``delta^2 = 1e-4`` (tau = 1e4) and kappa = 5e3. Extra
 measurements are added "from one edge to 21 edges without repetition", never
 touching the anchor (pose 0): the 21 candidates are all pairs of poses 1..7
-(``posecrb.synth.octagon_candidate_edges``). For each number k of extra edges
+(``posecrb.sim.generators.octagon_candidate_edges``). For each number k of extra edges
 we take every subset when there are at most ``trials`` of them, otherwise
 ``trials`` distinct random subsets. The FIM is evaluated at the ground truth:
 with noise-free measurements the truth is the maximum-likelihood (SE-Sync)
@@ -25,7 +25,7 @@ from typing import Callable
 
 import numpy as np
 
-from ..montecarlo import Task, make_tasks, run_tasks
+from ..sim.montecarlo import Task, make_tasks, run_tasks
 
 DEFAULT_RADIUS = 0.1   # the paper gives no size; small enough that sum tau ||p||^2 is small (sec. IX-A)
 
@@ -96,9 +96,9 @@ def _subsets(k: int, trials: int, rng: np.random.Generator, n_cand: int) -> list
 
 def _octagon_level(context: dict, task: Task) -> list[OctagonGraph]:
     """All graphs with ``context['k']`` extra edges (one Monte Carlo task per k)."""
-    from ..bounds import compute_bounds
-    from ..fim import fim_logdet, paper_fim, trace_fim
-    from ..synth import octagon, octagon_candidate_edges
+    from ..models.paper.bounds import compute_bounds
+    from ..models.paper.fim import fim_logdet, paper_fim, trace_fim
+    from ..sim.generators import octagon, octagon_candidate_edges
 
     cand = octagon_candidate_edges()
     out = []
@@ -119,7 +119,7 @@ def octagon_experiment(trials: int = 50, seed: int = 0, *, radius: float = DEFAU
                        scheduler: str | None = None, progress: Callable[[int], None] | None = None
                        ) -> OctagonResult:
     """Fig. 4/5: T- and D-optimality of octagon graphs with 0..21 extra edges."""
-    from ..synth import octagon_candidate_edges
+    from ..sim.generators import octagon_candidate_edges
 
     if trials < 1:
         raise ValueError("trials must be >= 1")

@@ -1,7 +1,7 @@
 """Pose-graph sparsification: what each selection method keeps, and what it costs the SLAM answer.
 
 For every budget (a share of the loop closures, MAC's protocol) and every method, select the
-candidate edges (``posecrb.select``), then solve the pruned graph (fixed + selected edges) with
+candidate edges (``posecrb.selection.select``), then solve the pruned graph (fixed + selected edges) with
 the certified solver and compare it with the full graph:
 
 * the method's own objective value, the upper bound on the best K-subset and the certified
@@ -17,7 +17,7 @@ the certified solver and compare it with the full graph:
 Methods are ``[objective-]method``: ``greedy``, ``relax``, ``random``, ``naive`` use
 ``objective`` (default tree); ``fiedler-relax`` is MAC's method, ``fim-greedy`` etc. name the
 objective explicitly. Selections run as independent tasks on the Monte Carlo engine
-(``posecrb.montecarlo``): serial, local processes or Dask, identical results for a given seed.
+(``posecrb.sim.montecarlo``): serial, local processes or Dask, identical results for a given seed.
 """
 from __future__ import annotations
 
@@ -27,9 +27,9 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from ..errors import UsageError
-from ..graph import PoseGraph
-from ..montecarlo import Task, make_tasks, run_tasks
+from ..core.errors import UsageError
+from ..core.graph import PoseGraph
+from ..sim.montecarlo import Task, make_tasks, run_tasks
 
 DEFAULT_BUDGETS = tuple(f"{p}%" for p in range(10, 101, 10))
 QUICK_BUDGETS = ("20%", "50%")
@@ -54,7 +54,7 @@ def parse_budgets(spec: str | Sequence[str]) -> list[str]:
 
 def parse_methods(spec: str | Sequence[str], objective: str = "tree") -> list[tuple[str, str, str]]:
     """``[objective-]method`` labels -> (label, objective, method)."""
-    from ..select import METHODS, OBJECTIVES
+    from ..selection.select import METHODS, OBJECTIVES
 
     parts = spec.split(",") if isinstance(spec, str) else list(spec)
     out = []
@@ -151,10 +151,10 @@ class SparsifyRow:
 
 def _evaluate(context: dict, keep_mask: np.ndarray) -> dict:
     """Objective-independent measures of the kept edges (weights over all edges)."""
-    from ..fim import paper_fim
-    from ..linalg import SymbolicCholesky
-    from ..select import FiedlerObjective, pruned_graph, tree_objective
-    from ..selinv import trace_inverse
+    from ..models.paper.fim import paper_fim
+    from ..linalg.cholesky import SymbolicCholesky
+    from ..selection.select import FiedlerObjective, pruned_graph, tree_objective
+    from ..linalg.selinv import trace_inverse
 
     graph: PoseGraph = context["graph"]
     ref = context["reference"]
@@ -172,8 +172,8 @@ def _evaluate(context: dict, keep_mask: np.ndarray) -> dict:
 def _sparsify_task(context: dict, task: Task) -> dict:
     import time
 
-    from ..select import select_edges
-    from ..sesync import solve
+    from ..selection.select import select_edges
+    from ..solver import solve
 
     budget, label, objective, method = context["jobs"][task.trial]
     graph = context["graph"]
@@ -234,10 +234,10 @@ def sparsify_experiment(graph: PoseGraph, budgets: Sequence[str] = DEFAULT_BUDGE
 
     The full graph is solved first (the reference for ATE/RPE and the point of every FIM);
     raises SolverError when it cannot be certified."""
-    from ..errors import SolverError
-    from ..estimate import Estimate
-    from ..select import parse_budget, split_edges
-    from ..sesync import solve
+    from ..core.errors import SolverError
+    from ..solver.estimate import Estimate
+    from ..selection.select import parse_budget, split_edges
+    from ..solver import solve
 
     budgets = parse_budgets(budgets)
     triples = parse_methods(methods, objective)

@@ -1,7 +1,7 @@
 """The thesis's chapter 6 case study: empirical covariance of the intrinsic MLE vs the
 anchored and quotient intrinsic CRBs on SE(2)^5 (Bertini, sections 6.1-6.7).
 
-Setting (``posecrb.thesis_example``): five poses, six directed arcs forming two
+Setting (``posecrb.models.thesis.example``): five poses, six directed arcs forming two
 components {1, 2} and {3, 4, 5}, heteroscedastic left noise ``H = Exp(xi) T_i T_j^{-1}``,
 ``xi ~ N(0, Sigma_ij)`` (4.3), ``m`` i.i.d. measurements per arc (4.10), so
 ``F_m = m F_1`` (4.12) with ``F_1`` the FIM (4.6) at the truth (nullity 6 = 3 c).
@@ -11,7 +11,7 @@ Per trial and per m:
 * anchored MLE (5.7): poses 1 and 3 fixed at the truth, the others estimated by
   Levenberg-Marquardt on SE(2) with the analytic Jacobians (4.7)
   ``J_i = -Jr^{-1}(r) Ad_{T_i}``, ``J_j = Jr^{-1}(r) Ad_{T_i}`` (closed-form right Jacobians,
-  ``posecrb.sed.edge_kinematics``), right-perturbation updates ``T_k <- T_k Exp(delta_k)``,
+  ``posecrb.models.thesis.fim.edge_kinematics``), right-perturbation updates ``T_k <- T_k Exp(delta_k)``,
   started from the measurements composed along each component (not from the truth);
 * intrinsic error ``delta_k = Log(T_true_k^{-1} T_est_k)``: the coordinates of the
   FIM's right perturbation ``T_k Exp(delta)``;
@@ -37,7 +37,7 @@ from typing import Callable, Sequence
 
 import numpy as np
 
-from ..montecarlo import Task, make_tasks, run_tasks
+from ..sim.montecarlo import Task, make_tasks, run_tasks
 
 DEFAULT_M = (1, 2, 5, 10, 20, 50, 100, 150)
 QUICK_M = (1, 10, 100)
@@ -47,20 +47,20 @@ N_POSES = 5
 
 # ---------------------------------------------------------------- SE(2) helpers on (R, t) pairs
 def _poses_T() -> tuple[np.ndarray, np.ndarray]:
-    from ..thesis_example import true_poses
+    from ..models.thesis.example import true_poses
 
     return true_poses()
 
 
 def _to_x(rot: np.ndarray, trans: np.ndarray):
-    from ..se_lie import se_inverse
+    from ..lie.se import se_inverse
 
     return se_inverse(rot, trans)
 
 
 def intrinsic_errors(rot_true, trans_true, rot_est, trans_est) -> np.ndarray:
     """(n, q) ``Log(T_true^{-1} T_est)``: coordinates of the right perturbation T_true Exp(delta)."""
-    from ..se_lie import se_compose, se_inverse, se_log
+    from ..lie.se import se_compose, se_inverse, se_log
 
     ri, ti = se_inverse(rot_true, trans_true)
     return se_log(*se_compose(ri, ti, rot_est, trans_est))
@@ -68,7 +68,7 @@ def intrinsic_errors(rot_true, trans_true, rot_est, trans_est) -> np.ndarray:
 
 def _retract(rot, trans, delta):
     """T_k <- T_k Exp(delta_k)."""
-    from ..se_lie import se_compose, se_exp
+    from ..lie.se import se_compose, se_exp
 
     er, et = se_exp(delta)
     return se_compose(rot, trans, er, et)
@@ -86,7 +86,7 @@ class MleResult:
 
 def _cost_grad_hess(graph, omega, rot, trans, free_dofs):
     """0.5 sum r^T Omega r, its gradient and Gauss-Newton Hessian over the free dofs (4.5-4.7)."""
-    from ..sed import edge_kinematics
+    from ..models.thesis.fim import edge_kinematics
 
     xr, xt = _to_x(rot, trans)
     res, a = edge_kinematics(graph, xr, xt)          # r_ij, A = Jr^{-1}(r) Ad_{T_i}
@@ -109,7 +109,7 @@ def _cost_grad_hess(graph, omega, rot, trans, free_dofs):
 
 def _initial_poses(graph, anchors: Sequence[int], rot_anchor, trans_anchor):
     """Compose the measurements outward from the anchors (one pass over a BFS tree of the arcs)."""
-    from ..se_lie import se_compose, se_inverse
+    from ..lie.se import se_compose, se_inverse
 
     n = graph.n
     rot = np.repeat(np.eye(2)[None], n, 0)
@@ -186,7 +186,7 @@ def horizontal_errors(rot_true, trans_true, rot_est, trans_est, labels: np.ndarr
     Newton on ``sum_{k in c} Log(T_true_k^{-1} T_est_k G_c Exp(eps)) = 0`` with
     ``d Log(Exp(delta) Exp(eps)) = Jr^{-1}(delta) eps``.
     """
-    from ..se_lie import se_jr_inv
+    from ..lie.se import se_jr_inv
 
     rot, trans = np.array(rot_est, float), np.array(trans_est, float)
     n_comp = int(labels.max()) + 1
@@ -205,7 +205,7 @@ def horizontal_errors(rot_true, trans_true, rot_est, trans_est, labels: np.ndarr
 
 # ---------------------------------------------------------------- Monte Carlo
 def _thesis_trial(context: dict, task: Task) -> dict:
-    from ..thesis_example import ANCHORS, left_information, sample_graph
+    from ..models.thesis.example import ANCHORS, left_information, sample_graph
 
     m = context["m"]
     graph = sample_graph(task.rng(), m)
@@ -220,8 +220,8 @@ def _thesis_trial(context: dict, task: Task) -> dict:
 
 def thesis_bounds(m: int) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     """``(F_m, (Pi F_m Pi)^+, F_m^+, N)``: dense 15 x 15 bounds of the case study at the truth."""
-    from ..sed import kernel_basis, sed_fim
-    from ..thesis_example import ANCHORS, left_information, thesis_graph, true_estimate
+    from ..models.thesis.fim import kernel_basis, sed_fim
+    from ..models.thesis.example import ANCHORS, left_information, thesis_graph, true_estimate
 
     g = thesis_graph()
     f1 = sed_fim(g, *true_estimate(), information=left_information()).matrix.toarray()

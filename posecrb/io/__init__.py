@@ -3,10 +3,10 @@
 ``load(path)`` sniffs the format from the content (never the extension) and
 returns a ``PoseGraph``. Parsing is vectorised: lines are grouped by tag and
 each group's numeric columns are converted by numpy in one call. Every file
-posecrb writes goes through ``posecrb.io.files.atomic_write``.
+posecrb writes goes through ``posecrb.core.files.atomic_write``.
 """
-from .files import atomic_write, check_output_dir, check_output_file, read_regular_file
-from .reader import QUATERNION_MODES, load, parse_text
+from ..core.files import atomic_write, check_output_dir, check_output_file, read_regular_file
+from .text import QUATERNION_MODES, load, parse_text
 from .g2o import write_g2o
 
 __all__ = ["QUATERNION_MODES", "atomic_write", "check_output_dir", "check_output_file", "load", "parse_text",

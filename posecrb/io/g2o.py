@@ -6,9 +6,9 @@ import os
 
 import numpy as np
 
-from ..graph import PoseGraph
-from ..lie import angle2, rot_to_quat
-from .files import atomic_write
+from ..core.graph import PoseGraph
+from ..lie.so import angle2, rot_to_quat
+from ..core.files import atomic_write
 
 
 def _fmt_rows(arr: np.ndarray) -> list[str]:
@@ -23,7 +23,7 @@ def write_g2o(graph: PoseGraph, path: str | os.PathLike, rot: np.ndarray | None 
 
     Information matrices are written in g2o order whatever the input format was. Ids are
     written from the int64 ids as read (never through float64). The file is replaced
-    atomically (``posecrb.io.files.atomic_write``): a failure or a signal leaves the previous
+    atomically (``posecrb.core.files.atomic_write``): a failure or a signal leaves the previous
     file, if any, and no temporary.
     """
     rot = graph.vertex_rot if rot is None else rot

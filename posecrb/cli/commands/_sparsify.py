@@ -1,0 +1,115 @@
+"""`posecrb experiment sparsify FILE`: selection methods vs budget, and the pruned graphs' solutions."""
+from __future__ import annotations
+
+import json
+import logging
+import os
+import sys
+import time
+from pathlib import Path
+
+import click
+
+from ...core.provenance import machine, versions
+from ...report.render import print_rows, to_csv, to_json
+from ..options import anchor_option, data_dir_option, format_option, load_dataset
+
+log = logging.getLogger("posecrb")
+
+COLUMNS = ["budget_spec", "budget", "method", "value", "upper_bound", "certified_ratio", "time_select", "tree",
+           "fiedler", "fim_logdet", "crlb_trace", "certified", "ate_trans", "ate_rot_deg", "rpe_trans",
+           "rpe_rot_deg"]
+HEADERS = {"budget_spec": "budget", "budget": "K", "upper_bound": "upper bound", "certified_ratio": "cert. ratio",
+           "time_select": "time (s)", "tree": "tree lb (75)", "fiedler": "λ2", "fim_logdet": "FIM logdet",
+           "crlb_trace": "tr CRLB", "certified": "cert.", "ate_trans": "ATE t", "ate_rot_deg": "ATE R [°]",
+           "rpe_trans": "RPE t", "rpe_rot_deg": "RPE R [°]"}
+
+
+def _atomic_write(path: Path, text: str) -> None:
+    tmp = path.with_name(path.name + ".tmp")
+    tmp.write_text(text)
+    os.replace(tmp, path)
+
+
+def _write_out(out_dir: str, settings: dict, rows: list[dict], seeds: list[dict], elapsed: float) -> None:
+    """rows.csv, rows.json and run.json (the run record of the other experiments), each written atomically."""
+    d = Path(out_dir)
+    d.mkdir(parents=True, exist_ok=True)
+    _atomic_write(d / "rows.csv", to_csv(rows))
+    _atomic_write(d / "rows.json", to_json(rows, single=False) + "\n")
+    run = {"experiment": "sparsify", "command": " ".join(["posecrb"] + sys.argv[1:]), "settings": settings,
+           "versions": {**versions(), "platform": machine()["platform"]}, "machine": machine(), "seeds": seeds,
+           "elapsed_seconds": elapsed, "created": time.strftime("%Y-%m-%dT%H:%M:%S%z")}
+    _atomic_write(d / "run.json", json.dumps(run, indent=2, default=str) + "\n")
+    log.info("wrote %s/{rows.csv,rows.json,run.json}", d)
+
+
+@click.command("sparsify", short_help="Selection methods vs budget: bounds, certificates, ATE of the pruned graphs.")
+@click.argument("file")
+@click.option("--budgets", default=None, metavar="LIST",
+              help="Budgets, each K or P% of the loop closures (default 10%,20%,...,100%; --quick: 20%,50%).")
+@click.option("--methods", default=None, metavar="LIST",
+              help="[objective-]method list (default greedy,relax,fiedler-relax,random,naive).")
+@click.option("--objective", default="tree", show_default=True, metavar="tree|fim|fiedler",
+              help="Objective of the methods named without one.")
+@click.option("--fixed", default="odometry", show_default=True, metavar="odometry|FILE", help="Fixed edges.")
+@click.option("--certify", is_flag=True, help="Frank-Wolfe bound for greedy, random and naive too.")
+@click.option("--max-iter", type=click.IntRange(1, 100000), default=None, help="Frank-Wolfe iterations.")
+@click.option("--seed", type=click.IntRange(0, 2 ** 63 - 1), default=0, show_default=True,
+              help="Seed of random selections and Madow rounding.")
+@click.option("--jobs", type=click.IntRange(1, 1024), default=1, show_default=True,
+              help="Worker processes (local pool, or LocalCluster size for --executor dask).")
+@click.option("--executor", type=click.Choice(["local", "dask"]), default="local", show_default=True,
+              help="local: serial (--jobs 1) or a process pool; dask: dask.distributed.")
+@click.option("--scheduler", metavar="ADDRESS", default=None, help="Dask scheduler address.")
+@click.option("--plot", "plot_path", type=click.Path(dir_okay=False), default=None, help="Write the figure (PNG).")
+@click.option("--out", "out_dir", type=click.Path(file_okay=False), default=None,
+              help="Directory for rows.csv, rows.json, run.json and sparsify.png.")
+@click.option("--quick", is_flag=True, help="Small settings for CI (budgets 20%,50%).")
+@anchor_option
+@data_dir_option
+@format_option()
+def sparsify_cmd(file, budgets, methods, objective, fixed, certify, max_iter, seed, jobs, executor, scheduler,
+                 plot_path, out_dir, quick, anchor, data_dir, fmt):
+    """Per budget and method: the selection's objective value, upper bound and certified ratio,
+    its tree bound, lambda_2, FIM log-det and CRLB trace (at the full graph's optimum), and the
+    pruned graph's certified optimum (ATE/RPE against the full graph's optimum, aligned)."""
+    from ...experiments.sparsify import (
+        DEFAULT_BUDGETS,
+        DEFAULT_METHODS,
+        QUICK_BUDGETS,
+        plot_sparsify,
+        sparsify_experiment,
+    )
+    from .experiment import _executor, _plot_target, _progress
+
+    ex = _executor(executor, jobs, scheduler)
+    graph, _ = load_dataset(file, data_dir)
+    budgets = budgets or ",".join(QUICK_BUDGETS if quick else DEFAULT_BUDGETS)
+    methods = methods or ",".join(DEFAULT_METHODS)
+    t0 = time.perf_counter()
+    n_tasks = len([b for b in budgets.split(",") if b.strip()]) * len([m for m in methods.split(",") if m.strip()])
+    with _progress(n_tasks, f"{graph.name}: selections") as cb:
+        res = sparsify_experiment(graph, budgets.split(","), methods, objective=objective, fixed=fixed, seed=seed,
+                                  certify=certify, max_iter=max_iter, anchor=graph.anchor_index(anchor),
+                                  progress=cb, **ex)
+    elapsed = time.perf_counter() - t0
+    bad = [f"{r['method']}@{r['budget_spec']}" for r in res.rows if not r["certified"]]
+    if bad:
+        log.warning("pruned graph(s) whose optimum is NOT certified: %s", ", ".join(bad))
+    ref = res.reference
+    print_rows(res.rows, fmt, COLUMNS if fmt in ("table", "markdown") else None, headers=HEADERS,
+               single_json=False,
+               title=f"{res.dataset}: {res.candidates} loop closures, {res.fixed} fixed edges, objective "
+                     f"{res.objective}; full graph: tree {ref['tree']:.6g}, λ2 {ref['fiedler']:.4g}, "
+                     f"FIM logdet {ref['fim_logdet']:.6g}, tr CRLB {ref['crlb_trace']:.4g} ({elapsed:.1f} s)")
+    target = _plot_target(plot_path, out_dir, "sparsify")
+    if target:
+        plot_sparsify(res, target)
+    if out_dir:
+        settings = {"file": res.path, "sha256": res.sha256, "dataset": res.dataset, "dim": res.dim,
+                    "poses": res.poses, "edges": res.edges, "fixed": res.fixed, "fixed_rule": res.fixed_rule,
+                    "candidates": res.candidates, "anchor": res.anchor_id, "objective": res.objective,
+                    "budgets": res.budgets, "methods": res.methods, "certify": certify, "max_iter": max_iter,
+                    "seed": seed, "quick": quick, "reference": res.reference, **ex}
+        _write_out(out_dir, settings, res.rows, res.seeds, elapsed)

@@ -1,0 +1,294 @@
+"""`posecrb experiment crlb|thesis|octagon`: the paper's and the thesis's experiments.
+
+Thin shell over ``posecrb.experiments``: options -> library call -> table / file output.
+Trials run serially (``--jobs 1``), in a local process pool (``--jobs N``) or on a Dask
+cluster (``--executor dask [--scheduler ADDRESS]``); results are bit-identical for a given
+``--seed`` whatever the executor.
+"""
+from __future__ import annotations
+
+import contextlib
+import json
+import logging
+import sys
+import time
+from pathlib import Path
+
+import click
+
+from ...core.errors import UsageError
+from ...core.provenance import machine, versions
+from ...report.render import print_rows, to_csv, to_json
+from ..options import FiniteFloat, anchor_option, data_dir_option, format_option, load_dataset
+from .fim import fim_variant_option
+
+log = logging.getLogger("posecrb")
+
+
+# ---------------------------------------------------------------- shared options and helpers
+def _run_options(default_trials: str):
+    def deco(f):
+        opts = [
+            click.option("--trials", type=click.IntRange(2, 10 ** 7), default=None,
+                         help=f"Monte Carlo trials ({default_trials})."),
+            click.option("--seed", type=click.IntRange(0, 2 ** 63 - 1), default=0, show_default=True,
+                         help="Root seed; every trial has its own SeedSequence child."),
+            click.option("--jobs", type=click.IntRange(1, 1024), default=1, show_default=True,
+                         help="Worker processes (local pool, or LocalCluster size for --executor dask)."),
+            click.option("--executor", type=click.Choice(["local", "dask"]), default="local", show_default=True,
+                         help="local: serial (--jobs 1) or a process pool; dask: dask.distributed "
+                              "(pip install 'posecrb[dask]').") ,
+            click.option("--scheduler", metavar="ADDRESS", default=None,
+                         help="Dask scheduler address (tcp://host:8786); without it a LocalCluster on "
+                              "127.0.0.1 is started."),
+            click.option("--plot", "plot_path", type=click.Path(dir_okay=False), default=None,
+                         help="Write the figure (PNG)."),
+            click.option("--out", "out_dir", type=click.Path(file_okay=False), default=None,
+                         help="Directory for the data (rows.csv, rows.json, per-trial data) and run.json."),
+            click.option("--quick", is_flag=True, help="Small settings for CI (well under a minute)."),
+            format_option(),
+        ]
+        for o in reversed(opts):
+            f = o(f)
+        return f
+    return deco
+
+
+def _executor(executor: str, jobs: int, scheduler: str | None) -> dict:
+    if scheduler and executor != "dask":
+        raise UsageError("--scheduler needs --executor dask")
+    kind = "dask" if executor == "dask" else ("local" if jobs > 1 else "serial")
+    return {"executor": kind, "jobs": jobs, "scheduler": scheduler}
+
+
+@contextlib.contextmanager
+def _progress(total: int, label: str):
+    """A rich progress bar on stderr (only on a terminal); yields the engine's callback."""
+    from rich.console import Console
+    from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeRemainingColumn
+
+    console = Console(stderr=True)
+    prog = Progress(TextColumn("{task.description}"), BarColumn(), MofNCompleteColumn(), TimeRemainingColumn(),
+                    console=console, transient=True, disable=not console.is_terminal)
+    with prog:
+        task = prog.add_task(label, total=total)
+        yield lambda k: prog.advance(task, k)
+
+
+def _write_out(out_dir: str | None, experiment: str, settings: dict, rows: list[dict], seeds: list[dict],
+               elapsed: float, extra: dict[str, list[dict]] | None = None) -> None:
+    if not out_dir:
+        return
+    from ...core.files import write_text
+
+    d = Path(out_dir)
+    d.mkdir(parents=True, exist_ok=True)
+    write_text(d / "rows.csv", to_csv(rows))   # every file atomically (temporary + rename)
+    write_text(d / "rows.json", to_json(rows, single=False) + "\n")
+    for name, data in (extra or {}).items():
+        write_text(d / f"{name}.csv", to_csv(data))
+    run = {"experiment": experiment, "command": " ".join(["posecrb"] + sys.argv[1:]), "settings": settings,
+           "versions": {**versions(), "platform": machine()["platform"]}, "seeds": seeds, "elapsed_seconds": elapsed,
+           "created": time.strftime("%Y-%m-%dT%H:%M:%S%z")}
+    write_text(d / "run.json", json.dumps(run, indent=2, default=str) + "\n")
+    log.info("wrote %s/{rows.csv,rows.json,run.json}", d)
+
+
+def _plot_target(plot_path: str | None, out_dir: str | None, name: str) -> str | None:
+    if plot_path:
+        return plot_path
+    return str(Path(out_dir) / f"{name}.png") if out_dir else None
+
+
+def _check_outputs(plot_path: str | None, out_dir: str | None, name: str, extra: tuple[str, ...] = (),
+                   inputs: tuple[str, ...] = ()) -> None:
+    """Validate --plot and --out before the trials run (exit 2), not after."""
+    from ...io import check_output_dir, check_output_file
+
+    if out_dir:
+        check_output_dir(out_dir, inputs, ["rows.csv", "rows.json", "run.json", f"{name}.png",
+                                           *(f"{e}.csv" for e in extra)], option="--out")
+    if plot_path:
+        check_output_file(plot_path, inputs, option="--plot", create_parents=True)
+        fmt = Path(plot_path).suffix[1:].lower()
+        if fmt:
+            from matplotlib.backend_bases import FigureCanvasBase
+
+            if fmt not in FigureCanvasBase.get_supported_filetypes():
+                raise UsageError(f"--plot {plot_path}: matplotlib cannot write .{fmt} files (use .png, .pdf, "
+                                 ".svg, ...)")
+
+
+@click.group("experiment")
+def command() -> None:
+    """The paper's and the thesis's experiments (Monte Carlo CRLB, T- vs D-optimality, thesis ch. 6)."""
+
+
+# ---------------------------------------------------------------- crlb
+CRLB_COLUMNS_2D = ["kc", "trials", "mse", "mse_stderr", "mse_bound", "ratio", "mse_trans", "mse_rot",
+                   "uncertified", "fim_variant"]
+CRLB_COLUMNS_3D = ["kc", "trials", "mse", "mse_stderr", "mse_bound", "mse_bound_curvature", "ratio",
+                   "ratio_curvature", "mse_trans", "mse_rot", "uncertified", "fim_variant"]
+CRLB_HEADERS = {"mse_stderr": "± s.e.", "mse_bound": "CRLB/n_p", "mse_bound_curvature": "CRLB+curv/n_p",
+                "ratio": "MSE/CRLB", "ratio_curvature": "MSE/(CRLB+curv)", "fim_variant": "FIM variant"}
+
+
+@command.command("crlb", short_help="Monte Carlo MSE vs CRLB over noise levels (paper Fig. 6/7).")
+@click.argument("file")
+@click.option("--kc", "kc_spec", default=None,
+              help="Noise levels k_c: one value (20), a list (1,5,20) or a range (1:20, 1:20:0.5). "
+                   "Default 1:20 (--quick: 1,20).")
+@click.option("--scale", type=click.Choice(["both", "rotation"]), default="both", show_default=True,
+              help="both: k_c multiplies kappa and tau (the whole information); rotation: only kappa, "
+                   "eq. (80) as printed.")
+@click.option("--kappa", type=FiniteFloat(min=1e-12, max=1e12), default=None,
+              help="Base Langevin concentration for every edge instead of the file's (paper Fig. 6: 150).")
+@click.option("--tau", type=FiniteFloat(min=1e-12, max=1e12), default=None,
+              help="Base translation precision 1/delta^2 for every edge instead of the file's (Fig. 6: 140).")
+@anchor_option
+@fim_variant_option
+@data_dir_option
+@_run_options("default 100; --quick: 20")
+def crlb_cmd(file, kc_spec, scale, kappa, tau, anchor, fim_variant, data_dir, trials, seed, jobs, executor,
+             scheduler, plot_path, out_dir, quick, fmt):
+    """Fig. 6/7: MSE per pose of the certified MLE vs trace(CRLB)/n_p over noise levels k_c.
+
+    Ground truth is the certified solution of FILE. Each trial regenerates every measurement by
+    eq. (80) at the level k_c, solves it, and measures the error in the FIM's coordinates
+    (anchor aligned; 2D angle, 3D sqrt2*Log). Columns: ratio = MSE / CRLB (eq. 67 / 68) of the
+    simulated model's Fisher information (fim_variant=consistent), or of eq. (64) as printed
+    with --fim-variant eq64; ratio_curvature with the curvature term (3D).
+    """
+    from ...experiments.crlb_sweep import crlb_sweep, parse_levels
+
+    kcs = parse_levels(kc_spec or ("1,20" if quick else "1:20"))
+    trials = trials or (20 if quick else 100)
+    ex = _executor(executor, jobs, scheduler)
+    graph, _ = load_dataset(file, data_dir)
+    _check_outputs(plot_path, out_dir, "crlb", ("trials",), (graph.path,))
+    anchor_idx = graph.anchor_index(anchor)
+    t0 = time.perf_counter()
+    with _progress(len(kcs) * trials, f"{graph.name}: trials") as cb:
+        res = crlb_sweep(graph, kcs, trials, seed, scale=scale, tau=tau, kappa=kappa, anchor=anchor_idx,
+                         progress=cb, fim_variant=fim_variant or "consistent", **ex)
+    elapsed = time.perf_counter() - t0
+    if not res.truth_certified:
+        log.warning("the ground truth (solution of %s) is not certified", graph.name)
+    for lv in res.levels:
+        if lv.accuracy and lv.accuracy["status"] != "ok":
+            log.warning("k_c = %g: CRLB %s: %s", lv.kc,
+                        "not available" if lv.accuracy["status"] == "unavailable" else "doubtful",
+                        lv.accuracy["reason"])
+        if lv.curvature_status:
+            log.warning("k_c = %g: curvature-corrected CRLB (eq. 68) %s: %s", lv.kc,
+                        "not available" if lv.curvature_status["status"] == "unavailable" else "doubtful",
+                        lv.curvature_status["reason"])
+    bad = sum(lv.uncertified for lv in res.levels)
+    if bad:
+        log.warning("%d trial solve(s) were not certified (counted in the MSE)", bad)
+    rows = res.rows()
+    cols = CRLB_COLUMNS_3D if graph.dim == 3 else CRLB_COLUMNS_2D
+    print_rows(rows, fmt, cols if fmt == "table" else None,
+               title=f"{graph.name}: MSE per pose vs CRLB ({res.trials} trials/level, scale={scale}, "
+                     f"seed {seed}, {elapsed:.1f} s)", headers=CRLB_HEADERS)
+    target = _plot_target(plot_path, out_dir, "crlb")
+    if target:
+        from ...report.plots import plot_crlb_sweep
+
+        plot_crlb_sweep(res, target)
+    trial_rows = [{"kc": kc, "trial": t, "sq_trans": float(d["sq_trans"][t]), "sq_rot": float(d["sq_rot"][t]),
+                   "certified": bool(d["certified"][t]), "objective": float(d["objective"][t])}
+                  for kc, d in res.trial_data.items() for t in range(len(d["sq_trans"]))]
+    settings = {"file": graph.path, "sha256": graph.sha256, "dataset": graph.name, "dim": graph.dim,
+                "poses": graph.n, "edges": graph.m, "anchor": res.anchor_id, "kc": kcs, "trials": trials,
+                "seed": seed, "scale": scale, "kappa": kappa, "tau": tau, "quick": quick,
+                "fim_variant": res.fim_variant, **ex,
+                "truth_certified": res.truth_certified, "truth_objective": res.truth_objective}
+    _write_out(out_dir, "crlb", settings, rows, res.seeds, elapsed, {"trials": trial_rows})
+
+
+# ---------------------------------------------------------------- thesis
+THESIS_HEADERS = {"frob": "‖Cov−CRB‖_F", "frob_rel": "relative", "frob_rel_noise": "MC noise level",
+                  "eig_min": "λmin Sym(Cov−CRB)", "eig_max": "λmax", "not_converged": "not conv."}
+
+
+@command.command("thesis", short_help="Thesis ch. 6: MLE covariance vs anchored and quotient CRB.")
+@click.option("--m", "m_spec", default=None,
+              help="Measurements per arc, a list (default 1,2,5,10,20,50,100,150; --quick: 1,10,100).")
+@_run_options("default 200; --quick: 100")
+def thesis_cmd(m_spec, trials, seed, jobs, executor, scheduler, plot_path, out_dir, quick, fmt):
+    """Thesis ch. 6: empirical covariance of the intrinsic MLE vs the anchored (Pi F Pi)^+ and
+    quotient F^+ bounds with F_m = m F_1, on the built-in 5-pose SE(2) case (nullity 6)."""
+    from ...experiments.thesis import DEFAULT_M, QUICK_M, thesis_experiment
+
+    if m_spec:
+        try:
+            ms = sorted({int(x) for x in m_spec.split(",") if x.strip()})
+        except ValueError as exc:
+            raise UsageError(f"--m takes a comma-separated list of integers, got {m_spec!r}") from exc
+        if not ms or ms[0] < 1:
+            raise UsageError("--m values must be >= 1")
+    else:
+        ms = list(QUICK_M if quick else DEFAULT_M)
+    trials = trials or (100 if quick else 200)
+    ex = _executor(executor, jobs, scheduler)
+    _check_outputs(plot_path, out_dir, "thesis", ("eigenvalues",))
+    t0 = time.perf_counter()
+    with _progress(len(ms) * trials, "thesis: trials") as cb:
+        res = thesis_experiment(ms, trials, seed, progress=cb, **ex)
+    elapsed = time.perf_counter() - t0
+    rows = res.rows()
+    print_rows(rows, fmt, None, title=f"thesis ch. 6: ‖Cov − CRB‖ vs m ({trials} trials per m, seed {seed}, "
+                                      f"{elapsed:.1f} s)", headers=THESIS_HEADERS)
+    target = _plot_target(plot_path, out_dir, "thesis")
+    if target:
+        from ...report.plots import plot_thesis
+
+        plot_thesis(res, target)
+    eig_rows = [{"m": m, "formulation": f, **{f"eig{k}": float(v) for k, v in enumerate(res.eigenvalues[f][m])}}
+                for f in ("anchored", "quotient") for m in res.ms]
+    settings = {"m": ms, "trials": trials, "seed": seed, "quick": quick, **ex}
+    _write_out(out_dir, "thesis", settings, rows, res.seeds, elapsed, {"eigenvalues": eig_rows})
+
+
+# ---------------------------------------------------------------- octagon
+OCTAGON_HEADERS = {"extra_edges": "extra", "m": "edges", "total_degree": "degree", "trace_eq73": "eq.(73)",
+                   "best_fewer_logdet": "best logdet, fewer edges", "flagged": "worse than fewer"}
+
+
+@command.command("octagon", short_help="T- vs D-optimality vs node degree (paper Fig. 4/5).")
+@click.option("--radius", type=FiniteFloat(min=1e-6, max=1e6), default=0.1, show_default=True,
+              help="Circumradius of the octagon. The paper gives no size; 0.1 keeps sum tau||p||^2 small, as it states.")
+@_run_options("random graphs per number of extra edges; default 50; --quick: 5")
+def octagon_cmd(radius, trials, seed, jobs, executor, scheduler, plot_path, out_dir, quick, fmt):
+    """Fig. 4/5: T-optimality (trace F) and D-optimality (log det F) vs total node degree on the
+    8-pose octagon with 0..21 extra edges; flags graphs worse than one with fewer edges."""
+    from ...experiments.octagon import octagon_experiment
+
+    trials = trials or (5 if quick else 50)
+    ex = _executor(executor, jobs, scheduler)
+    _check_outputs(plot_path, out_dir, "octagon", ("graphs",))
+    t0 = time.perf_counter()
+    with _progress(22, "octagon: levels") as cb:
+        res = octagon_experiment(trials, seed, radius=radius, progress=cb, **ex)
+    elapsed = time.perf_counter() - t0
+    rows = res.rows()
+    print_rows(rows, fmt, None, headers=OCTAGON_HEADERS,
+               title=f"octagon: {len(res.graphs)} graphs; corr(trace, degree) = {res.corr_trace_degree:.5f}, "
+                     f"corr(logdet, degree) = {res.corr_logdet_degree:.5f}; {res.flagged} graphs have more "
+                     f"edges but a smaller log det")
+    target = _plot_target(plot_path, out_dir, "octagon")
+    if target:
+        from ...report.plots import plot_octagon
+
+        plot_octagon(res, target)
+    settings = {"trials": trials, "seed": seed, "radius": radius, "tau": res.tau, "kappa": res.kappa,
+                "corr_trace_degree": res.corr_trace_degree, "corr_logdet_degree": res.corr_logdet_degree,
+                "trace_slope": res.trace_slope, "flagged": res.flagged, "quick": quick, **ex}
+    _write_out(out_dir, "octagon", settings, rows, res.seeds, elapsed, {"graphs": res.graph_rows()})
+
+
+# ---------------------------------------------------------------- sparsify (posecrb.cli.commands._sparsify)
+from ._sparsify import sparsify_cmd  # noqa: E402
+
+command.add_command(sparsify_cmd)

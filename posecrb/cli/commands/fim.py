@@ -1,0 +1,230 @@
+"""`posecrb fim FILE`: the Fisher information matrix at an estimate, paper or thesis model."""
+from __future__ import annotations
+
+import logging
+import time
+
+import click
+import numpy as np
+
+from ...core.errors import UsageError
+from ...models.paper.fim import FIM_VARIANTS
+from ...sim.sampling import ROTATION_WEIGHT_MODELS
+from ...report.render import print_rows
+from ...core.status import OK, log_status, put
+from ..options import POSE_ID, data_dir_option, estimate_inputs, format_option, load_dataset
+
+log = logging.getLogger("posecrb")
+
+MODELS = ("paper", "sed")
+
+model_option = click.option(
+    "--model", type=click.Choice(MODELS), default="paper", show_default=True,
+    help="paper: Chen et al. on (R^d x SO(d))^n, isotropic noise, anchored (eq. 42/64); "
+         "sed: Bertini's right-invariant model on SE(d)^n with full information matrices.")
+
+estimate_option = click.option(
+    "--estimate", "estimate_source", default="solve", show_default=True, metavar="solve|vertices|FILE",
+    help="Where the poses come from: the certified solver (global optimum), the file's own "
+         "VERTEX lines, or another g2o/TORO FILE with the same ids.")
+
+rotation_weight_option = click.option(
+    "--rotation-weight", "rotation_model", type=click.Choice(ROTATION_WEIGHT_MODELS), default="eq59",
+    show_default=True, help="Paper model, 3D rotation weight: eq. (59), or the empirical Table II fit.")
+
+
+fim_variant_option = click.option(
+    "--fim-variant", "fim_variant", type=click.Choice(FIM_VARIANTS), default=None,
+    help="Paper model, 3D: consistent is the Fisher information of the model the data follow "
+         "(rotation coupling -w R_i^T R_j; the bound the Monte Carlo MSE reaches); eq64 is eq. (64) "
+         "exactly as printed (coupling -w I), labelled fim_variant=eq64 in every output. Same matrix "
+         "in 2D.  [default: consistent]")
+
+
+frame_option = click.option(
+    "--frame", type=click.Choice(("world", "body")), default=None,
+    help="sed model: coordinates of the FIM and of every per-pose number. world: the thesis' X_i -> Exp(-delta) X_i, "
+         "about the world origin, rotation first (omega, v). body: GTSAM's and g2o's X_i -> X_i Exp(xi), "
+         "in GTSAM's order (Pose2 x, y, theta; Pose3 rotation, translation), comparable with "
+         "gtsam.Marginals / a GTSAM Hessian. Not for --model paper (its own coordinates, JSON "
+         "coordinates_description).  [default: world]")
+
+
+def resolve_frame(model: str, frame: str | None) -> str:
+    """The frame of the numbers: ``--frame`` for sed (default world), "mixed" for the paper model."""
+    if model != "sed":
+        if frame is not None:
+            raise UsageError("--frame applies to --model sed (the paper model's coordinates are translation "
+                             "in the world frame, rotation in the body frame)")
+        return "mixed"
+    return frame or "world"
+
+
+def resolve_fim_variant(model: str, fim_variant: str | None) -> str:
+    """The paper FIM variant to use; ``--fim-variant`` with ``--model sed`` is a usage error."""
+    if fim_variant is not None and model != "paper":
+        raise UsageError("--fim-variant applies to --model paper")
+    return fim_variant or "consistent"
+
+
+def load_with_estimate(file: str, data_dir: str | None, source: str):
+    """Graph, estimate and a JSON-ready description of the estimate plus parse/solve times."""
+    from ...solver.estimate import get_estimate
+
+    graph, t_parse = load_dataset(file, data_dir)
+    est = get_estimate(graph, source)
+    if est.certified is False:
+        log.warning("%s: the solver's estimate is NOT certified globally optimal (%s)", graph.name, est.status)
+    info = {"source": est.source, "certified": est.certified, "objective": est.objective}
+    times = {"parse": t_parse}
+    if est.solve_time is not None:
+        times["solve"] = est.solve_time
+    return graph, est, info, times
+
+
+def anchored_logdet(matrix, q: int, anchors: list[int], name: str) -> float:
+    """log det of a pose-major (q per pose) FIM with the anchored poses' rows/columns removed."""
+    from ...linalg.cholesky import logdet
+
+    n = matrix.shape[0] // q
+    keep = np.ones(n, bool)
+    keep[anchors] = False
+    dofs = (np.flatnonzero(keep)[:, None] * q + np.arange(q)).ravel()
+    return logdet(matrix[dofs][:, dofs].tocsc(), name=name)
+
+
+def npz_path(path: str) -> str:
+    """The file ``--save PATH`` writes: numpy's rule, ``.npz`` appended unless present."""
+    return path if path.endswith(".npz") else path + ".npz"
+
+
+def save_npz(path: str, matrix, row_ids: np.ndarray, row_coord: np.ndarray, names: list[str],
+             model: str, anchors: list[int], frame: str = "mixed") -> str:
+    """A scipy sparse .npz (``scipy.sparse.load_npz`` reads it) plus the index map:
+    ``row_pose_id[k]`` and ``row_coordinate[k]`` (into ``coordinate_names``) for row k, and
+    ``frame`` (world/body for sed, mixed for the paper model).
+    Written atomically to ``npz_path(path)``, which is returned."""
+    from ...io import atomic_write
+
+    m = matrix.tocsc()
+    target = npz_path(path)
+    with atomic_write(target, "wb") as fh:
+        np.savez(fh, data=m.data, indices=m.indices, indptr=m.indptr, format=np.array("csc"),
+             shape=np.array(m.shape), row_pose_id=np.asarray(row_ids, np.int64),
+             row_coordinate=np.asarray(row_coord, np.int64), coordinate_names=np.array(names),
+                 model=np.array(model), anchor_ids=np.asarray(anchors, np.int64), frame=np.array(frame))
+    return target
+
+
+def fim_row(file: str, data_dir: str | None, model: str, source: str, anchor_id: int | None,
+            rotation_model: str, save: str | None, fim_variant: str | None = None,
+            frame: str | None = None) -> dict:
+    variant = resolve_fim_variant(model, fim_variant)
+    frame = resolve_frame(model, frame)
+    if save:
+        from ...datasets import search as datasets
+        from ...io import check_output_file
+
+        save = npz_path(save)   # the file really written (and reported as `saved`)
+        check_output_file(save, [datasets.resolve(file, data_dir), *estimate_inputs(source)], option="--save")
+    graph, est, est_info, times = load_with_estimate(file, data_dir, source)
+    row: dict = {"dataset": graph.name, "model": model, "dim": graph.dim, "poses": graph.n,
+                 "edges": graph.m, "components": graph.n_components}
+    if model == "paper":
+        from ...models.paper.bounds import t_optimality
+        from ...models.paper.fim import fim_logdet, paper_fim, trace_fim
+
+        anchor = graph.anchor_index(anchor_id)
+        fim = paper_fim(graph, est.rot, est.trans, anchor=anchor, rotation_model=rotation_model, variant=variant)
+        times["fim_build"] = fim.build_time
+        t0 = time.perf_counter()
+        ld = fim_logdet(fim)
+        times["fim_logdet"] = time.perf_counter() - t0
+        row.update({"anchors": [fim.anchor_id], "layout": fim.layout, "size": fim.size, "nnz": fim.nnz,
+                    "logdet": ld, "trace": trace_fim(fim), "t_opt_approx": t_optimality(graph, anchor, rotation_model)[1],
+                    "rank": fim.size, "nullity": 0, "rotation_weight": rotation_model,
+                    "fim_variant": fim.variant})
+        if save:
+            ids, coord = fim.index_map()
+            save_npz(save, fim.matrix, ids, coord, fim.coordinate_names(), "paper", [fim.anchor_id])
+    else:
+        from ...models.thesis.frames import coordinate_names, convert_information
+        from ...models.thesis.fim import sed_fim
+
+        fim = sed_fim(graph, est.rot, est.trans)
+        times.update(fim.times)
+        # log-det, rank and nullity are the same in both frames (det B_i = +-1, posecrb.models.thesis.frames)
+        matrix = fim.matrix if frame == "world" else convert_information(fim.matrix, est.rot, est.trans, "body")
+        if anchor_id is not None:
+            if graph.n_components > 1:
+                raise UsageError("--anchor with --model sed needs a connected graph "
+                                 "(`posecrb crlb --anchor` takes one anchor per component)")
+            anchors = [graph.anchor_index(anchor_id)]
+            t0 = time.perf_counter()
+            ld = anchored_logdet(fim.matrix, fim.q, anchors, "SE(d) FIM on the free poses")
+            times["fim_logdet"] = time.perf_counter() - t0
+        else:
+            anchors, ld = list(fim.anchors), fim.logdet_anchored
+        names = coordinate_names(graph.dim, frame)
+        layout = "poses (rotation first)" if frame == "world" else f"poses (GTSAM order: {', '.join(names)})"
+        row.update({"anchors": [int(graph.ids[a]) for a in anchors], "layout": layout,
+                    "size": int(matrix.shape[0]), "nnz": int(matrix.nnz)})
+        put(row, "logdet", ld, fim.logdet_status if anchor_id is None else OK)
+        row.update({"trace": float(matrix.diagonal().sum()), "rank": fim.rank, "nullity": fim.nullity,
+                    "expected_nullity": fim.q * fim.components})
+        if anchor_id is None:
+            log_status(log, f"{graph.name}: log det of the SE(d) FIM", fim.logdet_status)
+        if save:
+            save_npz(save, matrix, np.repeat(graph.ids, fim.q), np.tile(np.arange(fim.q), graph.n),
+                     names, "sed", row["anchors"], frame=frame)
+    from ...models.thesis.frames import coordinates_description
+
+    row["frame"] = frame
+    row["coordinates_description"] = coordinates_description(graph.dim, frame)
+    if save:
+        row["saved"] = save
+    row["estimate"] = est_info
+    row["times"] = times
+    return row
+
+
+@click.command("fim")
+@click.argument("file")
+@model_option
+@estimate_option
+@click.option("--anchor", type=POSE_ID, default=None,
+              help="Pose id anchored for the log-det; default: the smallest id (of each component, sed).")
+@rotation_weight_option
+@fim_variant_option
+@frame_option
+@click.option("--save", type=click.Path(dir_okay=False, writable=True), default=None,
+              help="Write the FIM as a scipy sparse .npz with its index map "
+                   "(row_pose_id, row_coordinate, coordinate_names) and its frame; .npz is appended "
+                   "unless present. With --model sed --frame body it is comparable with a GTSAM Hessian.")
+@data_dir_option
+@format_option()
+def command(file, model, estimate_source, anchor, rotation_model, fim_variant, frame, save, data_dir, fmt):
+    """Fisher information matrix of FILE at an estimate: size, nnz, log-det, trace, rank.
+
+    paper: anchored FIM of eq. (42) (2D) / (64) (3D), rows [translations; rotations]
+    (rotation coordinates: angle in 2D, along G_k/sqrt(2) in 3D); logdet = D-optimality,
+    trace = T-optimality (eq. 69/70), t_opt_approx = eq. (72). In 3D the default is the
+    model's Fisher information (fim_variant=consistent); --fim-variant eq64 gives eq. (64)
+    exactly as printed. sed: thesis FIM on SE(d)^n (size n q, pose-major), rank and nullity
+    (nullity = q x components, Th. 4.8.1) and the log-det with one anchor per component; a
+    numerically singular FIM has logdet null with a logdet_status and a warning. --frame world
+    (default, the thesis' coordinates, rotation first) or body (GTSAM's and g2o's,
+    F_body = M^-T F M^-1, M = blkdiag(-P Ad_{X_i^-1})): trace and the saved matrix change,
+    log-det, rank and nullity do not. JSON: frame, coordinates_description.
+    """
+    row = fim_row(file, data_dir, model, estimate_source, anchor, rotation_model, save, fim_variant, frame)
+    if fmt != "json":
+        row = {k: (",".join(map(str, v)) if isinstance(v, list) else v) for k, v in row.items()}
+    if fmt == "table":
+        from ...report.render import key_value_rows
+
+        kv = key_value_rows(row)
+        print_rows(kv, "table", title=f"FIM ({model}) of {row['dataset']}")
+    else:
+        print_rows([row], fmt)
+

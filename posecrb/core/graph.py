@@ -1,0 +1,147 @@
+"""The pose graph: measurements as edge arrays, ids remapped to 0..n-1.
+
+A measurement on edge k = (src[k], dst[k]) is the relative pose X_i^{-1} X_j
+(g2o / SE-Sync convention, DESIGN.md section 2): rotation ``rot[k]`` and
+translation ``trans[k]`` expressed in frame i. ``info[k]`` is the file's
+information matrix in g2o order (translation block first, then rotation).
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from functools import cached_property
+
+import numpy as np
+import scipy.sparse as sp
+from scipy.sparse.csgraph import connected_components
+
+from .errors import ComponentSummary, DisconnectedGraph, UsageError
+from ..sim.sampling import isotropic_precisions, rotation_weight
+
+
+def rotation_dimension(dim: int) -> int:
+    """d_r = dim SO(d): 1 in 2D, 3 in 3D."""
+    return 1 if dim == 2 else 3
+
+
+@dataclass(frozen=True, eq=False)
+class PoseGraph:
+    dim: int                                # d = 2 or 3
+    ids: np.ndarray                         # (n,) original vertex ids, increasing; index = internal id
+    src: np.ndarray                         # (m,) internal index of i
+    dst: np.ndarray                         # (m,) internal index of j
+    rot: np.ndarray                         # (m, d, d) measured relative rotation
+    trans: np.ndarray                       # (m, d) measured relative translation (frame i)
+    info: np.ndarray                        # (m, q, q) information matrix, (translation, rotation) order
+    vertex_rot: np.ndarray | None = None    # (n, d, d) initial estimate from the file, if any
+    vertex_trans: np.ndarray | None = None  # (n, d)
+    path: str | None = None
+    format: str = "g2o"                     # "g2o" | "toro" | "synthetic"
+    skipped: dict[str, int] = field(default_factory=dict)
+    edge_lines: np.ndarray | None = None    # (m,) 1-based line numbers of the edges in the file
+    sha256: str | None = None               # of the file's bytes, for reproducibility records
+
+    # ---- sizes -------------------------------------------------------------
+    @property
+    def n(self) -> int:
+        return int(self.ids.shape[0])
+
+    @property
+    def m(self) -> int:
+        return int(self.src.shape[0])
+
+    @property
+    def rot_dim(self) -> int:
+        """d_r: 1 in 2D, 3 in 3D."""
+        return rotation_dimension(self.dim)
+
+    @property
+    def q(self) -> int:
+        """Tangent dimension of one pose: 3 (SE(2)) or 6 (SE(3))."""
+        return self.dim + self.rot_dim
+
+    @property
+    def name(self) -> str:
+        if self.path is None:
+            return "synthetic"
+        import os
+
+        base = os.path.basename(self.path)
+        return base.rsplit(".", 1)[0] if "." in base else base
+
+    @property
+    def has_vertices(self) -> bool:
+        return self.vertex_rot is not None
+
+    # ---- noise model (DESIGN.md section 3) ---------------------------------
+    @cached_property
+    def _precisions(self) -> tuple[np.ndarray, np.ndarray]:
+        return isotropic_precisions(self.info, self.dim)
+
+    @property
+    def tau(self) -> np.ndarray:
+        """Isotropic translation precision per edge (SE-Sync convention)."""
+        return self._precisions[0]
+
+    @property
+    def kappa(self) -> np.ndarray:
+        """Langevin rotation concentration per edge (SE-Sync convention)."""
+        return self._precisions[1]
+
+    @cached_property
+    def rotation_weight(self) -> np.ndarray:
+        """Edge weight of the rotation Laplacian in the paper's coordinates (eq. 39-41, 59)."""
+        return rotation_weight(self.kappa, self.dim)
+
+    # ---- topology ----------------------------------------------------------
+    @cached_property
+    def _components(self) -> tuple[int, np.ndarray]:
+        adj = sp.coo_matrix(
+            (np.ones(self.m), (self.src, self.dst)), shape=(self.n, self.n)
+        ).tocsr()
+        return connected_components(adj, directed=False)
+
+    @property
+    def n_components(self) -> int:
+        return int(self._components[0])
+
+    @property
+    def component_labels(self) -> np.ndarray:
+        """(n,) component index of each pose; components numbered by their smallest pose."""
+        return self._components[1]
+
+    def component_summaries(self, samples: int = 3) -> list[ComponentSummary]:
+        labels = self.component_labels
+        order = np.argsort(labels, kind="stable")
+        starts = np.searchsorted(labels[order], np.arange(self.n_components))
+        sizes = np.bincount(labels, minlength=self.n_components)
+        out = [
+            ComponentSummary(int(sizes[c]), tuple(int(x) for x in self.ids[order[starts[c]: starts[c] + samples]]))
+            for c in range(self.n_components)
+        ]
+        return sorted(out, key=lambda c: -c.size)
+
+    def require_connected(self) -> None:
+        if self.n_components != 1:
+            raise DisconnectedGraph(self.path, self.component_summaries())
+
+    @cached_property
+    def degree(self) -> np.ndarray:
+        """(n,) node degree; each parallel edge counts."""
+        return np.bincount(self.src, minlength=self.n) + np.bincount(self.dst, minlength=self.n)
+
+    # ---- ids ---------------------------------------------------------------
+    def index_of(self, vertex_id: int) -> int:
+        k = int(np.searchsorted(self.ids, vertex_id))
+        if k >= self.n or self.ids[k] != vertex_id:
+            raise UsageError(f"pose id {vertex_id} is not in the graph (ids range {self.ids[0]}..{self.ids[-1]})")
+        return k
+
+    def anchor_index(self, anchor_id: int | None) -> int:
+        """Internal index of the anchor; default the smallest id (DESIGN.md section 3)."""
+        return 0 if anchor_id is None else self.index_of(anchor_id)
+
+    def with_vertices(self, rot: np.ndarray, trans: np.ndarray) -> "PoseGraph":
+        """The same measurements with another estimate attached."""
+        from dataclasses import replace
+
+        return replace(self, vertex_rot=np.asarray(rot, float), vertex_trans=np.asarray(trans, float))

@@ -1,0 +1,266 @@
+"""Dataset lookup: a bare name resolves through the search path of DESIGN.md section 9.
+
+Search path, first hit wins: ``--data-dir``, ``$POSECRB_DATA``, ``./datasets``,
+``../shared/datasets`` (this workplace), the user cache ``~/.cache/posecrb``.
+Each directory is searched together with its ``toro/`` subfolder. "../shared/datasets"
+is looked for relative to the working directory, each of its ancestors and the
+repository holding this package, so a bare name works from any directory of the
+workplace.
+
+The second half ties the search path to the manifest (``posecrb.datasets.manifest``):
+``locate`` an entry's file, ``list_datasets`` (found / missing / checksum mismatch)
+and ``verify_files`` (every file on the path against its entry). ``resolve`` falls
+back on the manifest's names and the paper's names (``garage``, ``KITTI``) only
+when the plain file search fails.
+"""
+from __future__ import annotations
+
+import os
+from dataclasses import dataclass
+from pathlib import Path
+
+from ..core.errors import DatasetNotFound
+from .manifest import DatasetEntry, Manifest, Verification, load_manifest, verify_file
+
+EXTENSIONS = (".g2o", ".graph", ".toro")
+
+
+def cache_dir() -> Path:
+    base = os.environ.get("XDG_CACHE_HOME") or os.path.join(os.path.expanduser("~"), ".cache")
+    return Path(base) / "posecrb"
+
+
+def _workplace_shared() -> list[Path]:
+    """``shared/datasets`` beside the repository and beside any ancestor of the working directory."""
+    out = []
+    repo = Path(__file__).resolve().parents[2]
+    for base in [repo.parent, *Path.cwd().resolve().parents]:
+        cand = base / "shared" / "datasets"
+        if cand.is_dir() and cand not in out:
+            out.append(cand)
+    return out
+
+
+def search_path(data_dir: str | os.PathLike | None = None) -> list[Path]:
+    dirs: list[Path] = []
+    if data_dir:
+        dirs.append(Path(data_dir))
+    env = os.environ.get("POSECRB_DATA")
+    if env:
+        dirs += [Path(p) for p in env.split(os.pathsep) if p]
+    dirs += [Path("datasets"), Path("..") / "shared" / "datasets"]
+    dirs += _workplace_shared()
+    dirs.append(cache_dir())
+    out: list[Path] = []
+    for d in dirs:
+        for sub in (d, d / "toro"):
+            if sub not in out:
+                out.append(sub)
+    return out
+
+
+def _resolve_on_path(name_or_path: str | os.PathLike, data_dir: str | os.PathLike | None = None) -> Path:
+    """An existing path is returned as is; a bare name (with or without extension) is searched."""
+    p = Path(name_or_path)
+    if p.is_file():
+        return p
+    name = str(name_or_path)
+    if os.sep in name or (os.altsep and os.altsep in name):
+        from ..core.errors import ParseError
+
+        _not_regular(name)
+        raise ParseError(name, None, "no such file")
+    candidates = [name] if name.endswith(EXTENSIONS) else [name + ext for ext in EXTENSIONS]
+    dirs = search_path(data_dir)
+    for d in dirs:
+        if not d.is_dir():
+            continue
+        for c in candidates:
+            f = d / c
+            if f.is_file():
+                return f
+        # case-insensitive match (users type `csail` for CSAIL.g2o)
+        lowered = {c.lower() for c in candidates}
+        for f in sorted(d.iterdir()):
+            if f.is_file() and f.name.lower() in lowered:
+                return f
+    raise DatasetNotFound(name, [str(d) for d in dirs if d.is_dir()])
+
+
+def _not_regular(name: str | os.PathLike) -> None:
+    """ParseError saying what ``name`` is when it exists but is not a regular file (a
+    directory, FIFO or device is never read as a dataset nor reported as missing)."""
+    try:
+        st = os.stat(name)
+    except OSError:
+        return
+    from ..core.errors import ParseError
+    from ..core.files import path_kind
+
+    raise ParseError(str(name), None, f"is {path_kind(st)}, not a regular file")
+
+
+def discover(data_dir: str | os.PathLike | None = None) -> list[Path]:
+    """Every dataset file on the search path; the first hit of each name wins."""
+    seen: dict[str, Path] = {}
+    for d in search_path(data_dir):
+        if not d.is_dir():
+            continue
+        for f in sorted(d.iterdir()):
+            if f.is_file() and f.suffix in EXTENSIONS and f.stem.lower() not in seen:
+                seen[f.stem.lower()] = f
+    return list(seen.values())
+
+
+# ---- the manifest on the search path (issue 5) ---------------------------------
+# Everything below extends the lookup above with the manifest (posecrb.datasets.manifest):
+# which paper/shared datasets are present, where, and whether their bytes are the
+# published ones.
+
+STATUS_FOUND = "found"
+STATUS_MISSING = "missing"
+STATUS_MISMATCH = "checksum mismatch"
+
+
+def locate(entry: DatasetEntry, data_dir: str | os.PathLike | None = None) -> Path | None:
+    """First file named ``entry.file`` on the search path (each directory and its ``toro/``), or None."""
+    for d in search_path(data_dir):
+        f = d / entry.file
+        if f.is_file():
+            return f
+    return None
+
+
+def resolve(name_or_path: str | os.PathLike, data_dir: str | os.PathLike | None = None,
+            manifest: Manifest | None = None) -> Path:
+    """An existing path is returned as is; a bare name (with or without extension) is searched.
+
+    Only when that search fails, the manifest's aliases are tried: dataset names
+    (``csail-toro``) and the paper's names (``garage``, ``KITTI``, ``sphere``) map to
+    their files on the search path. Raises DatasetNotFound (with the fetch hint).
+    """
+    try:
+        return _resolve_on_path(name_or_path, data_dir)
+    except DatasetNotFound as exc:
+        entry = (manifest or load_manifest()).find(str(name_or_path))
+        found = locate(entry, data_dir) if entry is not None else None
+        if found is None:
+            _not_regular(name_or_path)
+            if entry is not None and entry.name != str(name_or_path):
+                raise DatasetNotFound(entry.name, exc.searched) from None
+            raise
+        return found
+
+
+@dataclass(frozen=True)
+class DatasetStatus:
+    """One manifest entry and what the search path holds for it."""
+    entry: DatasetEntry
+    path: Path | None
+    status: str                            # found | missing | checksum mismatch
+    verification: Verification | None = None
+
+    def row(self) -> dict:
+        e = self.entry
+        return {
+            "name": e.name, "dim": e.dim, "poses": e.poses, "edges": e.edges,
+            "table": e.table_label, "paper_name": e.paper_name, "table_number": e.table,
+            "paper_order": e.paper_order, "status": self.status,
+            "path": str(self.path) if self.path else None, "format": e.format, "file": e.file,
+            "checksum": f"{self.verification.algorithm}:{self.verification.expected}" if self.verification
+            else "{}:{}".format(*e.checksum),
+            "url": e.url,
+        }
+
+
+def dataset_status(entry: DatasetEntry, data_dir: str | os.PathLike | None = None,
+                   check: bool = True) -> DatasetStatus:
+    """Locate ``entry``; with ``check`` hash the file (sha256 or git blob) against the manifest."""
+    path = locate(entry, data_dir)
+    if path is None:
+        return DatasetStatus(entry, None, STATUS_MISSING)
+    if not check:
+        return DatasetStatus(entry, path, STATUS_FOUND)
+    v = verify_file(entry, path)
+    return DatasetStatus(entry, path, STATUS_FOUND if v.ok else STATUS_MISMATCH, v)
+
+
+def list_datasets(data_dir: str | os.PathLike | None = None, check: bool = True,
+                  manifest: Manifest | None = None) -> list[DatasetStatus]:
+    """Every manifest entry in manifest order (the paper's Table I, Table II, then the rest)."""
+    return [dataset_status(e, data_dir, check) for e in (manifest or load_manifest())]
+
+
+def dataset_files(data_dir: str | os.PathLike | None = None) -> list[Path]:
+    """Every dataset file in every search directory (not only the first hit of each name)."""
+    seen: set[Path] = set()
+    out: list[Path] = []
+    for d in search_path(data_dir):
+        if not d.is_dir():
+            continue
+        for f in sorted(d.iterdir()):
+            if f.is_file() and f.suffix in EXTENSIONS:
+                key = f.resolve()
+                if key not in seen:
+                    seen.add(key)
+                    out.append(f)
+    return out
+
+
+@dataclass(frozen=True)
+class FileCheck:
+    """``verify`` result for one file on the search path."""
+    path: Path
+    entry: DatasetEntry | None
+    status: str                     # ok | checksum mismatch | count mismatch | unknown
+    algorithm: str | None = None
+    expected: str | None = None
+    actual: str | None = None
+    poses: int | None = None        # parsed counts (only with parse=True)
+    edges: int | None = None
+
+    @property
+    def failed(self) -> bool:
+        return self.status in (STATUS_MISMATCH, "count mismatch")
+
+    def row(self) -> dict:
+        return {"name": self.entry.name if self.entry else None, "file": self.path.name,
+                "status": self.status, "algorithm": self.algorithm, "expected": self.expected,
+                "actual": self.actual, "poses": self.poses, "edges": self.edges, "path": str(self.path)}
+
+
+def _match_entry(manifest: Manifest, path: Path) -> DatasetEntry | None:
+    exact = [e for e in manifest if e.file == path.name]
+    if exact:
+        return exact[0]
+    folded = [e for e in manifest if e.file.lower() == path.name.lower()]
+    return folded[0] if folded else None
+
+
+def verify_files(data_dir: str | os.PathLike | None = None, parse: bool = False,
+                 manifest: Manifest | None = None, files: list[Path] | None = None) -> list[FileCheck]:
+    """Check every dataset file on the search path (or the given ``files``) against the manifest.
+
+    Files are matched to entries by file name. Files the manifest does not know are
+    reported as ``unknown`` (not a failure). ``parse=True`` also loads each matching
+    file and compares its pose/edge counts.
+    """
+    manifest = manifest or load_manifest()
+    out: list[FileCheck] = []
+    for f in (dataset_files(data_dir) if files is None else [Path(p) for p in files]):
+        entry = _match_entry(manifest, f)
+        if entry is None:
+            out.append(FileCheck(f, None, "unknown"))
+            continue
+        v = verify_file(entry, f)
+        status = "ok" if v.ok else STATUS_MISMATCH
+        poses = edges = None
+        if parse:
+            from ..io import load
+
+            g = load(f)
+            poses, edges = g.n, g.m
+            if status == "ok" and (poses, edges) != (entry.poses, entry.edges):
+                status = "count mismatch"
+        out.append(FileCheck(f, entry, status, v.algorithm, v.expected, v.actual, poses, edges))
+    return out

@@ -1,0 +1,410 @@
+"""A Cholesky factor with a fixed pattern: solves with sparse right-hand sides and rank-one
+updates that touch only the elimination-tree paths of the nonzeros.
+
+Measurement selection adds edges one by one to a matrix whose CHOLMOD analysis was done on the
+full graph, so the factor's pattern already holds every fill entry any subset can create. For
+``P A P^T = L L^T`` and a right-hand side ``b`` with a few nonzeros (one edge: two poses), the
+forward solve ``y = L^{-1} P b`` is nonzero only on the union of the elimination-tree paths from
+those rows to the root (Gilbert's reach), so ``b^T A^{-1} b = ||y||^2`` costs the column counts
+along that path, not a pass over the whole factor. The rank-one update ``A + u u^T`` (Gill,
+Golub, Murray & Saunders 1974, method C1; the column order of Davis & Hager 1999) likewise only
+rewrites the columns on the path of u's nonzeros, and needs no new entries because the pattern
+is closed under it. Kernels are compiled with numba (``cache=True``), like ``posecrb.linalg.selinv``.
+"""
+from __future__ import annotations
+
+import numpy as np
+import scipy.sparse as sp
+
+try:  # numba is a declared dependency
+    from numba import njit
+except ImportError:  # pragma: no cover
+    def njit(*args, **kwargs):
+        if args and callable(args[0]):
+            return args[0]
+        return lambda f: f
+
+
+@njit(cache=True, nogil=True)
+def _reach(parent, starts, mark, stamp):  # pragma: no cover - compiled
+    """Sorted union of the elimination-tree paths from ``starts`` to the root."""
+    out = np.empty(parent.shape[0], np.int64)
+    cnt = 0
+    for s0 in starts:
+        s = s0
+        while s != -1 and mark[s] != stamp:
+            mark[s] = stamp
+            out[cnt] = s
+            cnt += 1
+            s = parent[s]
+    return np.sort(out[:cnt])
+
+
+@njit(cache=True, nogil=True)
+def _h_edges(indptr, indices, lval, parent, iperm, rows, valid, u, mark, work):  # pragma: no cover
+    """``H_e = U_e^T A^{-1} U_e`` for each edge: forward solves along the reach of its rows."""
+    k, p, r = u.shape
+    out = np.zeros((k, r, r))
+    stamp = 1          # mark is all zeros on entry
+    for e in range(k):
+        nv = 0
+        for a in range(p):
+            if valid[e, a]:
+                nv += 1
+        starts = np.empty(nv, np.int64)
+        t = 0
+        for a in range(p):
+            if valid[e, a]:
+                starts[t] = iperm[rows[e, a]]
+                t += 1
+        path = _reach(parent, starts, mark, stamp)
+        stamp += 1
+        for a in range(p):
+            if valid[e, a]:
+                pos = iperm[rows[e, a]]
+                for c in range(r):
+                    work[pos, c] += u[e, a, c]
+        for j in path:
+            d = lval[indptr[j]]
+            for c in range(r):
+                work[j, c] /= d
+            for q in range(indptr[j] + 1, indptr[j + 1]):
+                i = indices[q]
+                lij = lval[q]
+                for c in range(r):
+                    work[i, c] -= lij * work[j, c]
+        for j in path:
+            for a in range(r):
+                for b in range(r):
+                    out[e, a, b] += work[j, a] * work[j, b]
+            for c in range(r):
+                work[j, c] = 0.0
+    return out
+
+
+@njit(cache=True, nogil=True)
+def _update(indptr, indices, lval, parent, iperm, rows, valid, u, mark, vec):  # pragma: no cover
+    """``L L^T + sum_c u_c u_c^T`` in place, one rank-one update per column of ``u`` (p, r)."""
+    p, r = u.shape
+    stamp = 1          # mark is all zeros on entry
+    nv = 0
+    for a in range(p):
+        if valid[a]:
+            nv += 1
+    starts = np.empty(nv, np.int64)
+    t = 0
+    for a in range(p):
+        if valid[a]:
+            starts[t] = iperm[rows[a]]
+            t += 1
+    path = _reach(parent, starts, mark, stamp)
+    for c in range(r):
+        for a in range(p):
+            if valid[a]:
+                vec[iperm[rows[a]]] += u[a, c]
+        for j in path:
+            wj = vec[j]
+            if wj == 0.0:
+                continue
+            q0 = indptr[j]
+            ljj = lval[q0]
+            rr = np.sqrt(ljj * ljj + wj * wj)
+            cc = rr / ljj
+            ss = wj / ljj
+            lval[q0] = rr
+            for q in range(q0 + 1, indptr[j + 1]):
+                i = indices[q]
+                lval[q] = (lval[q] + ss * vec[i]) / cc
+                vec[i] = cc * vec[i] - ss * lval[q]
+            vec[j] = 0.0
+        for j in path:
+            vec[j] = 0.0
+
+
+@njit(cache=True, nogil=True)
+def _solve(indptr, indices, lval, parent, iperm, rows, valid, u, mark):  # pragma: no cover - compiled
+    """``A^{-1} U`` (permuted order) for one edge: forward along the reach, backward over all."""
+    p, r = u.shape
+    n = indptr.shape[0] - 1
+    y = np.zeros((n, r))
+    nv = 0
+    for a in range(p):
+        if valid[a]:
+            nv += 1
+    starts = np.empty(nv, np.int64)
+    t = 0
+    for a in range(p):
+        if valid[a]:
+            starts[t] = iperm[rows[a]]
+            t += 1
+            for c in range(r):
+                y[iperm[rows[a]], c] += u[a, c]
+    path = _reach(parent, starts, mark, 1)
+    for j in path:
+        d = lval[indptr[j]]
+        for c in range(r):
+            y[j, c] /= d
+        for q in range(indptr[j] + 1, indptr[j + 1]):
+            i = indices[q]
+            for c in range(r):
+                y[i, c] -= lval[q] * y[j, c]
+    for j in range(n - 1, -1, -1):
+        for q in range(indptr[j] + 1, indptr[j + 1]):
+            i = indices[q]
+            for c in range(r):
+                y[j, c] -= lval[q] * y[i, c]
+        d = lval[indptr[j]]
+        for c in range(r):
+            y[j, c] /= d
+    return y
+
+
+@njit(cache=True, nogil=True)
+def logdet_eye_plus(h):  # pragma: no cover - compiled
+    """logdet(I + H) for each symmetric PSD H (k, r, r), by an unpivoted Cholesky (I + H >= I)."""
+    k, r, _ = h.shape
+    out = np.zeros(k)
+    a = np.empty((r, r))
+    for e in range(k):
+        if r == 1:
+            out[e] = np.log1p(max(h[e, 0, 0], 0.0))
+            continue
+        for i in range(r):
+            for j in range(r):
+                a[i, j] = 0.5 * (h[e, i, j] + h[e, j, i]) + (1.0 if i == j else 0.0)
+        acc = 0.0
+        for j in range(r):
+            d = a[j, j]
+            for t in range(j):
+                d -= a[j, t] * a[j, t]
+            d = np.sqrt(max(d, 1.0))   # I + H >= I: a pivot below 1 is rounding
+            a[j, j] = d
+            acc += np.log(d)
+            for i in range(j + 1, r):
+                v = a[i, j]
+                for t in range(j):
+                    v -= a[i, t] * a[j, t]
+                a[i, j] = v / d
+        out[e] = 2.0 * acc
+    return out
+
+
+@njit(cache=True, nogil=True)
+def woodbury_downdate(h, u, rows, valid, alive, z, inv):  # pragma: no cover - compiled
+    """``H_f <- H_f - C_f inv C_f^T`` with ``C_f = U_f^T Z[rows_f]`` for every alive f.
+
+    h (c, r, r), u (c, p, r), rows/valid (c, p), alive (c,), z (n, r), inv (r, r)."""
+    c, p, r = u.shape
+    cf = np.empty((r, r))
+    tmp = np.empty((r, r))
+    for f in range(c):
+        if not alive[f]:
+            continue
+        for a in range(r):
+            for b in range(r):
+                cf[a, b] = 0.0
+        for t in range(p):
+            if valid[f, t]:
+                row = rows[f, t]
+                for a in range(r):
+                    ua = u[f, t, a]
+                    if ua != 0.0:
+                        for b in range(r):
+                            cf[a, b] += ua * z[row, b]
+        for a in range(r):
+            for b in range(r):
+                v = 0.0
+                for t in range(r):
+                    v += cf[a, t] * inv[t, b]
+                tmp[a, b] = v
+        for a in range(r):
+            for b in range(r):
+                v = 0.0
+                for t in range(r):
+                    v += tmp[a, t] * cf[b, t]
+                h[f, a, b] -= v
+
+
+@njit(cache=True, nogil=True)
+def _solve1(indptr, indices, lval, parent, iperm, rows, valid, u, mark):  # pragma: no cover - compiled
+    """``_solve`` for one column (Laplacian blocks): 1-D work vector, no inner loop over columns."""
+    p = u.shape[0]
+    n = indptr.shape[0] - 1
+    y = np.zeros(n)
+    nv = 0
+    for a in range(p):
+        if valid[a]:
+            nv += 1
+    starts = np.empty(nv, np.int64)
+    t = 0
+    for a in range(p):
+        if valid[a]:
+            starts[t] = iperm[rows[a]]
+            y[starts[t]] += u[a, 0]
+            t += 1
+    path = _reach(parent, starts, mark, 1)
+    for j in path:
+        yj = y[j] / lval[indptr[j]]
+        y[j] = yj
+        for q in range(indptr[j] + 1, indptr[j + 1]):
+            y[indices[q]] -= lval[q] * yj
+    for j in range(n - 1, -1, -1):
+        acc = y[j]
+        for q in range(indptr[j] + 1, indptr[j + 1]):
+            acc -= lval[q] * y[indices[q]]
+        y[j] = acc / lval[indptr[j]]
+    return y
+
+
+@njit(cache=True, nogil=True)
+def woodbury_downdate1(h, u, rows, valid, alive, z, inv):  # pragma: no cover - compiled
+    """``woodbury_downdate`` for one column: ``h_f -= inv (u_f . z[rows_f])^2``."""
+    c, p, _ = u.shape
+    s = inv[0, 0]
+    for f in range(c):
+        if not alive[f]:
+            continue
+        acc = 0.0
+        for t in range(p):
+            if valid[f, t]:
+                acc += u[f, t, 0] * z[rows[f, t], 0]
+        h[f, 0, 0] -= s * acc * acc
+
+
+@njit(cache=True, nogil=True)
+def scalar_greedy_steps(indptr, indices, lval, parent, prow, valid, u, h, alive, nsteps, mult, update_last,
+                        mark, y):  # pragma: no cover - compiled
+    """``nsteps`` steps of the incremental greedy for one Laplacian block, fused (no Python per step).
+
+    prow (c, p): permuted rows of the candidates' U; u (c, p); h (c,) current ``U_f^T M^{-1} U_f``
+    (-inf once chosen); alive (c,). Per step: the argmax of h (first on ties), then
+    ``z = M^{-1} u_e`` (forward along the reach, backward over all columns), the Woodbury
+    downdate ``h_f -= (u_f . z)^2 / (1 + h_e)`` of every alive f, and the rank-one update of L.
+    Returns the chosen positions and their gains ``mult * log1p(h_e)``."""
+    c, p = u.shape
+    n = indptr.shape[0] - 1
+    chosen = np.empty(nsteps, np.int64)
+    gains = np.empty(nsteps)
+    starts = np.empty(p, np.int64)
+    for step in range(nsteps):
+        pos = -1
+        best = -np.inf
+        for f in range(c):
+            if alive[f] and h[f] > best:
+                best = h[f]
+                pos = f
+        he = max(h[pos], 0.0)
+        chosen[step] = pos
+        gains[step] = mult * np.log1p(he)
+        alive[pos] = False
+        h[pos] = -np.inf
+        if step == nsteps - 1 and not update_last:
+            break
+        # z = M^{-1} u_e in permuted order
+        for j in range(n):
+            y[j] = 0.0
+        nv = 0
+        for a in range(p):
+            if valid[pos, a]:
+                starts[nv] = prow[pos, a]
+                y[prow[pos, a]] += u[pos, a]
+                nv += 1
+        stamp = step + 1
+        path = _reach(parent, starts[:nv], mark, stamp)
+        for j in path:
+            yj = y[j] / lval[indptr[j]]
+            y[j] = yj
+            for q in range(indptr[j] + 1, indptr[j + 1]):
+                y[indices[q]] -= lval[q] * yj
+        for j in range(n - 1, -1, -1):
+            acc = y[j]
+            for q in range(indptr[j] + 1, indptr[j + 1]):
+                acc -= lval[q] * y[indices[q]]
+            y[j] = acc / lval[indptr[j]]
+        inv = 1.0 / (1.0 + he)
+        for f in range(c):
+            if alive[f]:
+                acc = 0.0
+                for t in range(p):
+                    if valid[f, t]:
+                        acc += u[f, t] * y[prow[f, t]]
+                h[f] -= inv * acc * acc
+        # L L^T + u_e u_e^T along the same path (y is reused as the work vector)
+        for j in path:
+            y[j] = 0.0
+        for a in range(p):
+            if valid[pos, a]:
+                y[prow[pos, a]] += u[pos, a]
+        for j in path:
+            wj = y[j]
+            if wj == 0.0:
+                continue
+            q0 = indptr[j]
+            ljj = lval[q0]
+            rr = np.sqrt(ljj * ljj + wj * wj)
+            cc = rr / ljj
+            ss = wj / ljj
+            lval[q0] = rr
+            for q in range(q0 + 1, indptr[j + 1]):
+                i = indices[q]
+                lval[q] = (lval[q] + ss * y[i]) / cc
+                y[i] = cc * y[i] - ss * lval[q]
+            y[j] = 0.0
+    return chosen, gains
+
+
+class PathFactor:
+    """``P A P^T = L L^T`` held as a CSC lower factor (from a CHOLMOD factor), for path solves
+    and in-place rank-one updates with the pattern fixed."""
+
+    def __init__(self, factor):
+        lower = sp.csc_matrix(factor.L())
+        lower.sort_indices()
+        self.indptr = lower.indptr.astype(np.int64)
+        self.indices = lower.indices.astype(np.int64)
+        self.lval = np.array(lower.data, dtype=np.float64)
+        n = self.indptr.size - 1
+        if np.any(self.indices[self.indptr[:-1]] != np.arange(n)):  # pragma: no cover - CHOLMOD's L
+            raise RuntimeError("Cholesky factor without its diagonal first in every column")
+        has_sub = self.indptr[1:] - self.indptr[:-1] > 1
+        self.parent = np.full(n, -1, dtype=np.int64)
+        self.parent[has_sub] = self.indices[self.indptr[:-1][has_sub] + 1]
+        perm = np.asarray(factor.P(), dtype=np.int64)
+        self.iperm = np.empty_like(perm)
+        self.iperm[perm] = np.arange(n)
+        self._mark = np.zeros(n, dtype=np.int64)
+        self._vec = np.zeros(n)
+        self.n = n
+
+    def h(self, rows: np.ndarray, valid: np.ndarray, u: np.ndarray) -> np.ndarray:
+        """``U_e^T A^{-1} U_e`` for edges given by rows (k, p), valid (k, p), U (k, p, r)."""
+        work = np.zeros((self.n, u.shape[2]))
+        out = _h_edges(self.indptr, self.indices, self.lval, self.parent, self.iperm,
+                       np.ascontiguousarray(rows, dtype=np.int64), np.ascontiguousarray(valid),
+                       np.ascontiguousarray(u, dtype=np.float64), self._mark, work)
+        self._mark[:] = 0
+        return out
+
+    def update(self, rows: np.ndarray, valid: np.ndarray, u: np.ndarray) -> None:
+        """``A <- A + U U^T`` for one edge (rows (p,), valid (p,), U (p, r))."""
+        _update(self.indptr, self.indices, self.lval, self.parent, self.iperm,
+                np.ascontiguousarray(rows, dtype=np.int64), np.ascontiguousarray(valid),
+                np.ascontiguousarray(u, dtype=np.float64), self._mark, self._vec)
+        self._mark[:] = 0
+
+    def solve(self, rows: np.ndarray, valid: np.ndarray, u: np.ndarray) -> np.ndarray:
+        """``A^{-1} U`` (n, r) in the original order for one edge's rows (p,), valid (p,), U (p, r)."""
+        if u.shape[1] == 1:
+            y = _solve1(self.indptr, self.indices, self.lval, self.parent, self.iperm,
+                        np.ascontiguousarray(rows, dtype=np.int64), np.ascontiguousarray(valid),
+                        np.ascontiguousarray(u, dtype=np.float64), self._mark)
+            self._mark[:] = 0
+            return y[self.iperm][:, None]
+        y = _solve(self.indptr, self.indices, self.lval, self.parent, self.iperm,
+                   np.ascontiguousarray(rows, dtype=np.int64), np.ascontiguousarray(valid),
+                   np.ascontiguousarray(u, dtype=np.float64), self._mark)
+        self._mark[:] = 0
+        return y[self.iperm]
+
+    def logdet(self) -> float:
+        return float(2.0 * np.log(self.lval[self.indptr[:-1]]).sum())

@@ -1,0 +1,101 @@
+"""Regression of metric values against ``datasets/expected.json``.
+
+For each dataset the file stores the input's sha256 and ``lb, ub, ub_lambda``
+(graph-only: relative tolerance 1e-9) and ``fim_logdet, objective, trace_crlb``
+(at the certified optimum: relative tolerance 1e-6, since they depend on the
+solver's stopping point), with ``fim_variant``, the FIM they were computed from (the model's
+Fisher information, ``"consistent"``, the default of ``posecrb.models.paper.fim.paper_fim``; the same matrix
+as eq. 64 in 2D). A changed input file or FIM variant is reported, not compared.
+"""
+from __future__ import annotations
+
+import json
+import os
+from dataclasses import dataclass
+from pathlib import Path
+
+from ..datasets import search as datasets
+from ..models.paper.bounds import compute_bounds
+from ..core.errors import PosecrbError
+from ..solver.estimate import get_estimate
+from ..io import load
+from ..core.files import read_regular_file, write_text
+
+GRAPH_ONLY = ("lb", "ub", "ub_lambda")
+ESTIMATE_DEPENDENT = ("fim_logdet", "objective", "trace_crlb")
+FIM_DERIVED = ("fim_logdet", "trace_crlb")
+TOLERANCES = {**{k: 1e-9 for k in GRAPH_ONLY}, **{k: 1e-6 for k in ESTIMATE_DEPENDENT}}
+
+
+def default_expected_path() -> Path:
+    """``datasets/expected.json`` of the repository (a symlink to the package-data copy)."""
+    package = Path(__file__).resolve().parents[1]
+    repo = package.parent / "datasets" / "expected.json"
+    return repo if repo.exists() else package / "data" / "expected.json"
+
+
+def load_expected(path: str | os.PathLike | None = None) -> dict:
+    p = Path(path) if path else default_expected_path()
+    if not os.path.lexists(p):
+        return {"version": 1, "datasets": {}}
+    try:
+        data = json.loads(read_regular_file(p))   # a directory, FIFO or device is an error, not a hang
+    except (json.JSONDecodeError, UnicodeDecodeError) as exc:
+        if isinstance(exc, UnicodeDecodeError):
+            raise PosecrbError(f"{p}: not a text file (invalid UTF-8)") from None
+        raise PosecrbError(f"{p}:{exc.lineno}: invalid JSON ({exc.msg})") from None
+    if not isinstance(data, dict) or not isinstance(data.get("datasets"), dict):
+        raise PosecrbError(f"{p}: expected an object with a 'datasets' mapping")
+    return data
+
+
+def save_expected(data: dict, path: str | os.PathLike | None = None) -> Path:
+    p = Path(path) if path else default_expected_path()
+    write_text(p.resolve(), json.dumps(data, indent=2, sort_keys=True) + "\n")   # atomic, through a symlink
+    return p
+
+
+def compute_metrics(name: str, data_dir: str | None = None, variant: str = "consistent") -> dict:
+    """The regressed quantities of one dataset, at its certified optimum (FIM ``variant``)."""
+    from ..models.paper.crlb import crlb_from_fim
+    from ..models.paper.fim import fim_logdet, paper_fim
+
+    path = datasets.resolve(name, data_dir)
+    graph = load(path)
+    b = compute_bounds(graph)
+    est = get_estimate(graph, "solve")
+    if not est.certified:
+        raise PosecrbError(f"{name}: the solver did not certify its estimate")
+    fim = paper_fim(graph, est.rot, est.trans, 0, variant=variant)
+    return {"sha256": graph.sha256, "fim_variant": fim.variant, "lb": b.lb, "ub": b.ub, "ub_lambda": b.ub_lambda,
+            "fim_logdet": fim_logdet(fim), "objective": est.objective,
+            "trace_crlb": crlb_from_fim(fim, graph).trace_crlb}  # the same FIM, built once
+
+
+@dataclass(frozen=True)
+class Diff:
+    dataset: str
+    quantity: str
+    expected: float | str | None
+    got: float | str | None
+    rel_diff: float | None
+    tolerance: float | None
+    ok: bool
+    fim_variant: str | None = None      # for the FIM-derived quantities (fim_logdet, trace_crlb)
+
+
+def compare(name: str, expected: dict, got: dict) -> list[Diff]:
+    if expected.get("sha256") and got.get("sha256") != expected["sha256"]:
+        return [Diff(name, "sha256", expected["sha256"], got.get("sha256"), None, None, False)]
+    variant = got.get("fim_variant")
+    if expected.get("fim_variant") and expected["fim_variant"] != variant:
+        return [Diff(name, "fim_variant", expected["fim_variant"], variant, None, None, False, variant)]
+    out = []
+    for q, tol in TOLERANCES.items():
+        e, g = expected.get(q), got.get(q)
+        if e is None:
+            continue
+        rel = abs(g - e) / max(abs(e), 1e-300) if g is not None else None
+        out.append(Diff(name, q, e, g, rel, tol, rel is not None and rel <= tol,
+                        variant if q in FIM_DERIVED else None))
+    return out

@@ -1,0 +1,277 @@
+"""Tables I-IV of the paper on every available dataset (DESIGN.md section 8).
+
+One ``dataset_row`` per dataset computes everything (parse, bounds, certified
+solve, FIM at the optimum and its log-det, construction times); the four tables
+are column views of those rows. Timing protocol: ``time.perf_counter`` around
+exactly the measured work, warm-up once, median of ``repeat`` runs:
+
+* ``lb_time`` / ``ub_time`` / ``ub_lambda_time``: see ``posecrb.models.paper.bounds.compute_bounds``;
+* ``fim_time``: ordering + numeric Cholesky + log-det of the anchored FIM (Table I/II "Time");
+* ``fim_build_time`` / ``laplacians_build_time``: construction of the whole FIM from the
+  estimate and edge data, vs the two weighted reduced Laplacians (Table III/IV);
+* ``solve_time``: one run of the certified solver (not repeated).
+"""
+from __future__ import annotations
+
+import logging
+import math
+import os
+from dataclasses import asdict, dataclass, field
+from typing import Callable, Iterable, Sequence
+
+from ..datasets import search as datasets
+from ..models.paper.bounds import compute_bounds
+from ..core.errors import DatasetNotFound, PosecrbError, status_of
+from ..solver.estimate import get_estimate
+from ..io import load
+from .published import TABLE_II_FIT_FOOTNOTE, TABLE_II_FOOTNOTE, TABLE_II_PUBLISHED_FOOTNOTE, paper_row
+from ..core.provenance import machine, versions
+from ..core.status import put
+from ..core.timing import timed
+
+log = logging.getLogger("posecrb")
+
+# Failed computations make the command exit 1; "not found" rows of datasets that were not
+# asked for by name (e.g. grid3D/rim, which only a user with internet can fetch) do not.
+FAILED_STATUSES = ("parse error", "not positive definite", "uncertified", "disconnected", "error")
+
+
+@dataclass(frozen=True)
+class TableSettings:
+    """``rotation_model`` / ``fim_variant``: the model's quantities by default (eq. 59, the model's
+    Fisher information); ``published()`` gives the settings that reproduce the printed Table II."""
+
+    repeat: int = 3
+    rotation_model: str = "eq59"
+    data_dir: str | None = None
+    solver: dict = field(default_factory=dict)
+    fim_variant: str = "consistent"
+
+    @property
+    def as_published(self) -> bool:
+        return self.rotation_model == "table2" and self.fim_variant == "eq64"
+
+
+def published_settings(**kwargs) -> TableSettings:
+    """Eq. (64) as printed with the empirical Table II rotation weight (``posecrb tables --as-published``)."""
+    return TableSettings(rotation_model="table2", fim_variant="eq64", **kwargs)
+
+
+def dataset_names(names: Sequence[str] | None = None, data_dir: str | None = None) -> list[str]:
+    """The paper's datasets first (Table I then II, in the paper's order), then every other
+    manifest entry, then any other dataset file found on the search path."""
+    if names:
+        return list(names)
+    from ..datasets.manifest import load_manifest
+
+    man = load_manifest()
+    order = [e.name for e in man.paper()] + [e.name for e in man if e.table is None]
+    known = {n.lower() for n in order} | {e.file.lower() for e in man}
+    extra = [p.stem for p in datasets.discover(data_dir)
+             if p.stem.lower() not in known and p.name.lower() not in known]
+    return order + extra
+
+
+def dataset_row(name: str, settings: TableSettings,
+                progress: Callable[[str], None] | None = None) -> dict:
+    """Every Table I-IV quantity for one dataset; failures become a status, never an exception."""
+    step = progress or (lambda s: None)
+    row: dict = {"dataset": name, "status": "ok"}
+    try:
+        path = datasets.resolve(name, settings.data_dir)
+    except DatasetNotFound as exc:
+        row.update(status="not found", hint=f"posecrb datasets fetch {name}", error=str(exc))
+        return row
+    except PosecrbError as exc:   # e.g. a directory or a device given as the dataset
+        row.update(status=status_of(exc), error=str(exc))
+        log.error("%s", exc)
+        return row
+    try:
+        step("parse")
+        graph, t_parse = timed(lambda: load(path), 1)
+        if os.sep in name:  # a path: name the row after the file
+            row["dataset"] = graph.name
+        row.update(path=str(path), sha256=graph.sha256, dim=graph.dim,
+                   poses=graph.n, edges=graph.m)
+        step("bounds")
+        b = compute_bounds(graph, 0, settings.rotation_model, settings.repeat)
+        row.update(lb=b.lb)
+        put(row, "ub", b.ub, b.ub_status)
+        row.update(ub_lambda=b.ub_lambda, lb_time=b.times["lb"], ub_time=b.times["ub"],
+                   ub_lambda_time=b.times["ub_lambda"], laplacians_build_time=b.times["laplacians"])
+        step("solve")
+        est = get_estimate(graph, "solve", **settings.solver)
+        row.update(objective=est.objective, certified=est.certified, solve_time=est.solve_time)
+        step("fim")
+        from ..models.paper.fim import fim_logdet, paper_fim
+
+        fim, t_build = timed(lambda: paper_fim(graph, est.rot, est.trans, 0, settings.rotation_model,
+                                               variant=settings.fim_variant), settings.repeat)
+        ld, t_ld = timed(lambda: fim_logdet(fim), settings.repeat)
+        row.update(fim_logdet=ld, fim_variant=fim.variant, rotation_weight=settings.rotation_model, fim_time=t_ld,
+                   fim_build_time=t_build)
+        row.update(gap_ub_rel=None if b.ub is None else (b.ub - b.lb) / b.lb, gap_fim_rel=(ld - b.lb) / b.lb,
+                   parse_time=t_parse)
+        if not est.certified:
+            row["status"] = "uncertified"
+    except PosecrbError as exc:
+        row.update(status=status_of(exc), error=str(exc))
+        log.error("%s: %s", name, exc)
+    return row
+
+
+def _run_one(args):  # top level: picklable for the process pool
+    name, settings = args
+    return dataset_row(name, settings)
+
+
+def build_rows(names: Sequence[str], settings: TableSettings, jobs: int = 1,
+               on_done: Callable[[str, dict], None] | None = None,
+               on_step: Callable[[str, str], None] | None = None) -> list[dict]:
+    """Rows in the order of ``names``; with jobs > 1 datasets run in a process pool
+    (timings then include contention for the machine's cores: use --jobs 1 for timing)."""
+    if jobs <= 1:
+        rows = []
+        for n in names:
+            rows.append(dataset_row(n, settings, (lambda s, n=n: on_step(n, s)) if on_step else None))
+            if on_done:
+                on_done(n, rows[-1])
+        return rows
+    from concurrent.futures import ProcessPoolExecutor
+
+    out: dict[str, dict] = {}
+    with ProcessPoolExecutor(max_workers=jobs) as pool:
+        futures = {pool.submit(_run_one, (n, settings)): n for n in names}
+        from concurrent.futures import as_completed
+
+        for fut in as_completed(futures):
+            n = futures[fut]
+            out[n] = fut.result()
+            if on_done:
+                on_done(n, out[n])
+    return [out[n] for n in names]
+
+
+# ---- views -------------------------------------------------------------------------
+MAIN_COLUMNS = ["dataset", "poses", "edges", "fim_logdet", "fim_time", "ub", "ub_time", "lb", "lb_time",
+                "ub_lambda", "gap_ub_rel", "gap_fim_rel", "objective", "solve_time", "fim_variant", "status"]
+BUILD_COLUMNS = ["dataset", "fim_build_time", "laplacians_build_time", "build_ratio", "status"]
+HEADERS = {
+    "poses": "# Poses", "edges": "# Meas.", "fim_logdet": "FIM logdet", "fim_time": "FIM t [s]",
+    "ub": "ub", "ub_time": "ub t [s]", "lb": "lb", "lb_time": "lb t [s]", "ub_lambda": "ub (λ∞)",
+    "gap_ub_rel": "(ub-lb)/lb", "gap_fim_rel": "(FIM-lb)/lb", "objective": "objective F*",
+    "solve_time": "solve t [s]", "fim_build_time": "whole FIM [s]",
+    "laplacians_build_time": "weighted Laplacians [s]", "build_ratio": "FIM/Lapl.",
+    "paper_name": "paper name", "fim_variant": "FIM variant",
+}
+for _c, _h in (("fim_logdet", "FIM"), ("ub", "ub"), ("lb", "lb"), ("fim_build_time", "whole FIM"),
+               ("laplacians_build_time", "Laplacians")):
+    HEADERS[f"paper_{_c}"] = f"paper {_h}"
+    HEADERS[f"rel_diff_{_c}"] = f"Δrel {_h}"
+TITLES = {1: "Table I: metric results, 2D datasets", 2: "Table II: metric results, 3D datasets",
+          3: "Table III: matrix construction time, 2D datasets",
+          4: "Table IV: matrix construction time, 3D datasets"}
+COMPARED = {1: ["fim_logdet", "ub", "lb"], 2: ["fim_logdet", "ub", "lb"],
+            3: ["fim_build_time", "laplacians_build_time"], 4: ["fim_build_time", "laplacians_build_time"]}
+
+
+def table_rows(rows: Iterable[dict], table: int, compare_paper: bool = False) -> tuple[list[dict], list[str]]:
+    """(rows, columns) of Table 1-4; 2D rows go to I/III, 3D rows to II/IV, missing ones to both."""
+    dim = 2 if table in (1, 3) else 3
+    cols = list(MAIN_COLUMNS if table in (1, 2) else BUILD_COLUMNS)
+    out = []
+    for r in rows:
+        if r.get("dim", dim) != dim:
+            continue
+        if r.get("dim") is None and not _belongs_missing(r["dataset"], dim):
+            continue
+        v = {c: r.get(c) for c in cols}
+        v.update({f"{c}_status": r[f"{c}_status"] for c in cols if f"{c}_status" in r})
+        if table in (3, 4) and r.get("fim_build_time") and r.get("laplacians_build_time"):
+            v["build_ratio"] = r["fim_build_time"] / r["laplacians_build_time"]
+        if compare_paper:
+            p = paper_row(r["dataset"]) or {}
+            v["paper_name"] = p.get("paper_name")
+            for c in COMPARED[table]:
+                pv = p.get(c)
+                v[f"paper_{c}"] = pv
+                v[f"rel_diff_{c}"] = (r[c] - pv) / abs(pv) if pv and r.get(c) is not None else None
+        out.append(v)
+    if compare_paper:
+        extra = ["paper_name"] + [x for c in COMPARED[table] for x in (f"paper_{c}", f"rel_diff_{c}")]
+        cols = cols[:-1] + extra + cols[-1:]
+    return out, cols
+
+
+def _belongs_missing(name: str, dim: int) -> bool:
+    try:
+        from ..datasets.manifest import load_manifest
+
+        entry = load_manifest().find(name)
+    except Exception:  # noqa: BLE001 - no manifest: show the row in both tables
+        return True
+    return entry is None or entry.dim == dim
+
+
+def footnote(table: int, rotation_model: str, fim_variant: str = "consistent") -> str | None:
+    """The note printed once, under Table II: how its numbers relate to the printed table."""
+    if table != 2:
+        return None
+    if rotation_model == "table2" and fim_variant == "eq64":
+        return TABLE_II_PUBLISHED_FOOTNOTE
+    if rotation_model == "table2":
+        return TABLE_II_FIT_FOOTNOTE.format(variant="model's (consistent)" if fim_variant == "consistent"
+                                            else "eq. (64) as printed")
+    return TABLE_II_FOOTNOTE
+
+
+def failed(rows: Iterable[dict], requested: Sequence[str] | None) -> list[dict]:
+    """Rows that make the command exit 1."""
+    asked = {n.lower() for n in requested or []}
+    return [r for r in rows if r["status"] in FAILED_STATUSES
+            or (r["status"] == "not found" and r["dataset"].lower() in asked)]
+
+
+# ---- LaTeX --------------------------------------------------------------------------
+def _tex_number(v) -> str:
+    if v is None:
+        return "--"
+    if isinstance(v, bool):
+        return "yes" if v else "no"
+    if isinstance(v, int):
+        return str(v)
+    if isinstance(v, float):
+        if v == 0 or not math.isfinite(v):
+            return str(v)
+        e = int(math.floor(math.log10(abs(v))))
+        m = v / 10 ** e
+        if f"{m:.4f}".startswith("10."):
+            m, e = m / 10, e + 1
+        return f"${m:.4f}\\times10^{{{e}}}$"
+    return str(v).replace("_", r"\_").replace("%", r"\%").replace("&", r"\&")
+
+
+def to_latex(rows: list[dict], columns: list[str], caption: str, headers: dict[str, str]) -> str:
+    def head(c):
+        return _tex_number(headers.get(c, c)).replace("λ∞", r"$\lambda_\infty$")
+
+    lines = [r"\begin{table}[t]", r"\centering", f"\\caption{{{_tex_number(caption)}}}",
+             r"\begin{tabular}{" + "l" + "r" * (len(columns) - 1) + "}", r"\toprule",
+             " & ".join(head(c) for c in columns) + r" \\", r"\midrule"]
+    lines += [" & ".join(_tex_number(r.get(c)) for c in columns) + r" \\" for r in rows]
+    lines += [r"\bottomrule", r"\end{tabular}", r"\end{table}"]
+    return "\n".join(lines) + "\n"
+
+
+# ---- reproducibility record ------------------------------------------------------------
+def run_record(settings: TableSettings, rows: list[dict], argv: Sequence[str] | None = None) -> dict:
+    """Versions, machine, dataset checksums and settings: enough to reproduce and diff a run."""
+    return {
+        "command": list(argv) if argv else None,
+        "versions": versions(),
+        "machine": machine(),
+        "settings": asdict(settings),
+        "seeds": {"solver": settings.solver.get("seed", "default (deterministic)")},
+        "datasets": {r["dataset"]: {"path": r.get("path"), "sha256": r.get("sha256"), "status": r["status"]}
+                     for r in rows},
+    }

@@ -1,0 +1,346 @@
+"""Noise model: information matrices -> isotropic (tau, kappa), rotation weights.
+
+DESIGN.md section 3. tau is the isotropic Gaussian translation precision
+(1/delta^2 of the paper's eq. 3) and kappa the Langevin concentration of eq. 5,
+both with SE-Sync's conventions:
+
+* 2D: ``tau = 2 / trace(inv(I_tt))``, ``kappa = I_thth``;
+* 3D: ``tau = 3 / trace(inv(I_tt))``, ``kappa = 3 / (2 trace(inv(I_RR)))``.
+"""
+from __future__ import annotations
+
+from fractions import Fraction
+from math import factorial
+
+import numpy as np
+from scipy.special import ive
+
+# Table II of the paper is reproduced by w = TABLE2_FIT * kappa^2 (an empirical fit
+# measured on the published lower bounds, NOT eq. 59; with eq. 64 as printed it also
+# reproduces the printed FIM column); see DESIGN.md section 4.
+TABLE2_FIT = 0.5515
+
+ROTATION_WEIGHT_MODELS = ("eq59", "table2")
+
+
+def isotropic_precisions(info: np.ndarray, dim: int) -> tuple[np.ndarray, np.ndarray]:
+    """(tau, kappa) per edge from (m, q, q) information matrices, SE-Sync's rule."""
+    info = np.asarray(info, dtype=float)
+    if dim == 2:
+        a, b, c = info[:, 0, 0], info[:, 0, 1], info[:, 1, 1]
+        # trace(inv([[a, b], [b, c]])) = (a + c) / (a c - b^2)
+        tau = 2.0 * (a * c - b * b) / (a + c)
+        kappa = info[:, 2, 2].copy()
+        return tau, kappa
+    if dim == 3:
+        tr_cov_t = np.trace(np.linalg.inv(info[:, :3, :3]), axis1=1, axis2=2)
+        tr_cov_r = np.trace(np.linalg.inv(info[:, 3:, 3:]), axis1=1, axis2=2)
+        return 3.0 / tr_cov_t, 3.0 / (2.0 * tr_cov_r)
+    raise ValueError(f"dimension must be 2 or 3, got {dim}")
+
+
+def _asymptotic_coefficients(v: int, terms: int) -> list[Fraction]:
+    """c_k with I_v(x) e^{-x} sqrt(2 pi x) ~ sum_k c_k x^{-k} (Abramowitz-Stegun 9.7.1)."""
+    out, prod = [], Fraction(1)
+    for k in range(terms):
+        if k > 0:
+            prod *= Fraction(4 * v * v - (2 * k - 1) ** 2)
+        out.append((-1) ** k * prod / (factorial(k) * 8 ** k))
+    return out
+
+
+_TERMS = 30
+_A = [_asymptotic_coefficients(v, _TERMS) for v in range(3)]
+# Exact rational coefficients of the two differences; computing them as series
+# avoids the catastrophic cancellation of I_1 - I_2 and I_0 - I_1 at large x.
+_D12 = np.array([float(a - b) for a, b in zip(_A[1], _A[2])])
+_D01 = np.array([float(a - b) for a, b in zip(_A[0], _A[1])])
+_ASYMPTOTIC_FROM = 30.0  # x = 2 kappa; truncation error of 30 terms there is < 1e-20
+
+
+def omega(kappa: np.ndarray | float) -> np.ndarray:
+    """omega(kappa) of eq. (59), evaluated stably.
+
+    Eq. (59) is ``kappa^2 (2I0 - I1 - 2I2 + I3) / (2I0 - 2I1)`` at ``x = 2 kappa``.
+    With the recurrences ``I0 - I2 = (2/x) I1`` and ``I1 - I3 = (4/x) I2`` it
+    simplifies exactly to ``kappa (I1 - I2) / (I0 - I1)``. Small x: exponentially
+    scaled Bessel functions (``ive``; the scale cancels in the ratio). Large x:
+    the asymptotic series of both differences, whose leading terms cancel
+    analytically, so omega is accurate to ~1 ulp from kappa = 1e-3 to 1e8 and
+    ``omega / 3 -> kappa`` as kappa grows.
+    """
+    k = np.asarray(kappa, dtype=float)
+    x = 2.0 * k
+    out = np.empty_like(x)
+    small = x < _ASYMPTOTIC_FROM
+    xs = x[small]
+    i0, i1, i2 = ive(0, xs), ive(1, xs), ive(2, xs)
+    out[small] = k[small] * (i1 - i2) / (i0 - i1)
+    xl = x[~small]
+    if xl.size:
+        powers = xl[:, None] ** -np.arange(_TERMS)[None, :]
+        out[~small] = k[~small] * (powers @ _D12) / (powers @ _D01)
+    return out if out.ndim else out[()]
+
+
+def rotation_weight(kappa: np.ndarray, dim: int, model: str = "eq59") -> np.ndarray:
+    """Edge weight of the rotation Laplacian L_w in the paper's tangent coordinates.
+
+    2D: ``w = 2 kappa`` (eq. 39-41). 3D: ``w = omega(kappa) / 3`` (eq. 58-63,
+    coordinates along ``E_k = G_k / sqrt 2``). ``model="table2"`` uses the
+    empirical fit ``w = 0.5515 kappa^2`` that reproduces the paper's printed
+    Table II (3D only; 2D is unchanged because Table I follows eq. 41).
+    """
+    kappa = np.asarray(kappa, dtype=float)
+    if model not in ROTATION_WEIGHT_MODELS:
+        raise ValueError(f"unknown rotation weight model {model!r}; choose from {ROTATION_WEIGHT_MODELS}")
+    if dim == 2:
+        return 2.0 * kappa
+    if model == "table2":
+        return TABLE2_FIT * kappa * kappa
+    return omega(kappa) / 3.0
+
+
+# ---------------------------------------------------------------------------
+# Sampling (issue 6): exact isotropic Langevin rotations, Gaussian translations,
+# measurement regeneration by eq. (80) and the thesis's left se(d) noise (4.3).
+# ---------------------------------------------------------------------------
+
+_SMALL_C = 1e-3        # below this concentration the piece-1 proposal drops e^{-cu}
+_MAX_ROUNDS = 10_000   # acceptance is >= ~0.3 for every c, so this is never reached
+
+
+def _concentrations(kappa, size: int) -> np.ndarray:
+    k = np.broadcast_to(np.asarray(kappa, dtype=float), (size,)).copy()
+    if not np.all(np.isfinite(k)) or np.any(k <= 0):
+        raise ValueError("Langevin concentration kappa must be finite and > 0")
+    return k
+
+
+def _sample_versine(a: float, c: np.ndarray, rng: np.random.Generator) -> tuple[np.ndarray, np.ndarray]:
+    """Exact draws of ``u = 1 - cos t`` with density ``u^(a-1) e^(-c u) (2-u)^(-1/2)`` on (0, 2).
+
+    Returns ``(u, v)`` with ``v = 2 - u`` kept separately (accurate near t = pi).
+    This is the law of the rotation angle's versine for the von Mises angle
+    (a = 1/2) and for the SO(3) Langevin angle (a = 3/2), c = 2 kappa.
+
+    Acceptance-rejection from a two-piece envelope:
+    on (0, 1] ``(2-u)^(-1/2) <= 1``, so ``g1 = u^(a-1) e^(-cu)`` (a truncated gamma,
+    drawn by inverting its CDF with ``gammaincinv``; acceptance >= 1/sqrt 2);
+    on (1, 2) ``u^(a-1) e^(-cu) <= M2 e^(-c)``, so ``g2 = M2 e^(-c) (2-u)^(-1/2)``
+    (drawn as ``2 - V^2``). Both envelope masses are closed-form, the
+    pieces are picked with probability proportional to them, and no term overflows:
+    ``e^(-c)`` underflows to 0 for huge c exactly where piece 2 is unreachable.
+    """
+    from scipy.special import gamma as gamma_fn, gammainc, gammaincinv
+
+    n = c.shape[0]
+    u = np.empty(n)
+    v = np.empty(n)
+    m2 = max(1.0, 2.0 ** (a - 1.0))
+    small = c < _SMALL_C
+    cs = np.where(small, 1.0, c)
+    p1 = gammainc(a, cs)
+    # Envelope masses: piece 1 = integral_0^1 u^(a-1) e^(-cu) du (for tiny c, of u^(a-1)).
+    w1 = np.where(small, 1.0 / a, gamma_fn(a) * cs ** (-a) * p1)
+    w2 = 2.0 * m2 * np.exp(-c)
+    prob2 = w2 / (w1 + w2)
+    pending = np.arange(n)
+    for _ in range(_MAX_ROUNDS):
+        k = pending.size
+        if k == 0:
+            return u, v
+        pick2 = rng.random(k) < prob2[pending]
+        x = rng.random(k)
+        acc = rng.random(k)
+        cp = c[pending]
+        # piece 1: truncated gamma on (0, 1] by inverse CDF
+        uu = np.where(small[pending], x ** (1.0 / a),
+                      gammaincinv(a, x * p1[pending]) / cs[pending])
+        uu = np.minimum(uu, 1.0)
+        ratio1 = (2.0 - uu) ** -0.5 * np.where(small[pending], np.exp(-cp * uu), 1.0)
+        # piece 2: u = 2 - V^2 on (1, 2)
+        vv = x * x
+        u2 = 2.0 - vv
+        ratio2 = u2 ** (a - 1.0) / m2 * np.exp(-cp * (u2 - 1.0))
+        ok = acc < np.where(pick2, ratio2, ratio1)
+        idx = pending[ok]
+        u[idx] = np.where(pick2, u2, uu)[ok]
+        v[idx] = np.where(pick2, vv, 2.0 - uu)[ok]
+        pending = pending[~ok]
+    raise RuntimeError("Langevin sampler did not terminate")  # pragma: no cover
+
+
+def _angle_from_versine(u: np.ndarray, v: np.ndarray) -> np.ndarray:
+    """t in [0, pi] with 1 - cos t = u and 1 + cos t = v, accurate at both ends."""
+    return np.where(u <= 1.0, 2.0 * np.arcsin(np.sqrt(u / 2.0)),
+                    np.pi - 2.0 * np.arcsin(np.sqrt(np.minimum(v, 2.0) / 2.0)))
+
+
+def sample_langevin_angle_so2(kappa, size: int, rng: np.random.Generator) -> np.ndarray:
+    """(size,) signed angles of Z ~ Lang(I, kappa) on SO(2) (density prop. to exp(kappa tr Z), eq. 5).
+
+    ``tr Z = 2 cos t``, so the angle is von Mises with concentration ``2 kappa``.
+    Exact for any kappa > 0 (no normal approximation at large kappa).
+    """
+    c = 2.0 * _concentrations(kappa, size)
+    u, v = _sample_versine(0.5, c, rng)
+    sign = np.where(rng.random(size) < 0.5, -1.0, 1.0)
+    return sign * _angle_from_versine(u, v)
+
+
+def sample_langevin_so2(kappa, size: int, rng: np.random.Generator) -> np.ndarray:
+    """(size, 2, 2) draws of Z ~ Lang(I, kappa) on SO(2) (paper eq. 5)."""
+    from ..lie.so import rot2
+
+    return rot2(sample_langevin_angle_so2(kappa, size, rng))
+
+
+def sample_langevin_angle_so3(kappa, size: int, rng: np.random.Generator) -> np.ndarray:
+    """(size,) rotation angles t in [0, pi] of Z ~ Lang(I, kappa) on SO(3).
+
+    By the Weyl integration formula (paper Appendix C) the angle has density
+    proportional to ``exp(2 kappa cos t) (1 - cos t)`` on [0, pi].
+    """
+    c = 2.0 * _concentrations(kappa, size)
+    u, v = _sample_versine(1.5, c, rng)
+    return _angle_from_versine(u, v)
+
+
+def sample_langevin_so3(kappa, size: int, rng: np.random.Generator) -> np.ndarray:
+    """(size, 3, 3) draws of Z ~ Lang(I, kappa) on SO(3) (density prop. to exp(kappa tr Z), eq. 5).
+
+    Class function: the angle comes from ``sample_langevin_angle_so3`` and the
+    axis is uniform on the sphere, independent of the angle.
+    """
+    from ..lie.so import exp_so3
+
+    t = sample_langevin_angle_so3(kappa, size, rng)
+    axis = rng.standard_normal((size, 3))
+    axis /= np.linalg.norm(axis, axis=1, keepdims=True)
+    return exp_so3(axis * t[:, None])
+
+
+def sample_langevin(kappa, size: int, dim: int, rng: np.random.Generator) -> np.ndarray:
+    """(size, d, d) Langevin rotations on SO(2) or SO(3)."""
+    if dim == 2:
+        return sample_langevin_so2(kappa, size, rng)
+    if dim == 3:
+        return sample_langevin_so3(kappa, size, rng)
+    raise ValueError(f"dimension must be 2 or 3, got {dim}")
+
+
+def sample_isotropic_gaussian(tau, size: int, dim: int, rng: np.random.Generator) -> np.ndarray:
+    """(size, d) draws of y ~ N(0, I / tau) (paper eq. 3, tau = delta^-2)."""
+    tau = np.broadcast_to(np.asarray(tau, dtype=float), (size,))
+    if np.any(tau <= 0) or not np.all(np.isfinite(tau)):
+        raise ValueError("translation precision tau must be finite and > 0")
+    return rng.standard_normal((size, dim)) / np.sqrt(tau)[:, None]
+
+
+def isotropic_information(tau, kappa, dim: int) -> np.ndarray:
+    """(m, q, q) g2o-order information matrices that SE-Sync's rule maps back to (tau, kappa).
+
+    Inverse of ``isotropic_precisions`` (DESIGN.md section 3): 2D
+    ``diag(tau, tau, kappa)``; 3D ``diag(tau I3, 2 kappa I3)`` (because
+    ``kappa = 3 / (2 tr(inv I_RR))``). With these, SE-Sync's objective
+    ``sum kappa ||R_j - R_i R~||_F^2 + tau ||t_j - t_i - R_i t~||^2`` is twice the
+    negative log-likelihood of eq. (80), so a solve is the MLE of that model.
+    """
+    tau = np.atleast_1d(np.asarray(tau, dtype=float))
+    kappa = np.atleast_1d(np.asarray(kappa, dtype=float))
+    tau, kappa = np.broadcast_arrays(tau, kappa)
+    m = tau.shape[0]
+    if dim == 2:
+        diag = np.stack([tau, tau, kappa], axis=1)
+    elif dim == 3:
+        diag = np.concatenate([np.repeat(tau[:, None], 3, 1), np.repeat(2.0 * kappa[:, None], 3, 1)], axis=1)
+    else:
+        raise ValueError(f"dimension must be 2 or 3, got {dim}")
+    q = diag.shape[1]
+    info = np.zeros((m, q, q))
+    info[:, np.arange(q), np.arange(q)] = diag
+    return info
+
+
+NOISE_SCALES = ("both", "rotation")
+
+
+def scaled_precisions(graph, kc: float = 1.0, scale: str = "both", tau=None, kappa=None) -> tuple[np.ndarray, np.ndarray]:
+    """(tau, kappa) per edge of the Monte Carlo noise model of eq. (80).
+
+    ``tau`` / ``kappa`` (scalar or (m,)) replace the graph's own precisions (the
+    paper's Fig. 6 uses kappa = 150, tau = 140 on CSAIL). ``kc`` multiplies kappa;
+    with ``scale="both"`` (default) it multiplies tau as well, so that k_c scales the
+    whole information (the SNR); ``scale="rotation"`` is eq. (80) as printed, where
+    only the Langevin concentration carries k_c.
+    """
+    if scale not in NOISE_SCALES:
+        raise ValueError(f"scale must be one of {NOISE_SCALES}, got {scale!r}")
+    if not (np.isfinite(kc) and kc > 0):
+        raise ValueError(f"k_c must be > 0, got {kc}")
+    m = graph.m
+    t = np.broadcast_to(np.asarray(graph.tau if tau is None else tau, dtype=float), (m,))
+    k = np.broadcast_to(np.asarray(graph.kappa if kappa is None else kappa, dtype=float), (m,))
+    return (kc * t if scale == "both" else t.copy()), kc * k
+
+
+def noise_model_graph(graph, kc: float = 1.0, scale: str = "both", tau=None, kappa=None):
+    """The graph with its information matrices replaced by the isotropic noise model of eq. (80).
+
+    Same measurements; use it to evaluate the FIM/CRLB of the Monte Carlo model.
+    """
+    from dataclasses import replace
+
+    t, k = scaled_precisions(graph, kc, scale, tau, kappa)
+    return replace(graph, info=isotropic_information(t, k, graph.dim))
+
+
+def perturb_measurements(graph, rot_true: np.ndarray, trans_true: np.ndarray, rng: np.random.Generator,
+                         kc: float = 1.0, scale: str = "both", tau=None, kappa=None):
+    """A new PoseGraph with measurements regenerated from a ground truth by eq. (80).
+
+    Rotation: ``R~_ij = R_i^T R_j Z_ij``, ``Z_ij ~ Lang(I, k_c kappa_ij)``: the model of g2o /
+    SE-Sync files (edge (i, j) measures ``X_i^{-1} X_j``), whose Fisher information is the
+    ``"consistent"`` variant of ``posecrb.models.paper.fim``. The paper's eq. (4), ``H_ij = Z_ij R_j R_i^T``,
+    is a different law in general: conjugation invariance of Lang(I, kappa) only moves the noise
+    to the other side of the same matrix (``Z R_j R_i^T = R_j R_i^T Z'``, ``Z' ~ Lang(I, kappa)``),
+    and ``R_j R_i^T != R_i^T R_j`` unless the rotations commute (2D). Translation: ``t~_ij = R_i^T (x_j - x_i) + y_ij``, ``y_ij ~ N(0, I / tau'_ij)``
+    with ``tau' = k_c tau`` (``scale="both"``) or ``tau`` (``scale="rotation"``).
+    The information matrices encode (tau', k_c kappa) under SE-Sync's convention
+    (``isotropic_information``), so solving the returned graph gives the MLE.
+    Vertices are dropped (a solver must not start at the truth).
+    """
+    from dataclasses import replace
+
+    t, k = scaled_precisions(graph, kc, scale, tau, kappa)
+    rot_true = np.asarray(rot_true, dtype=float)
+    trans_true = np.asarray(trans_true, dtype=float)
+    ri, rj = rot_true[graph.src], rot_true[graph.dst]
+    ri_t = np.swapaxes(ri, 1, 2)
+    z = sample_langevin(k, graph.m, graph.dim, rng)
+    y = sample_isotropic_gaussian(t, graph.m, graph.dim, rng)
+    rot = ri_t @ rj @ z
+    trans = np.einsum("mab,mb->ma", ri_t, trans_true[graph.dst] - trans_true[graph.src]) + y
+    return replace(graph, rot=rot, trans=trans, info=isotropic_information(t, k, graph.dim),
+                   vertex_rot=None, vertex_trans=None, format="synthetic", sha256=None, edge_lines=None)
+
+
+def sample_se_noise(cov: np.ndarray, rng: np.random.Generator) -> np.ndarray:
+    """(m, q) draws xi_ij ~ N(0, Sigma_ij) in se(d) coordinates (thesis 4.3; rotation first)."""
+    cov = np.asarray(cov, dtype=float)
+    chol = np.linalg.cholesky(cov)
+    z = rng.standard_normal(cov.shape[:-1])
+    return np.einsum("mab,mb->ma", chol, z)
+
+
+def perturb_left(rot: np.ndarray, trans: np.ndarray, xi: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Left-multiplicative se(d) noise of the thesis (4.3): ``H = Exp(xi^) T_i T_j^{-1}``.
+
+    ``(rot, trans)``: (m, d, d), (m, d) noise-free ``T_i T_j^{-1}``; ``xi``: (m, q),
+    rotation first (thesis sec. 6.2). Returns ``H`` as (rot, trans).
+    """
+    from ..lie.se import se_compose, se_exp
+
+    er, et = se_exp(np.asarray(xi, dtype=float))
+    return se_compose(er, et, np.asarray(rot, dtype=float), np.asarray(trans, dtype=float))

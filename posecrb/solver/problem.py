@@ -1,0 +1,259 @@
+"""SE-Sync data matrices built from a PoseGraph, and the reduced objective applied as an operator.
+
+Notation (Rosen et al., SE-Sync, IJRR 2019, section 4; DESIGN.md section 6). With
+``X = [t R]`` (d x (n + dn)) the maximum-likelihood objective is
+
+    F(t, R) = sum_e kappa_e ||R_j - R_i R~_e||_F^2 + tau_e ||t_j - t_i - R_i t~_e||^2
+            = tr(M X^T X),   M = [[L(W^tau), V], [V^T, L(G^rho) + Sigma]],
+
+(no factor 1/2, SE-Sync's convention; the second equality needs orthogonal R~, see below).
+Eliminating the translations in closed form gives ``F*(R) = tr(Q R^T R)`` with the Schur complement
+
+    Q = L(G^rho) + Sigma - V^T L(W^tau)^+ V.
+
+Rotation term, exactly as SE-Sync's data matrix defines it: ``L(G^rho)`` has ``kappa I_d`` on
+both diagonal blocks of an edge and ``-kappa R~`` off the diagonal, so its edge term is
+
+    kappa (||R_i||_F^2 + ||R_j||_F^2 - 2 tr(R_j^T R_i R~))
+        = kappa ||R_j - R_i R~||_F^2 + kappa tr(R_i (I - R~ R~^T) R_i^T).
+
+For an orthogonal R~ the last term vanishes and this is the usual chordal residual. A
+measured R~ that is NOT orthogonal (SE-Sync builds 3D measurements from unnormalised
+quaternions; ``load(..., quaternions="raw")``) keeps it: on SO(d)^n or St(d, r)^n it is the
+constant ``kappa tr(I - R~ R~^T)``, which leaves the minimisers and the Riemannian gradient
+alone but makes the objective value SE-Sync's ``tr(M X^T X)``. The objective is summed in the
+right-hand form: the residual is computed directly and the defect term is small, so nothing
+cancels (the left-hand form would lose ``eps * 2d kappa`` per edge to cancellation).
+
+Q is dense, so it is never formed: ``Q Z = C Z - V^T L_red^{-1} V_red Z`` uses one
+CHOLMOD factor of the anchored translation Laplacian ``L_red``. Everything here works
+in the "row" layout: a point of St(d, r)^n is ``Z = Y^T`` of shape (dn, r) whose
+i-th d x r block is ``Z_i = Y_i^T`` (so for a rotation estimate, ``Z_i = R_i^T``).
+
+The same Schur-complement identity gives cheap inverses: the rotation block of
+``M_red(s)^{-1}`` with ``M_red(s) = [[L_red, V_red], [V_red^T, C - Lambda + s I]]`` is
+``(Q - Lambda + s I)^{-1}``. M_red(s) is SPARSE, so both the trust-region
+preconditioner (Lambda = 0) and the certificate test ``Q - Lambda + eta I > 0``
+(one sparse Cholesky, SE-Sync's first verification step) never see a dense matrix.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+import scipy.sparse as sp
+from sksparse.cholmod import Factor
+
+from ..core.graph import PoseGraph
+from ..linalg.laplacian import reduced_laplacian
+from ..linalg.cholesky import SymbolicCholesky, cholesky
+
+# An edge's R~ counts as orthogonal when max |I - R~ R~^T| is at the rounding level of a
+# rotation computed in floating point (normalised quaternions measure up to ~10 eps on the
+# shared datasets); its defect term is then dropped, so orthogonal data give exactly the
+# residual-form objective.
+ORTHOGONALITY_TOL = 64 * np.finfo(float).eps
+
+
+def orthogonality_defect(rot: np.ndarray, tol: float = ORTHOGONALITY_TOL) -> tuple[np.ndarray, np.ndarray]:
+    """(edges, E) with ``E_e = I - R~_e R~_e^T`` for the edges whose R~ is not orthogonal within ``tol``."""
+    d = rot.shape[-1]
+    E = np.eye(d) - rot @ np.swapaxes(rot, 1, 2)
+    edges = np.flatnonzero(np.abs(E).max(axis=(1, 2)) > tol)
+    return edges, np.ascontiguousarray(E[edges])
+
+
+def connection_laplacian(n: int, d: int, src: np.ndarray, dst: np.ndarray, rot: np.ndarray,
+                         kappa: np.ndarray) -> sp.csr_matrix:
+    """L(G^rho) (dn x dn): diagonal blocks sum kappa I_d, block (i, j) = -kappa R~_ij, (j, i) its transpose.
+
+    ``tr(L(G^rho) Z Z^T) = sum kappa ||R_j - R_i R~_ij||_F^2`` for ``Z_i = R_i^T``.
+    """
+    a, b = np.meshgrid(np.arange(d), np.arange(d), indexing="ij")           # (d, d) row/col offsets
+    off_r = (src[:, None, None] * d + a).ravel()
+    off_c = (dst[:, None, None] * d + b).ravel()
+    off_v = -(kappa[:, None, None] * rot).ravel()
+    diag_nodes = np.concatenate([src, dst])
+    diag_r = (diag_nodes[:, None] * d + np.arange(d)).ravel()
+    diag_v = np.repeat(np.concatenate([kappa, kappa]), d)
+    rows = np.concatenate([off_r, off_c, diag_r])
+    cols = np.concatenate([off_c, off_r, diag_r])
+    vals = np.concatenate([off_v, off_v, diag_v])
+    return sp.csr_matrix((vals, (rows, cols)), shape=(n * d, n * d))
+
+
+@dataclass
+class Problem:
+    """Sparse data of one pose graph in SE-Sync's simplified (translation-eliminated) form."""
+
+    graph: PoseGraph
+    n: int
+    d: int
+    conlap: sp.csr_matrix          # L(G^rho), dn x dn
+    C: sp.csr_matrix               # L(G^rho) + Sigma
+    V: sp.csr_matrix               # n x dn translational coupling
+    Vred: sp.csr_matrix            # V without the translation anchor's row
+    VredT: sp.csr_matrix
+    Lred: sp.csc_matrix            # reduced translation Laplacian L(W^tau)
+    Lfactor: Factor
+    tau: np.ndarray
+    kappa: np.ndarray
+    src: np.ndarray
+    dst: np.ndarray
+    rot: np.ndarray                # (m, d, d) R~
+    rotT: np.ndarray               # (m, d, d) R~^T
+    trans: np.ndarray              # (m, d) t~
+    defect_edges: np.ndarray       # edges whose R~ is not orthogonal (see module docstring)
+    defect: np.ndarray             # (k, d, d) I - R~ R~^T on those edges
+    _full_symbolic: SymbolicCholesky | None = field(default=None, repr=False)
+    _full_pattern: sp.csc_matrix | None = field(default=None, repr=False)
+    _full_base: np.ndarray | None = field(default=None, repr=False)
+    _full_diag_pos: np.ndarray | None = field(default=None, repr=False)
+    _full_lam_pos: np.ndarray | None = field(default=None, repr=False)
+
+    # ---- construction ------------------------------------------------------
+    @classmethod
+    def from_graph(cls, graph: PoseGraph) -> "Problem":
+        n, d = graph.n, graph.dim
+        src, dst = np.asarray(graph.src, np.int64), np.asarray(graph.dst, np.int64)
+        tau = np.asarray(graph.tau, float)
+        kappa = np.asarray(graph.kappa, float)
+        rot = np.asarray(graph.rot, float)
+        tt = np.asarray(graph.trans, float)
+        conlap = connection_laplacian(n, d, src, dst, rot, kappa)
+        # Sigma: block i += tau t~ t~^T over edges leaving i.
+        a, b = np.meshgrid(np.arange(d), np.arange(d), indexing="ij")
+        sr = (src[:, None, None] * d + a).ravel()
+        sc = (src[:, None, None] * d + b).ravel()
+        sv = (tau[:, None, None] * tt[:, :, None] * tt[:, None, :]).ravel()
+        sigma = sp.csr_matrix((sv, (sr, sc)), shape=(n * d, n * d))
+        # V = sum_e tau (e_j - e_i)(-E_i t~)^T: row j gets -tau t~^T, row i +tau t~^T, in block i.
+        cols = (src[:, None] * d + np.arange(d)).ravel()
+        vv = (tau[:, None] * tt).ravel()
+        V = sp.csr_matrix(
+            (np.concatenate([-vv, vv]), (np.concatenate([np.repeat(dst, d), np.repeat(src, d)]),
+                                        np.concatenate([cols, cols]))), shape=(n, n * d))
+        Lred = reduced_laplacian(n, src, dst, tau, anchor=0)
+        Lfactor = cholesky(Lred, name="reduced translation Laplacian L(W^tau)")
+        Vred = V[1:].tocsr()
+        defect_edges, defect = orthogonality_defect(rot)
+        return cls(graph=graph, n=n, d=d, conlap=conlap, C=(conlap + sigma).tocsr(), V=V,
+                   Vred=Vred, VredT=Vred.T.tocsr(), Lred=Lred, Lfactor=Lfactor, tau=tau, kappa=kappa,
+                   src=src, dst=dst, rot=rot, rotT=np.ascontiguousarray(np.swapaxes(rot, 1, 2)), trans=tt,
+                   defect_edges=defect_edges, defect=defect)
+
+    # ---- the objective -----------------------------------------------------
+    def translations(self, Z: np.ndarray) -> np.ndarray:
+        """Optimal relaxed translations (n, r) for Z (dn, r); pose 0's is zero: L p = -V Z."""
+        rhs = -(self.Vred @ Z)
+        p = np.zeros((self.n, Z.shape[1]))
+        p[1:] = self.Lfactor(rhs)
+        return p
+
+    def Q_product(self, Z: np.ndarray) -> np.ndarray:
+        """Q Z for Z of shape (dn, k), through the L(W^tau) factor (never forming Q)."""
+        w = self.Lfactor(self.Vred @ Z)
+        return self.C @ Z - self.VredT @ w
+
+    def Q_product_and_translations(self, Z: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        w = self.Lfactor(self.Vred @ Z)
+        p = np.zeros((self.n, Z.shape[1]))
+        p[1:] = -w
+        return self.C @ Z - self.VredT @ w, p
+
+    def objective_from_translations(self, Z: np.ndarray, p: np.ndarray) -> float:
+        """F(Y, p) = tr(X^T M X) summed edge by edge (no cancellation between the large terms of
+        tr(Z^T Q Z)); the rotation term in the residual + defect form of the module docstring."""
+        n, d = self.n, self.d
+        Zb = Z.reshape(n, d, -1)
+        Zi = Zb[self.src]
+        # rotation residual, transposed: Z_j - R~^T Z_i  (d x r)
+        rr = Zb[self.dst] - self.rotT @ Zi
+        # translation residual: p_j - p_i - Z_i^T t~  (r,)
+        tr = p[self.dst] - p[self.src] - np.einsum("ea,ear->er", self.trans, Zi)
+        f = float(np.dot(self.kappa, np.einsum("eab,eab->e", rr, rr))
+                  + np.dot(self.tau, np.einsum("er,er->e", tr, tr)))
+        return f + self.defect_term(Zi[self.defect_edges])
+
+    def defect_term(self, Zi: np.ndarray) -> float:
+        """sum kappa tr(Z_i^T (I - R~ R~^T) Z_i) over the non-orthogonal edges (Zi: their (k, d, r) source blocks)."""
+        if self.defect_edges.size == 0:
+            return 0.0
+        return float(np.dot(self.kappa[self.defect_edges], np.einsum("kab,kar,kbr->k", self.defect, Zi, Zi)))
+
+    def objective(self, Z: np.ndarray) -> float:
+        return self.objective_from_translations(Z, self.translations(Z))
+
+    # ---- full sparse (translations kept) matrix: preconditioner and certificate --------
+    def _full_parts(self) -> None:
+        """Pattern, symbolic analysis and value map of M_red(s), computed once per problem.
+
+        Every M_red(Lambda, s) has the pattern of ``[[L_red, V_red], [V_red^T, C + blockdiag]]``;
+        its values are ``base + s (lower diagonal) - Lambda (lower block diagonal)``, so each
+        factorization only writes O(nnz) numbers into a fixed CSC layout instead of assembling
+        sparse matrices (scipy's construction overhead dominated small problems).
+        """
+        if self._full_symbolic is not None:
+            return
+        n, d = self.n, self.d
+        dn = n * d
+        N = n - 1 + dn
+        # Block-diagonal d x d pattern of the rotation block (Lambda lives there).
+        i = np.arange(n)
+        a, b = np.meshgrid(np.arange(d), np.arange(d), indexing="ij")
+        rr = (i[:, None, None] * d + a).ravel() + (n - 1)
+        cc = (i[:, None, None] * d + b).ravel() + (n - 1)
+        # [[L_red, V_red], [V_red^T, C]] as one COO list (scipy's bmat costs more than the rest
+        # of a small problem's set-up); with the block diagonal it gives the analysed pattern.
+        blocks = [(self.Lred.tocoo(), 0, 0), (self.Vred.tocoo(), 0, n - 1), (self.VredT.tocoo(), n - 1, 0),
+                  (self.C.tocoo(), n - 1, n - 1)]
+        brow = np.concatenate([blk.row.astype(np.int64) + r0 for blk, r0, _ in blocks])
+        bcol = np.concatenate([blk.col.astype(np.int64) + c0 for blk, _, c0 in blocks])
+        bval = np.concatenate([blk.data for blk, _, _ in blocks])
+        prow, pcol = np.concatenate([brow, rr]), np.concatenate([bcol, cc])
+        pattern = sp.csc_matrix((np.ones(prow.size), (prow, pcol)), shape=(N, N))
+        pattern.sum_duplicates()
+        pattern.sort_indices()
+        keys = np.repeat(np.arange(N, dtype=np.int64), np.diff(pattern.indptr)) * N + pattern.indices
+
+        def positions(rows: np.ndarray, cols: np.ndarray) -> np.ndarray:
+            k = cols.astype(np.int64) * N + rows
+            pos = np.searchsorted(keys, k)
+            assert np.array_equal(keys[np.minimum(pos, keys.size - 1)], k), "entry outside the analysed pattern"
+            return pos
+
+        # add.at: a block that stored duplicate entries would still sum them, as scipy does.
+        self._full_base = np.zeros(keys.size)
+        np.add.at(self._full_base, positions(brow, bcol), bval)
+        diag = np.arange(n - 1, N)
+        self._full_diag_pos = positions(diag, diag)
+        self._full_lam_pos = positions(rr, cc)
+        self._full_pattern = pattern
+        self._full_symbolic = SymbolicCholesky(pattern)
+
+    def full_matrix(self, lam_blocks: np.ndarray | None, shift: float) -> sp.csc_matrix:
+        """M_red(s) = [[L_red, V_red], [V_red^T, C - Lambda + s I]] (sparse, (n-1+dn) square)."""
+        self._full_parts()
+        data = self._full_base.copy()
+        data[self._full_diag_pos] += shift
+        if lam_blocks is not None:
+            data[self._full_lam_pos] -= lam_blocks.ravel()
+        P = self._full_pattern
+        M = sp.csc_matrix((data, P.indices, P.indptr), shape=P.shape, copy=False)
+        M.has_sorted_indices = True
+        return M
+
+    def factor_full(self, lam_blocks: np.ndarray | None, shift: float, name: str) -> Factor:
+        """Cholesky of M_red(shift) with the shared symbolic analysis; raises NotPositiveDefinite."""
+        self._full_parts()
+        return self._full_symbolic.factor(self.full_matrix(lam_blocks, shift), name=name)
+
+    def schur_solve(self, factor: Factor, W: np.ndarray) -> np.ndarray:
+        """(Q - Lambda + s I)^{-1} W, the rotation block of M_red(s)^{-1} [0; W]."""
+        rhs = np.zeros((self.n - 1 + W.shape[0], W.shape[1]))
+        rhs[self.n - 1:] = W
+        return factor(rhs)[self.n - 1:]
+
+    def gershgorin_max(self) -> float:
+        """Upper bound on lambda_max(Q) <= lambda_max(C) (Q = C - PSD term)."""
+        return float(np.max(np.asarray(abs(self.C).sum(axis=1)).ravel()))

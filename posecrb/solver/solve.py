@@ -1,0 +1,183 @@
+"""``solve``: SE-Sync's certifiably correct maximum-likelihood pose-graph estimator (DESIGN.md section 6).
+
+Pipeline (Rosen et al., IJRR 2019, Algorithms 1-2): build the sparse data
+(problem.py), chordal initialisation (chordal.py), Riemannian staircase with a
+preconditioned truncated-Newton trust region at each rank (trust_region.py,
+staircase.py), verification of ``Q - Lambda >= 0`` by sparse Cholesky, rounding
+to SO(d)^n and translation recovery (rounding.py).
+"""
+from __future__ import annotations
+
+import logging
+import time
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from ..core.errors import NotPositiveDefinite, PosecrbError, UsageError
+from ..core.graph import PoseGraph
+from .chordal import chordal_rotations
+from .problem import Problem
+from .rounding import anchor_estimate, recover_translations, round_rotations, se_objective
+from .staircase import RelaxedModel, escape, verify
+from .stiefel import lift
+from .trust_region import TROptions, trust_region
+
+log = logging.getLogger("posecrb")
+
+
+@dataclass(frozen=True)
+class SolveResult:
+    rot: np.ndarray            # (n, d, d) in SO(d), rot[anchor] = I
+    trans: np.ndarray          # (n, d), trans[anchor] = 0
+    objective: float           # F(R, t) at the rounded estimate (SE-Sync convention, no 1/2)
+    relaxation_value: float    # f(Y*) of the rank-r relaxation: a lower bound on F* when certified
+    duality_gap: float         # objective - relaxation_value
+    lambda_min: float          # lambda_min(Q - Lambda) at the final relaxed point
+    certified: bool
+    status: str                # "certified" | "uncertified"
+    reason: str
+    rank: int
+    iterations: int            # trust-region iterations over all staircase levels
+    hessian_vector_products: int
+    times: dict = field(default_factory=dict)   # {init, optimize, verify, round, total} seconds
+    anchor: int = 0
+
+
+_BLAS_CONTROLLER = None
+
+
+def _blas_controller():
+    """threadpoolctl's controller, built once: scanning the loaded libraries costs ~1.5 ms,
+    which was a tenth of a small problem's solve when done on every call."""
+    global _BLAS_CONTROLLER
+    if _BLAS_CONTROLLER is None:
+        try:
+            from threadpoolctl import ThreadpoolController
+        except ImportError:  # pragma: no cover - optional
+            _BLAS_CONTROLLER = False
+        else:
+            _BLAS_CONTROLLER = ThreadpoolController()
+    return _BLAS_CONTROLLER
+
+
+def solve(graph: PoseGraph, **kwargs) -> SolveResult:
+    """Certifiably correct maximum-likelihood estimate of a pose graph (see :func:`_solve`).
+
+    BLAS runs single-threaded inside: the work is many small dense products, for which
+    OpenBLAS's thread start-up costs more than it saves (and CHOLMOD does the heavy part).
+    """
+    controller = _blas_controller()
+    if not controller:  # pragma: no cover - threadpoolctl missing
+        return _solve(graph, **kwargs)
+    with controller.limit(limits=1, user_api="blas"):
+        return _solve(graph, **kwargs)
+
+
+def _solve(graph: PoseGraph, *, r0: int | None = None, rmax: int = 10, init: str = "chordal",
+          anchor: int | None = None, max_iterations: int = 500, certificate_tol: float = 1e-3,
+          verbose: bool = False, seed: int = 0, precondition: bool = True,
+          precond_max_cond: float = 1e6, adaptive_precond: float | None = 1e-10, **tuning) -> SolveResult:
+    """Certifiably correct maximum-likelihood estimate of a pose graph.
+
+    ``r0`` is the first staircase rank (default d + 1), ``rmax`` the last. ``init`` is
+    "chordal" (default) or "vertices" (the file's own estimate), or an (n, d, d)
+    array of rotations. ``anchor`` is the internal index of the pose put at the
+    identity (default 0). ``certificate_tol``: accept lambda_min(Q - Lambda) >= -tol
+    (SE-Sync's 1e-3). ``precond_max_cond`` caps the condition number of the base
+    preconditioner (Q + delta I)^{-1}; ``adaptive_precond`` (relative shift s / ||C||) turns
+    on the per-iteration (Q - Lambda + s I)^{-1} preconditioner, None disables it.
+    ``tuning`` goes to :class:`TROptions` (e.g. decrement_tol, max_inner). Raises
+    DisconnectedGraph for a disconnected graph, UsageError for bad ranks/anchor/init.
+    """
+    t_start = time.perf_counter()
+    graph.require_connected()
+    d, n = graph.dim, graph.n
+    anchor = 0 if anchor is None else int(anchor)
+    if not 0 <= anchor < n:
+        raise UsageError(f"anchor index {anchor} out of range 0..{n - 1}")
+    r0 = d + 1 if r0 is None else int(r0)
+    if r0 < d or rmax < r0:
+        raise UsageError(f"need d <= r0 <= rmax (d={d}, r0={r0}, rmax={rmax})")
+    if verbose:
+        log.setLevel(min(log.level or logging.INFO, logging.INFO))
+    rng = np.random.default_rng(seed)
+    opts = TROptions(max_iterations=max_iterations, **tuning)
+
+    # ---- initialisation --------------------------------------------------
+    t0 = time.perf_counter()
+    problem = Problem.from_graph(graph)
+    if isinstance(init, np.ndarray):
+        rot0 = np.asarray(init, float)
+    elif init == "chordal":
+        rot0 = chordal_rotations(problem)
+    elif init == "vertices":
+        if not graph.has_vertices:
+            raise PosecrbError(f"{graph.path}: --init vertices needs VERTEX lines in the file")
+        rot0 = np.asarray(graph.vertex_rot, float)
+    else:
+        raise UsageError(f"unknown init {init!r} (chordal|vertices)")
+    precond = None
+    if precondition:
+        # Regularised Schur-complement preconditioner (Q + delta I)^{-1}; delta caps the
+        # condition number near precond_max_cond (SE-Sync's regularised Cholesky, section 4.3).
+        delta = problem.gershgorin_max() / precond_max_cond
+        precond = problem.factor_full(None, delta, name="preconditioner M_red(delta)")
+    model = RelaxedModel(problem, precond,
+                         None if adaptive_precond is None else adaptive_precond * problem.gershgorin_max())
+    Z = lift(np.ascontiguousarray(np.swapaxes(rot0, 1, 2)), r0)
+    times = {"init": time.perf_counter() - t0, "optimize": 0.0, "verify": 0.0}
+
+    # ---- Riemannian staircase ---------------------------------------------
+    iterations = 0
+    state = None
+    cert = None
+    reason = ""
+    r = r0
+    while True:
+        t0 = time.perf_counter()
+        res = trust_region(model, Z, opts, state=state)
+        times["optimize"] += time.perf_counter() - t0
+        state = res.state
+        iterations += res.iterations
+        log.info("staircase r=%d: f=%.12g after %d TR iterations (%s), %d HVPs", r, state.f,
+                 res.iterations, res.status, model.hvps)
+        t0 = time.perf_counter()
+        try:
+            cert = verify(problem, state, certificate_tol, rng)
+        except NotPositiveDefinite as exc:
+            times["verify"] += time.perf_counter() - t0
+            reason = f"verification failed: {exc}"
+            break
+        times["verify"] += time.perf_counter() - t0
+        log.info("staircase r=%d: lambda_min(Q - Lambda) = %.3e (%s)", r, cert.lambda_min,
+                 "certified" if cert.certified else "saddle")
+        if cert.certified:
+            reason = f"lambda_min(Q - Lambda) = {cert.lambda_min:.3e} >= -{certificate_tol:g} at rank {r}"
+            break
+        if r >= rmax:
+            reason = (f"not certified: lambda_min(Q - Lambda) = {cert.lambda_min:.3e} < -{certificate_tol:g} "
+                      f"at the maximum rank rmax = {rmax}")
+            break
+        t0 = time.perf_counter()
+        state = escape(model, state, cert)
+        times["optimize"] += time.perf_counter() - t0
+        Z = state.Z
+        r += 1
+
+    # ---- rounding -----------------------------------------------------------
+    t0 = time.perf_counter()
+    rot = round_rotations(state.Z)
+    trans = recover_translations(problem, rot)
+    objective = se_objective(problem, rot, trans)
+    rot, trans = anchor_estimate(rot, trans, anchor)
+    times["round"] = time.perf_counter() - t0
+    times["total"] = time.perf_counter() - t_start
+    certified = bool(cert is not None and cert.certified)
+    return SolveResult(
+        rot=rot, trans=trans, objective=objective, relaxation_value=float(state.f),
+        duality_gap=float(objective - state.f),
+        lambda_min=float(cert.lambda_min) if cert is not None else float("nan"),
+        certified=certified, status="certified" if certified else "uncertified", reason=reason,
+        rank=int(state.Z.shape[2]), iterations=iterations, hessian_vector_products=model.hvps,
+        times=times, anchor=anchor)

@@ -1,0 +1,197 @@
+"""Riemannian staircase: local optimisation at rank r, certification, negative-curvature escape.
+
+SE-Sync (Rosen et al., IJRR 2019), Algorithm 1 and section 4.2-4.3:
+at a first-order critical point Y of the rank-r relaxation, ``Lambda = SymBlockDiag(Q Y^T Y)``
+and ``S = Q - Lambda``. If ``S >= 0`` (within tolerance) Y solves the SDP relaxation
+globally; otherwise an eigenvector v of S with ``v^T S v < 0`` gives a second-order
+descent direction ``[0 | v]`` at rank r + 1.
+
+Verification uses the sparse identity ``(Q - Lambda + s I)^{-1} = [M_red(s)^{-1}]_{RR}``
+(see problem.py): one sparse Cholesky of ``M_red(eta)`` decides ``lambda_min(S) > -eta``
+(SE-Sync's first test); its factor also drives a shift-invert Lanczos for the value of
+lambda_min. When it fails, increasing shifts locate a PD shift sigma and shift-invert
+Lanczos at -sigma returns the negative eigenpair for the escape.
+"""
+from __future__ import annotations
+
+import logging
+import math
+from dataclasses import dataclass
+
+import numpy as np
+from scipy.sparse.linalg import ArpackNoConvergence, LinearOperator, eigsh
+
+from ..core.errors import NotPositiveDefinite, SolverError
+from .problem import Problem
+from .stiefel import gram_eigh, lift, project, remove_vertical, retract, sym_block_diag_product
+from .trust_region import State
+
+log = logging.getLogger("posecrb")
+
+
+class RelaxedModel:
+    """f(Z) = tr(Z^T Q Z) on St(d, r)^n with gradient, Hessian and a Schur-complement preconditioner."""
+
+    def __init__(self, problem: Problem, precond_factor=None, adaptive_shift: float | None = None):
+        self.problem = problem
+        self.base_factor = precond_factor
+        self.precond_factor = precond_factor
+        self.adaptive_shift = adaptive_shift
+        self.hvps = 0
+        self.factorizations = 0
+        self._gram: tuple[np.ndarray, tuple[np.ndarray, np.ndarray]] | None = None   # (Z, gram_eigh(Z))
+
+    def prepare(self, state: State) -> None:
+        """Refactor the preconditioner as (Q - Lambda(Y) + s I)^{-1} at a new iterate.
+
+        Near a minimiser the Riemannian Hessian is 2 Proj S with S = Q - Lambda, so this
+        is close to an exact Newton preconditioner; where S + s I is not positive
+        definite (far from a minimiser) the Lambda-free factor (Q + delta I)^{-1} is used.
+        """
+        if self.adaptive_shift is None or self.base_factor is None:
+            return
+        try:
+            self.precond_factor = self.problem.factor_full(state.lam, self.adaptive_shift,
+                                                           name="preconditioner M_red(Lambda, s)")
+            log.debug("preconditioner: (Q - Lambda + s I)^-1")
+        except NotPositiveDefinite:
+            self.precond_factor = self.base_factor
+            log.debug("preconditioner: Q - Lambda + s I not PD, using (Q + delta I)^-1")
+        self.factorizations += 1
+
+    def evaluate(self, Z: np.ndarray) -> State:
+        p = self.problem
+        n, d, r = Z.shape
+        Zf = Z.reshape(n * d, r)
+        QZf, trans = p.Q_product_and_translations(Zf)
+        f = p.objective_from_translations(Zf, trans)
+        QZ = QZf.reshape(n, d, r)
+        lam = sym_block_diag_product(QZ, Z)
+        grad = 2.0 * (QZ - lam @ Z)
+        return State(Z, f, QZ, lam, grad)
+
+    def hvp(self, state: State, V: np.ndarray) -> np.ndarray:
+        """Riemannian Hessian: 2 Proj_Z(Q V - Lambda V) (SE-Sync eq. 46 in this layout)."""
+        self.hvps += 1
+        n, d, r = V.shape
+        QV = self.problem.Q_product(V.reshape(n * d, r)).reshape(n, d, r)
+        return 2.0 * project(state.Z, QV - state.lam @ V)
+
+    def precondition(self, state: State, R: np.ndarray) -> np.ndarray:
+        if self.precond_factor is None:
+            return R
+        n, d, r = R.shape
+        # tCG preconditions many vectors at one point: decompose its Gram matrix once.
+        if self._gram is None or self._gram[0] is not state.Z:
+            self._gram = (state.Z, gram_eigh(state.Z))
+        gram = self._gram[1]
+        R = remove_vertical(state.Z, R, gram)
+        W = self.problem.schur_solve(self.precond_factor, R.reshape(n * d, r)).reshape(n, d, r)
+        return remove_vertical(state.Z, project(state.Z, 0.5 * W), gram)
+
+
+@dataclass
+class Certificate:
+    certified: bool
+    lambda_min: float
+    vector: np.ndarray | None      # (n, d) unit eigenvector for lambda_min < -tol
+    factorizations: int
+    lanczos_solves: int
+
+
+def _largest_inverse_eig(problem: Problem, factor, dn: int, rng: np.random.Generator, maxiter: int,
+                         tol: float, v0: np.ndarray | None = None):
+    """Largest eigenpair of (S + s I)^{-1} through the sparse factor of M_red(s)."""
+    count = [0]
+
+    def mv(x):
+        count[0] += 1
+        return problem.schur_solve(factor, np.asarray(x, float).reshape(dn, 1)).ravel()
+
+    op = LinearOperator((dn, dn), matvec=mv, dtype=float)
+    if v0 is None:
+        v0 = rng.standard_normal(dn)
+    try:
+        vals, vecs = eigsh(op, k=1, which="LA", v0=v0, maxiter=maxiter, tol=tol, ncv=min(dn, 12))
+        return float(vals[0]), vecs[:, 0], count[0]
+    except ArpackNoConvergence as exc:
+        if exc.eigenvalues.size:
+            return float(exc.eigenvalues[0]), exc.eigenvectors[:, 0], count[0]
+        x = v0 / np.linalg.norm(v0)
+        y = mv(x)
+        return float(x @ y), x, count[0]
+
+
+def verify(problem: Problem, state: State, tol: float, rng: np.random.Generator,
+           estimate_lambda: bool = True) -> Certificate:
+    """Decide lambda_min(Q - Lambda) >= -tol by sparse Cholesky; return the eigenpair if not.
+
+    ``tol`` must be finite and >= 0 (a NaN made the shift search below loop forever); a
+    non-finite certificate matrix is a SolverError, never an endless search.
+    """
+    if not (math.isfinite(tol) and tol >= 0):
+        raise SolverError(f"certificate tolerance must be a finite number >= 0, got {float(tol)}")
+    n, d = problem.n, problem.d
+    dn = n * d
+    lam = state.lam
+    try:
+        fac = problem.factor_full(lam, tol, name="certificate matrix Q - Lambda + eta I")
+    except NotPositiveDefinite:
+        fac = None
+    if fac is not None:
+        lm = 0.0
+        solves = 0
+        if estimate_lambda:
+            mu, _, solves = _largest_inverse_eig(problem, fac, dn, rng, maxiter=50, tol=1e-10)
+            lm = 1.0 / mu - tol if mu > 0 else -tol
+            lm = max(lm, -tol)   # the factorization proved lambda_min > -tol
+        return Certificate(True, lm, None, 1, solves)
+    # Not PSD within tol: find a positive-definite shift, then shift-invert at it.
+    scale = problem.gershgorin_max() + float(np.max(np.abs(lam)))
+    if not math.isfinite(scale):
+        raise SolverError("the certificate matrix Q - Lambda has non-finite entries; cannot verify the estimate")
+    sigma = max(10.0 * tol, 1e-9 * scale, np.finfo(float).tiny)
+    facs = 1
+    while True:   # sigma grows 10x per step from >= 1e-9 scale to 4 scale: at most ~11 steps
+        try:
+            fac = problem.factor_full(lam, sigma, name="shifted certificate matrix")
+            facs += 1
+            break
+        except NotPositiveDefinite:
+            facs += 1
+            if sigma > 4 * scale:
+                raise
+            sigma *= 10.0
+    mu, v, solves = _largest_inverse_eig(problem, fac, dn, rng, maxiter=300, tol=1e-6)
+    lm = 1.0 / mu - sigma
+    v = v / np.linalg.norm(v)
+    # Rayleigh quotient with the exact operator (guards against an inaccurate Ritz value).
+    Sv = problem.Q_product(v[:, None]).ravel() - (lam @ v.reshape(n, d, 1)).ravel()
+    rq = float(v @ Sv)
+    lm = min(lm, rq) if rq < 0 else lm
+    certified = lm >= -tol
+    return Certificate(certified, lm, None if certified else v.reshape(n, d), facs, solves)
+
+
+def escape(model: RelaxedModel, state: State, cert: Certificate) -> State:
+    """Second-order descent from a saddle at rank r along [0 | v] at rank r + 1 (backtracking)."""
+    Z = state.Z
+    n, d, r = Z.shape
+    Zp = lift(Z, r + 1)
+    direction = np.zeros_like(Zp)
+    direction[:, :, r] = cert.vector
+    lam = cert.lambda_min
+    f0 = state.f
+    alpha = math.sqrt(n)
+    best = None
+    for _ in range(60):
+        cand = model.evaluate(retract(Zp, alpha * direction))
+        # Along the direction, f ~ f0 + lambda_min alpha^2; ask for a quarter of that decrease.
+        if cand.f < f0 + 0.25 * lam * alpha * alpha:
+            return cand
+        if cand.f < f0 and (best is None or cand.f < best.f):
+            best = cand
+        alpha *= 0.5
+    if best is not None:
+        return best
+    return model.evaluate(retract(Zp, 1e-6 * direction))
