@@ -9,15 +9,11 @@ Usage: python benchmarks/bounds.py [--repeat K] [NAME ...]
 """
 from __future__ import annotations
 
-
+from _common import dataset_args, median_time
 from sksparse.cholmod import cholesky
 
-
-from _common import dataset_args, median_time
 from posecrb import load
 from posecrb.models.paper.bounds import compute_bounds, weighted_laplacians
-
-
 
 
 def main() -> None:

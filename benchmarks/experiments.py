@@ -13,8 +13,8 @@ import numpy as np
 
 
 def main() -> None:
-    from posecrb.datasets import search as datasets
     from posecrb.core.errors import DatasetNotFound
+    from posecrb.datasets import search as datasets
     from posecrb.experiments.crlb_sweep import _crlb_trial, anchor_poses, crlb_sweep, parse_levels
     from posecrb.io import load
     from posecrb.sim.montecarlo import make_tasks

@@ -18,12 +18,12 @@ from __future__ import annotations
 from collections import deque
 
 import numpy as np
-
 from _common import dataset_args, median_time
+
 from posecrb import load
+from posecrb.linalg.selinv import inverse_block_diagonal
 from posecrb.models.paper.crlb import paper_crlb
 from posecrb.models.paper.fim import fim_logdet, paper_fim
-from posecrb.linalg.selinv import inverse_block_diagonal
 
 GTSAM = {"sphere2500": 7.0, "city10000": 7.9}
 

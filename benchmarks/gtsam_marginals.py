@@ -23,12 +23,12 @@ import tempfile
 from pathlib import Path
 
 import numpy as np
-
 from _common import median_time
+
 from posecrb import load
 from posecrb.datasets import search as datasets
-from posecrb.solver.estimate import get_estimate
 from posecrb.io import write_g2o
+from posecrb.solver.estimate import get_estimate
 
 GTSAM_SCRIPT = r"""
 import sys

@@ -12,12 +12,11 @@ from __future__ import annotations
 
 import statistics
 
-
 from _common import dataset_args, median_time
+
 from posecrb import load
-from posecrb.models.thesis.fim import sed_crb, sed_fim
-
-
+from posecrb.models.thesis.crb import sed_crb
+from posecrb.models.thesis.fim import sed_fim
 
 
 def main() -> None:

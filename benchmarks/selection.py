@@ -14,18 +14,16 @@ from __future__ import annotations
 
 import argparse
 import logging
-import os
-import sys
 import time
 
 import numpy as np
-
 from _common import median_time
+
 from posecrb import load
-from posecrb.datasets import search as datasets
-from posecrb.solver.estimate import get_estimate
-from posecrb.selection.select import select_edges, split_edges, tree_objective
 from posecrb.core.timing import timed
+from posecrb.datasets import search as datasets
+from posecrb.selection.select import select_edges, split_edges, tree_objective
+from posecrb.solver.estimate import get_estimate
 
 TREE_DATASETS = ("intel", "city10000", "sphere2500")
 BUDGETS = ("10%", "20%", "50%")

@@ -18,7 +18,7 @@ def random_rotations(n: int, dim: int, rng: np.random.Generator) -> np.ndarray:
         return rot2(rng.uniform(-np.pi, np.pi, n))
     q = rng.standard_normal((n, 4))
     q /= np.linalg.norm(q, axis=1, keepdims=True)
-    from posecrb.lie.so import quat_to_rot
+    from posecrb.io.rotations import quat_to_rot
 
     return quat_to_rot(q)
 

@@ -9,8 +9,8 @@ from dataclasses import replace
 import numpy as np
 import pytest
 
-from posecrb.models.paper.crlb import CURVATURE_WARN, curvature_status, inverse_accuracy, paper_crlb
 from posecrb.core.errors import DisconnectedGraph, UsageError
+from posecrb.models.paper.crlb import CURVATURE_WARN, curvature_status, inverse_accuracy, paper_crlb
 from posecrb.models.paper.fim import FIM_VARIANTS, paper_fim
 
 from .conftest import make_random_graph
@@ -198,7 +198,7 @@ def test_inverse_accuracy_against_dense_references():
 def _bridge_graph(dim: int, weak: float):
     """Two 4-pose clusters (tau 100, kappa 1000) joined by one edge of precision ``weak``."""
     from posecrb.core.graph import PoseGraph
-    from posecrb.sim.sampling import isotropic_information
+    from posecrb.core.noise import isotropic_information
     from posecrb.sim.generators import relative_poses, uniform_rotations
 
     rng = np.random.default_rng(2)

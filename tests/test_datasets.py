@@ -10,11 +10,18 @@ from pathlib import Path
 
 import pytest
 
-from posecrb.datasets import search as ds
 from posecrb.cli import main
+from posecrb.datasets import search as ds
+from posecrb.datasets import verify as dsv
+from posecrb.datasets.manifest import (
+    ManifestError,
+    default_manifest_path,
+    git_blob_file,
+    load_manifest,
+    parse_manifest,
+    sha256_file,
+)
 from posecrb.io import load
-from posecrb.datasets.manifest import (ManifestError, default_manifest_path, git_blob_file, load_manifest,
-                              parse_manifest, sha256_file)
 
 REPO = Path(__file__).resolve().parents[1]
 SE_SYNC_COMMIT = "9b631b6b82d8aa7d32ab846412ae1c070412b7b6"
@@ -163,7 +170,7 @@ def _corrupt_copy(src: Path, dst_dir: Path) -> Path:
 
 def test_list_reports_found_missing_and_mismatch(shared_datasets, tmp_path, isolated_cache):
     bad = _corrupt_copy(shared_datasets / "tinyGrid3D.g2o", tmp_path / "data")
-    status = {s.entry.name: s for s in ds.list_datasets(tmp_path / "data")}
+    status = {s.entry.name: s for s in dsv.list_datasets(tmp_path / "data")}
     assert status["tinyGrid3D"].status == "checksum mismatch" and status["tinyGrid3D"].path == bad
     assert status["intel"].status == "found"
     assert status["grid3D"].status == "missing" and status["grid3D"].path is None
@@ -174,7 +181,7 @@ def test_verify_files_flags_a_mismatch_and_unknown_files(shared_datasets, tmp_pa
     data = tmp_path / "data"
     _corrupt_copy(shared_datasets / "tinyGrid3D.g2o", data)
     shutil.copy(shared_datasets / "tinyGrid3D.g2o", data / "mine.g2o")
-    checks = {c.path.resolve(): c for c in ds.verify_files(data)}
+    checks = {c.path.resolve(): c for c in dsv.verify_files(data)}
     assert checks[(data / "tinyGrid3D.g2o").resolve()].status == "checksum mismatch"
     assert checks[(data / "mine.g2o").resolve()].status == "unknown"
     assert checks[(shared_datasets / "tinyGrid3D.g2o").resolve()].status == "ok"
@@ -182,12 +189,12 @@ def test_verify_files_flags_a_mismatch_and_unknown_files(shared_datasets, tmp_pa
 
 
 def test_verify_parse_compares_counts(shared_datasets, tmp_path):
-    checks = ds.verify_files(parse=True, files=[shared_datasets / "tinyGrid3D.g2o",
+    checks = dsv.verify_files(parse=True, files=[shared_datasets / "tinyGrid3D.g2o",
                                                 shared_datasets / "toro" / "w100.graph"])
     assert [(c.status, c.poses, c.edges) for c in checks] == [("ok", 9, 11), ("ok", 100, 300)]
     # Same bytes under another entry's file name: the checksum catches it before the counts.
     shutil.copy(shared_datasets / "tinyGrid3D.g2o", tmp_path / "smallGrid3D.g2o")
-    (c,) = ds.verify_files(parse=True, files=[tmp_path / "smallGrid3D.g2o"])
+    (c,) = dsv.verify_files(parse=True, files=[tmp_path / "smallGrid3D.g2o"])
     assert c.status == "checksum mismatch" and c.failed
 
 

@@ -11,11 +11,11 @@ import numpy as np
 import pytest
 from click.testing import CliRunner
 
-from posecrb.sim import generators as synth
 from posecrb.core.errors import UsageError
 from posecrb.experiments.crlb_sweep import anchor_poses, crlb_sweep, parse_levels, pose_errors, rotation_errors
-from posecrb.models.paper.fim import paper_fim
 from posecrb.lie.so import exp_so3, hat3, rot2
+from posecrb.models.paper.fim import paper_fim
+from posecrb.sim import generators as synth
 
 
 # ---------------------------------------------------------------- crlb sweep
@@ -89,8 +89,8 @@ def test_consistent_fim_is_the_simulated_models_fim():
 def test_sweep_bounds_come_from_the_chosen_variant(variant):
     """mse_bound* = paper_crlb of the scaled noise model with the chosen FIM variant (default:
     the model's Fisher information); the variants differ in 3D."""
-    from posecrb.models.paper.crlb import paper_crlb
     from posecrb.experiments.crlb_sweep import _bounds
+    from posecrb.models.paper.crlb import paper_crlb
     from posecrb.sim.sampling import noise_model_graph
 
     g = synth.grid(3, 2, tau=100.0, kappa=200.0, orientation="random", rng=3)

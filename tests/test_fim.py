@@ -8,14 +8,13 @@ from dataclasses import replace
 
 import numpy as np
 import pytest
-
-from posecrb.core.errors import DisconnectedGraph, NotPositiveDefinite
 from scipy.spatial.transform import Rotation
 
+from posecrb.core.errors import DisconnectedGraph, NotPositiveDefinite
+from posecrb.core.noise import rotation_weight
+from posecrb.lie.so import exp_so3, rot2
 from posecrb.models.paper.bounds import t_optimality
 from posecrb.models.paper.fim import FIM_VARIANTS, fim_logdet, fim_symbolic, paper_fim, trace_fim
-from posecrb.lie.so import exp_so3, rot2
-from posecrb.sim.sampling import rotation_weight
 
 from .conftest import make_random_graph
 from .numerics import assert_within, logdet_atol, psd_sum_tolerance, sum_atol

@@ -16,11 +16,19 @@ import pytest
 import scipy.sparse as sp
 from scipy.linalg import expm
 
-from posecrb.lie import se as L
-from posecrb.models.thesis.frames import (FRAMES, body_map, convert_covariance_blocks, convert_information, coordinate_names,
-                            sed_crb_in_frame, world_map)
 from posecrb.core.graph import PoseGraph
-from posecrb.models.thesis.fim import kernel_basis, sed_crb, sed_fim
+from posecrb.lie import se as L
+from posecrb.models.thesis.crb import sed_crb
+from posecrb.models.thesis.fim import kernel_basis, sed_fim
+from posecrb.models.thesis.frames import (
+    FRAMES,
+    body_map,
+    convert_covariance_blocks,
+    convert_information,
+    coordinate_names,
+    sed_crb_in_frame,
+    world_map,
+)
 
 from .conftest import make_random_graph
 

@@ -20,10 +20,10 @@ import pytest
 
 gtsam = pytest.importorskip("gtsam", reason="gtsam is not installed (pip install 'posecrb[gtsam]')")
 
-from posecrb.solver.estimate import get_estimate  # noqa: E402
-from posecrb.models.thesis.frames import sed_crb_in_frame  # noqa: E402
 from posecrb.core.graph import PoseGraph  # noqa: E402
 from posecrb.io import load  # noqa: E402
+from posecrb.models.thesis.frames import sed_crb_in_frame  # noqa: E402
+from posecrb.solver.estimate import get_estimate  # noqa: E402
 
 from .test_frames import body_fim_reference, consistent_graph, free_dofs, gtsam_information  # noqa: E402
 

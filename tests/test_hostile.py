@@ -424,9 +424,9 @@ def test_output_locations_are_checked_before_the_work(tmp_path, capsys, monkeypa
     """A 70 s solve ended in `internal error: FileNotFoundError`: now exit 2 at once."""
     import importlib
 
-    import posecrb.solver.estimate
     import posecrb.metrics.regress
     import posecrb.metrics.tables
+    import posecrb.solver.estimate
 
     sweep = importlib.import_module("posecrb.experiments.crlb_sweep")
 
@@ -436,8 +436,8 @@ def test_output_locations_are_checked_before_the_work(tmp_path, capsys, monkeypa
     for mod, name in ((posecrb.solver.estimate, "from_solver"), (posecrb.metrics.tables, "build_rows"),
                       (sweep, "crlb_sweep"), (posecrb.metrics.regress, "compute_metrics")):
         monkeypatch.setattr(mod, name, forbidden)
-    import posecrb.cli.commands.solve as solve_cmd
     import posecrb.cli.commands.regress as regress_cmd
+    import posecrb.cli.commands.solve as solve_cmd
     monkeypatch.setattr(solve_cmd, "solve", forbidden)
     monkeypatch.setattr(regress_cmd, "compute_metrics", forbidden)
     f = write_clean(CASES["crlf_line_ends"], tmp_path)

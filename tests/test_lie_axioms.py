@@ -19,10 +19,6 @@ import pytest
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
-# The library's names for the closed forms, in one place.
-from posecrb.lie.so import angle2 as so2_log
-from posecrb.lie.so import exp_so3 as so3_exp
-from posecrb.lie.so import rot2 as so2_exp
 from posecrb.lie.se import (
     from_homogeneous,
     se2_adjoint,
@@ -42,6 +38,11 @@ from posecrb.lie.se import (
     so3_log,
     to_homogeneous,
 )
+
+# The library's names for the closed forms, in one place.
+from posecrb.lie.so import angle2 as so2_log
+from posecrb.lie.so import exp_so3 as so3_exp
+from posecrb.lie.so import rot2 as so2_exp
 
 EPS = np.finfo(float).eps
 

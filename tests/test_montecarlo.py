@@ -6,7 +6,14 @@ import pytest
 
 from posecrb.core.errors import UsageError
 from posecrb.sim.montecarlo import (
-    Task, demo_trial, level_key, make_tasks, mean_and_stderr, run_tasks, seed_record, trial_seeds,
+    Task,
+    demo_trial,
+    level_key,
+    make_tasks,
+    mean_and_stderr,
+    run_tasks,
+    seed_record,
+    trial_seeds,
 )
 
 

@@ -3,7 +3,7 @@ import mpmath as mp
 import numpy as np
 import pytest
 
-from posecrb.sim.sampling import isotropic_precisions, omega, rotation_weight
+from posecrb.core.noise import isotropic_precisions, omega, rotation_weight
 
 from .conftest import random_spd
 from .numerics import EPS, MARGIN, spd_condition

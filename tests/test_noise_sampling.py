@@ -13,11 +13,18 @@ from scipy import integrate, stats
 from scipy.special import ive
 
 from posecrb.core.graph import PoseGraph
+from posecrb.core.noise import isotropic_information, isotropic_precisions, omega
 from posecrb.lie.so import angle2, rot2
 from posecrb.sim.sampling import (
-    isotropic_information, isotropic_precisions, noise_model_graph, omega, perturb_measurements,
-    sample_isotropic_gaussian, sample_langevin_angle_so2, sample_langevin_angle_so3,
-    sample_langevin_so2, sample_langevin_so3, sample_se_noise, scaled_precisions,
+    noise_model_graph,
+    perturb_measurements,
+    sample_isotropic_gaussian,
+    sample_langevin_angle_so2,
+    sample_langevin_angle_so3,
+    sample_langevin_so2,
+    sample_langevin_so3,
+    sample_se_noise,
+    scaled_precisions,
 )
 
 KAPPAS = [1e-2, 0.3, 2.0, 15.0, 400.0, 1e4, 1e6]
@@ -193,9 +200,9 @@ def test_scaled_precisions_overrides_and_validation():
 @pytest.mark.parametrize("dim", [2, 3])
 def test_perturb_left_is_left_multiplicative(dim):
     """H = Exp(xi) T  =>  Log(H T^{-1}) = xi (thesis 4.3, Prop. 4.3.2)."""
+    from posecrb.lie.se import se_compose, se_inverse, se_log
     from posecrb.lie.so import exp_so3
     from posecrb.sim.sampling import perturb_left
-    from posecrb.lie.se import se_compose, se_inverse, se_log
 
     rng = np.random.default_rng(9)
     q = 3 if dim == 2 else 6

@@ -8,16 +8,25 @@ import numpy as np
 import pytest
 from scipy.linalg import expm
 
-from posecrb.lie import se as L
-from posecrb.models.thesis import example as te
 from posecrb.core.errors import NotPositiveDefinite, UsageError
 from posecrb.core.graph import PoseGraph
 from posecrb.io import load
-from posecrb.models.thesis.fim import edge_residuals, kernel_basis, left_information, sed_crb, sed_fim
+from posecrb.lie import se as L
+from posecrb.models.thesis import example as te
+from posecrb.models.thesis.crb import sed_crb
+from posecrb.models.thesis.fim import edge_residuals, kernel_basis, left_information, sed_fim
 
 from .conftest import make_random_graph
-from .numerics import (EPS, MARGIN, assert_within, inverse_entry_atol, pinv_entry_atol, pinv_trace_rtol,
-                       psd_sum_tolerance, trace_inverse_rtol)
+from .numerics import (
+    EPS,
+    MARGIN,
+    assert_within,
+    inverse_entry_atol,
+    pinv_entry_atol,
+    pinv_trace_rtol,
+    psd_sum_tolerance,
+    trace_inverse_rtol,
+)
 from .test_se_lie import hat_ref
 
 

@@ -17,7 +17,6 @@ import pytest
 from scipy.special import ive
 
 from posecrb.core.errors import DisconnectedGraph, ParseError, UsageError
-from posecrb.solver.estimate import from_vertices
 from posecrb.core.graph import PoseGraph
 from posecrb.selection.select import (
     DisconnectedFixedSet,
@@ -30,6 +29,7 @@ from posecrb.selection.select import (
     split_edges,
     tree_objective,
 )
+from posecrb.solver.estimate import from_vertices
 
 from .conftest import random_rotations, random_spd
 from .test_fim import dense_model_fisher
@@ -493,8 +493,8 @@ def test_cli_fixed_file_errors(g2o_path, tmp_path, capsys):
 
 # ----------------------------------------------------------------------------- real data
 def test_intel_tree_greedy_value_and_certificate(shared_datasets):
-    from posecrb.models.paper.bounds import compute_bounds
     from posecrb.io import load
+    from posecrb.models.paper.bounds import compute_bounds
 
     g = load(shared_datasets / "intel.g2o")
     res = select_edges(g, "10%", certify=True)
@@ -505,8 +505,8 @@ def test_intel_tree_greedy_value_and_certificate(shared_datasets):
 
 
 def test_small_grid_fim_value_is_the_consistent_fim_logdet(shared_datasets):
-    from posecrb.models.paper.fim import fim_logdet, paper_fim
     from posecrb.io import load
+    from posecrb.models.paper.fim import fim_logdet, paper_fim
 
     g = load(shared_datasets / "smallGrid3D.g2o")
     res = select_edges(g, "20%", objective="fim", estimate="solve")

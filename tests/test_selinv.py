@@ -91,8 +91,8 @@ def test_real_fim_blocks_match_sparse_lu_solves(shared_datasets, name, stride):
     """Per-pose blocks of a real FIM's inverse against columns from an independent sparse LU."""
     from scipy.sparse.linalg import splu
 
-    from posecrb.models.paper.fim import paper_fim
     from posecrb.io import load
+    from posecrb.models.paper.fim import paper_fim
 
     g = load(shared_datasets / name)
     fim = paper_fim(g, g.vertex_rot, g.vertex_trans, layout="poses")

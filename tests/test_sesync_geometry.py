@@ -11,6 +11,7 @@ import pytest
 from posecrb.solver.problem import Problem
 from posecrb.solver.staircase import RelaxedModel
 from posecrb.solver.stiefel import project, random_point, remove_vertical, retract
+
 from .helpers import random_pose_graph
 
 

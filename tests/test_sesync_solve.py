@@ -15,9 +15,9 @@ from posecrb.solver import solve
 from posecrb.solver.problem import Problem
 from posecrb.solver.staircase import RelaxedModel, verify
 from posecrb.solver.stiefel import lift, random_point
-from .helpers import random_pose_graph, random_rotations
 from posecrb.solver.trust_region import TROptions, trust_region
 
+from .helpers import random_pose_graph, random_rotations
 from .numerics import EPS, MARGIN, objective_atol, suboptimality_bound
 
 # SE-Sync C++ reference optima.

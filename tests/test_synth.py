@@ -10,9 +10,9 @@ from scipy.sparse.csgraph import connected_components
 from scipy.spatial.transform import Rotation
 
 from posecrb import load
-from posecrb.sim import generators as synth
 from posecrb.cli import main
 from posecrb.io import write_g2o
+from posecrb.sim import generators as synth
 
 from .numerics import EPS, MARGIN
 

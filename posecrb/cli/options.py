@@ -6,12 +6,11 @@ import re
 
 import click
 
-from ..datasets import search as datasets
 from ..core.graph import PoseGraph
+from ..core.timing import timed
+from ..datasets import search as datasets
 from ..io import load
 from ..report.render import FORMATS
-from ..core.timing import timed
-
 
 _PLAIN_NUMBER = re.compile(r"[+-]?(?:[0-9]+\.?[0-9]*|\.[0-9]+)(?:[eE][+-]?[0-9]+)?")
 INT64_MAX = 2 ** 63 - 1

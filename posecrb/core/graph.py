@@ -15,7 +15,7 @@ import scipy.sparse as sp
 from scipy.sparse.csgraph import connected_components
 
 from .errors import ComponentSummary, DisconnectedGraph, UsageError
-from ..sim.sampling import isotropic_precisions, rotation_weight
+from .noise import isotropic_precisions, rotation_weight
 
 
 def rotation_dimension(dim: int) -> int:

@@ -25,10 +25,10 @@ from pathlib import Path
 from typing import Callable, Iterable
 
 from .. import __version__
-from .search import cache_dir, locate
 from ..core.errors import PosecrbError
 from ..core.files import atomic_write
 from .manifest import DatasetEntry, Manifest, load_manifest, verify_file
+from .search import cache_dir, locate
 
 log = logging.getLogger("posecrb")
 

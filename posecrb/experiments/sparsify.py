@@ -151,10 +151,10 @@ class SparsifyRow:
 
 def _evaluate(context: dict, keep_mask: np.ndarray) -> dict:
     """Objective-independent measures of the kept edges (weights over all edges)."""
-    from ..models.paper.fim import paper_fim
     from ..linalg.cholesky import SymbolicCholesky
-    from ..selection.select import FiedlerObjective, pruned_graph, tree_objective
     from ..linalg.selinv import trace_inverse
+    from ..models.paper.fim import paper_fim
+    from ..selection.select import FiedlerObjective, pruned_graph, tree_objective
 
     graph: PoseGraph = context["graph"]
     ref = context["reference"]
@@ -235,9 +235,9 @@ def sparsify_experiment(graph: PoseGraph, budgets: Sequence[str] = DEFAULT_BUDGE
     The full graph is solved first (the reference for ATE/RPE and the point of every FIM);
     raises SolverError when it cannot be certified."""
     from ..core.errors import SolverError
-    from ..solver.estimate import Estimate
     from ..selection.select import parse_budget, split_edges
     from ..solver import solve
+    from ..solver.estimate import Estimate
 
     budgets = parse_budgets(budgets)
     triples = parse_methods(methods, objective)

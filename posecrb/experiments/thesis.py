@@ -220,8 +220,8 @@ def _thesis_trial(context: dict, task: Task) -> dict:
 
 def thesis_bounds(m: int) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     """``(F_m, (Pi F_m Pi)^+, F_m^+, N)``: dense 15 x 15 bounds of the case study at the truth."""
-    from ..models.thesis.fim import kernel_basis, sed_fim
     from ..models.thesis.example import ANCHORS, left_information, thesis_graph, true_estimate
+    from ..models.thesis.fim import kernel_basis, sed_fim
 
     g = thesis_graph()
     f1 = sed_fim(g, *true_estimate(), information=left_information()).matrix.toarray()

@@ -6,8 +6,8 @@ each group's numeric columns are converted by numpy in one call. Every file
 posecrb writes goes through ``posecrb.core.files.atomic_write``.
 """
 from ..core.files import atomic_write, check_output_dir, check_output_file, read_regular_file
-from .text import QUATERNION_MODES, load, parse_text
 from .g2o import write_g2o
+from .text import QUATERNION_MODES, load, parse_text
 
 __all__ = ["QUATERNION_MODES", "atomic_write", "check_output_dir", "check_output_file", "load", "parse_text",
            "read_regular_file", "write_g2o"]

@@ -6,9 +6,10 @@ import os
 
 import numpy as np
 
-from ..core.graph import PoseGraph
-from ..lie.so import angle2, rot_to_quat
 from ..core.files import atomic_write
+from ..core.graph import PoseGraph
+from ..lie.so import angle2
+from .rotations import rot_to_quat
 
 
 def _fmt_rows(arr: np.ndarray) -> list[str]:

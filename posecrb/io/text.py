@@ -24,11 +24,12 @@ from itertools import chain
 import numpy as np
 
 from ..core.errors import ParseError, UsageError
-from ..core.graph import PoseGraph
-from ..lie.so import euler_to_rot, quat_to_rot, rot2
-from ..sim.sampling import isotropic_precisions, rotation_weight
 from ..core.files import read_regular_file
+from ..core.graph import PoseGraph
+from ..core.noise import isotropic_precisions, rotation_weight
+from ..lie.so import rot2
 from .records import RECORDS, SKIPPED_TAGS, TORO2_INFO_ORDER, RecordKind
+from .rotations import euler_to_rot, quat_to_rot
 
 log = logging.getLogger("posecrb")
 

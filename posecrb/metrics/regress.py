@@ -14,12 +14,12 @@ import os
 from dataclasses import dataclass
 from pathlib import Path
 
-from ..datasets import search as datasets
-from ..models.paper.bounds import compute_bounds
 from ..core.errors import PosecrbError
-from ..solver.estimate import get_estimate
-from ..io import load
 from ..core.files import read_regular_file, write_text
+from ..datasets import search as datasets
+from ..io import load
+from ..models.paper.bounds import compute_bounds
+from ..solver.estimate import get_estimate
 
 GRAPH_ONLY = ("lb", "ub", "ub_lambda")
 ESTIMATE_DEPENDENT = ("fim_logdet", "objective", "trace_crlb")

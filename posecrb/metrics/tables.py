@@ -19,15 +19,15 @@ import os
 from dataclasses import asdict, dataclass, field
 from typing import Callable, Iterable, Sequence
 
-from ..datasets import search as datasets
-from ..models.paper.bounds import compute_bounds
 from ..core.errors import DatasetNotFound, PosecrbError, status_of
-from ..solver.estimate import get_estimate
-from ..io import load
-from .published import TABLE_II_FIT_FOOTNOTE, TABLE_II_FOOTNOTE, TABLE_II_PUBLISHED_FOOTNOTE, paper_row
 from ..core.provenance import machine, versions
 from ..core.status import put
 from ..core.timing import timed
+from ..datasets import search as datasets
+from ..io import load
+from ..models.paper.bounds import compute_bounds
+from ..solver.estimate import get_estimate
+from .published import TABLE_II_FIT_FOOTNOTE, TABLE_II_FOOTNOTE, TABLE_II_PUBLISHED_FOOTNOTE, paper_row
 
 log = logging.getLogger("posecrb")
 

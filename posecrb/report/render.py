@@ -150,9 +150,9 @@ def print_rows(rows: list[dict[str, Any]], fmt: str, columns: Sequence[str] | No
     elif fmt == "markdown":
         click.echo(to_markdown(rows, columns, headers), nl=False)
     elif fmt == "table":
-        from rich.console import Console
-
         import sys
+
+        from rich.console import Console
 
         # Piped output: no terminal width to respect, so never squeeze columns.
         width = None if sys.stdout.isatty() else 250

@@ -60,8 +60,8 @@ from scipy.sparse.csgraph import connected_components, minimum_spanning_tree
 
 from ..core.errors import ParseError, PosecrbError, UsageError
 from ..core.graph import PoseGraph
-from ..linalg.laplacian import laplacian, reduced_index
 from ..linalg.cholesky import SymbolicCholesky
+from ..linalg.laplacian import laplacian, reduced_index
 
 log = logging.getLogger("posecrb")
 
@@ -387,7 +387,7 @@ def tree_objective(graph: PoseGraph, anchor: int = 0, rotation_model: str = "eq5
 
     When ``w = c tau`` on every edge (uniform noise, e.g. city10000) ``L_w = c L_tau`` and the
     objective is ``(d + d_r) logdet L_tau + d_r (n - 1) log c``: one factor instead of two."""
-    from ..sim.sampling import isotropic_precisions, rotation_weight
+    from ..core.noise import isotropic_precisions, rotation_weight
 
     tau, kappa = isotropic_precisions(graph.info, graph.dim)
     w = rotation_weight(kappa, graph.dim, rotation_model)
@@ -424,8 +424,8 @@ def edge_information_factors(graph: PoseGraph, rot: np.ndarray, trans: np.ndarra
     diagonal blocks ``w I`` and the coupling ``-w R_i^T R_j`` of the frame-consistent FIM
     (``-w I`` for ``variant="eq64"``, eq. 61-62 as printed). Returns (rows (m, 2q), valid, U (m, 2q, q)).
     """
+    from ..core.noise import rotation_weight
     from ..models.paper.fim import rotation_jacobians
-    from ..sim.sampling import rotation_weight
 
     d, dr, q = graph.dim, graph.rot_dim, graph.q
     tau = graph.tau
@@ -1003,7 +1003,7 @@ def make_objective(graph: PoseGraph, objective: str, anchor: int = 0, estimate=N
         return fim_objective(graph, estimate.rot, estimate.trans, anchor)
     if objective == "fiedler":
         if fiedler_weight == "w":
-            from ..sim.sampling import rotation_weight
+            from ..core.noise import rotation_weight
 
             weights = rotation_weight(graph.kappa, graph.dim, rotation_model)
         elif fiedler_weight == "kappa":

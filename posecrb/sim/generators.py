@@ -74,7 +74,7 @@ def _assemble(dim: int, rot: np.ndarray, trans: np.ndarray, src: np.ndarray, dst
               tau, kappa, noise: bool, rng: np.random.Generator | None,
               ids: np.ndarray | None = None, info: np.ndarray | None = None) -> PoseGraph:
     """Measurements from the truth (optionally noisy), isotropic information, truth as vertices."""
-    from .sampling import isotropic_information
+    from ..core.noise import isotropic_information
 
     src = np.asarray(src, dtype=np.int64)
     dst = np.asarray(dst, dtype=np.int64)
@@ -110,7 +110,7 @@ def uniform_rotations(n: int, dim: int, rng: np.random.Generator) -> np.ndarray:
     """(n, d, d) Haar-uniform rotations (uniform angle in 2D, normalised Gaussian quaternions in 3D)."""
     if dim == 2:
         return rot2(rng.uniform(-np.pi, np.pi, n))
-    from ..lie.so import quat_to_rot
+    from ..io.rotations import quat_to_rot
 
     q = rng.standard_normal((n, 4))
     return quat_to_rot(q / np.linalg.norm(q, axis=1, keepdims=True))
@@ -327,7 +327,7 @@ def random_information(rng: np.random.Generator, m: int, dim: int, kind: str = "
     r = rotation_dimension(dim)
     q = dim + r
     if kind == "isotropic":
-        from .sampling import isotropic_information
+        from ..core.noise import isotropic_information
 
         tau = np.exp(rng.uniform(*np.log(tau_range), m))
         kappa = np.exp(rng.uniform(*np.log(kappa_range), m))

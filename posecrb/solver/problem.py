@@ -45,8 +45,8 @@ import scipy.sparse as sp
 from sksparse.cholmod import Factor
 
 from ..core.graph import PoseGraph
-from ..linalg.laplacian import reduced_laplacian
 from ..linalg.cholesky import SymbolicCholesky, cholesky
+from ..linalg.laplacian import reduced_laplacian
 
 # An edge's R~ counts as orthogonal when max |I - R~ R~^T| is at the rounding level of a
 # rotation computed in floating point (normalised quaternions measure up to ~10 eps on the

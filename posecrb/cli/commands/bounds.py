@@ -5,13 +5,13 @@ import logging
 
 import click
 
-from ...models.paper.bounds import compute_bounds
 from ...core.errors import PosecrbError, status_of
-from ...solver.estimate import get_estimate
-from ...core.timing import timed
-from ...sim.sampling import ROTATION_WEIGHT_MODELS
-from ...report.render import print_rows
+from ...core.noise import ROTATION_WEIGHT_MODELS
 from ...core.status import log_status, put
+from ...core.timing import timed
+from ...models.paper.bounds import compute_bounds
+from ...report.render import print_rows
+from ...solver.estimate import get_estimate
 from ..options import anchor_option, data_dir_option, format_option, load_dataset, repeat_option
 from .fim import fim_variant_option
 

@@ -8,11 +8,19 @@ import click
 import numpy as np
 
 from ...core.errors import UsageError
-from ...report.render import print_rows
 from ...core.status import Status, log_status, put
+from ...report.render import print_rows
 from ..options import INT64_MAX, POSE_ID, data_dir_option, format_option
-from .fim import (estimate_option, fim_variant_option, frame_option, load_with_estimate, model_option,
-                  resolve_fim_variant, resolve_frame, rotation_weight_option)
+from .fim import (
+    estimate_option,
+    fim_variant_option,
+    frame_option,
+    load_with_estimate,
+    model_option,
+    resolve_fim_variant,
+    resolve_frame,
+    rotation_weight_option,
+)
 
 log = logging.getLogger("posecrb")
 

@@ -6,8 +6,9 @@ from pathlib import Path
 
 import click
 
-from ...datasets import search as ds
 from ...core.errors import PosecrbError, UsageError
+from ...datasets import search as ds
+from ...datasets import verify as dsv
 from ...report.render import print_rows
 from ..options import FiniteFloat, data_dir_option, format_option
 
@@ -33,7 +34,7 @@ def command() -> None:
 @click.option("--no-check", is_flag=True, help="Do not hash the files (status is only found/missing).")
 def list_cmd(data_dir: str | None, fmt: str, no_check: bool) -> None:
     """Every manifest dataset: dim, counts, paper table, status (found / missing / checksum mismatch), path."""
-    rows = [s.row() for s in ds.list_datasets(data_dir, check=not no_check)]
+    rows = [s.row() for s in dsv.list_datasets(data_dir, check=not no_check)]
     print_rows(rows, fmt, columns=LIST_COLUMNS, single_json=False, title="posecrb datasets",
                headers={"paper_name": "paper"})
 
@@ -48,8 +49,7 @@ def path_cmd(name: str, data_dir: str | None) -> None:
 
 def _progress_bar():
     from rich.console import Console
-    from rich.progress import (BarColumn, DownloadColumn, Progress, TextColumn, TimeRemainingColumn,
-                               TransferSpeedColumn)
+    from rich.progress import BarColumn, DownloadColumn, Progress, TextColumn, TimeRemainingColumn, TransferSpeedColumn
 
     return Progress(TextColumn("{task.description}"), BarColumn(), DownloadColumn(), TransferSpeedColumn(),
                     TimeRemainingColumn(), console=Console(stderr=True))
@@ -78,8 +78,8 @@ def fetch_cmd(names: tuple[str, ...], all_: bool, dest: str | None, url: str | N
     manifest's size of the file is aborted as soon as it exceeds it.
     """
     from ...datasets.fetch import fetch_many
-    from ...io import check_output_dir
     from ...datasets.manifest import load_manifest
+    from ...io import check_output_dir
 
     if all_ == bool(names):
         raise click.UsageError("give dataset NAME(s) or --all (not both)")
@@ -139,7 +139,7 @@ def verify_cmd(data_dir: str | None, parse: bool, fmt: str) -> None:
     """
     from ...datasets.manifest import load_manifest
 
-    checks = ds.verify_files(data_dir, parse=parse)
+    checks = dsv.verify_files(data_dir, parse=parse)
     cols = ["name", "file", "status", "algorithm"] + (["poses", "edges"] if parse else []) + ["path"]
     print_rows([c.row() for c in checks], fmt, columns=cols, single_json=False, title="posecrb datasets verify")
     found = {c.entry.name for c in checks if c.entry is not None}

@@ -8,10 +8,10 @@ import click
 import numpy as np
 
 from ...core.errors import UsageError
-from ...models.paper.fim import FIM_VARIANTS
-from ...sim.sampling import ROTATION_WEIGHT_MODELS
-from ...report.render import print_rows
+from ...core.noise import ROTATION_WEIGHT_MODELS
 from ...core.status import OK, log_status, put
+from ...models.paper.fim import FIM_VARIANTS
+from ...report.render import print_rows
 from ..options import POSE_ID, data_dir_option, estimate_inputs, format_option, load_dataset
 
 log = logging.getLogger("posecrb")
@@ -148,8 +148,8 @@ def fim_row(file: str, data_dir: str | None, model: str, source: str, anchor_id:
             ids, coord = fim.index_map()
             save_npz(save, fim.matrix, ids, coord, fim.coordinate_names(), "paper", [fim.anchor_id])
     else:
-        from ...models.thesis.frames import coordinate_names, convert_information
         from ...models.thesis.fim import sed_fim
+        from ...models.thesis.frames import convert_information, coordinate_names
 
         fim = sed_fim(graph, est.rot, est.trans)
         times.update(fim.times)

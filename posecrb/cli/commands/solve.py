@@ -3,12 +3,12 @@ from __future__ import annotations
 
 import click
 
-from ...datasets import search as datasets
 from ...core.errors import SolverError
+from ...core.timing import timed
+from ...datasets import search as datasets
 from ...io import check_output_file, load, write_g2o
 from ...report.render import print_rows
 from ...solver import solve
-from ...core.timing import timed
 from ..options import POSE_ID, FiniteFloat, data_dir_option, format_option
 
 # Compact column set for the human-readable formats; json/csv carry every key.

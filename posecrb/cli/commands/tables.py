@@ -11,10 +11,22 @@ from pathlib import Path
 import click
 
 from ...core.errors import PosecrbError
-from ...sim.sampling import ROTATION_WEIGHT_MODELS
+from ...core.noise import ROTATION_WEIGHT_MODELS
+from ...metrics.tables import (
+    HEADERS,
+    TITLES,
+    TableSettings,
+    build_rows,
+    dataset_names,
+    dataset_row,
+    failed,
+    footnote,
+    published_settings,
+    run_record,
+    table_rows,
+    to_latex,
+)
 from ...report.render import to_csv, to_json, to_markdown
-from ...metrics.tables import (HEADERS, TITLES, TableSettings, build_rows, dataset_names, dataset_row, failed,
-                      footnote, published_settings, run_record, table_rows, to_latex)
 from ..options import data_dir_option
 
 log = logging.getLogger("posecrb")

@@ -27,11 +27,11 @@ import scipy.sparse as sp
 
 from ...core.errors import NotPositiveDefinite
 from ...core.graph import PoseGraph
-from ...linalg.laplacian import kron_identity, reduced_index, reduced_laplacian
-from ...linalg.cholesky import SymbolicCholesky
-from ...sim.sampling import isotropic_precisions, rotation_weight
+from ...core.noise import isotropic_precisions, rotation_weight
 from ...core.status import OK, Status
 from ...core.timing import timed
+from ...linalg.cholesky import SymbolicCholesky
+from ...linalg.laplacian import kron_identity, reduced_index, reduced_laplacian
 
 # lambda_min(L_w) is reported with a warning when its certified interval is wider than this
 # (relative to the estimate).

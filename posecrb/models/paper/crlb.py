@@ -41,9 +41,9 @@ from typing import Sequence
 
 import numpy as np
 
-from .fim import PaperFim, coordinate_names, paper_fim
 from ...core.graph import PoseGraph
 from ...core.status import OK, Status
+from .fim import PaperFim, coordinate_names, paper_fim
 
 # eq. (68): warn when the curvature correction exceeds this fraction of the first-order term
 # at some pose (the neglected higher-order terms are then of the order of its square).

@@ -58,9 +58,9 @@ import numpy as np
 import scipy.sparse as sp
 
 from ...core.graph import PoseGraph, rotation_dimension
-from ...linalg.laplacian import reduced_index
+from ...core.noise import rotation_weight as _rotation_weight
 from ...linalg.cholesky import SymbolicCholesky
-from ...sim.sampling import rotation_weight as _rotation_weight
+from ...linalg.laplacian import reduced_index
 
 _E2 = np.array([[0.0, -1.0], [1.0, 0.0]])
 LAYOUTS = ("blocks", "poses")

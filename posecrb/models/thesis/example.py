@@ -16,8 +16,8 @@ from __future__ import annotations
 import numpy as np
 
 from ...core.graph import PoseGraph
-from ...lie.so import rot2
 from ...lie.se import se_compose, se_exp, se_inverse
+from ...lie.so import rot2
 
 IDS = (1, 2, 3, 4, 5)
 # (theta, t_x, t_y) of the true poses T_i (sec. 6.2; the matrices printed there are these,

@@ -139,14 +139,14 @@ def convert_information(matrix: sp.spmatrix, rot: np.ndarray, trans: np.ndarray,
 def sed_crb_in_frame(graph: PoseGraph, rot: np.ndarray, trans: np.ndarray, frame: str = "world", *,
                      anchors: Sequence[int] | None = None, quotient: bool = False,
                      per_pose: bool | Sequence[int] = False, **sed_options):
-    """``posecrb.models.thesis.fim.sed_crb`` with traces and per-pose blocks in ``frame`` ("world" or "body").
+    """``posecrb.models.thesis.crb.sed_crb`` with traces and per-pose blocks in ``frame`` ("world" or "body").
 
     "world" is ``sed_crb`` unchanged. "body" converts every per-pose block (5.1 / 5.5) with
     ``B_i C_i B_i^T`` (module docstring); the trace (hence ``mse_bound``) is the sum of the
     converted blocks' traces, so all blocks are computed whatever ``per_pose`` asks for.
     ``sed_options`` go to ``sed_crb`` (``fim``, ``indefinite``, ``information``).
     """
-    from .fim import sed_crb
+    from .crb import sed_crb
 
     if check_frame(frame) == "world":
         return sed_crb(graph, rot, trans, anchors=anchors, quotient=quotient, per_pose=per_pose, **sed_options)
