@@ -3,5 +3,5 @@ from .core.errors import PosecrbError
 from .core.graph import PoseGraph
 from .io import load
 
-__version__ = "0.1.0"
+__version__ = "0.2.0"
 __all__ = ["PoseGraph", "PosecrbError", "load", "__version__"]

@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 
 from posecrb.core.graph import PoseGraph
-from posecrb.lie.so import exp_so3, rot2
+from posecrb.lie.so import so2_exp, so3_exp
 
 SHARED = Path(__file__).resolve().parents[2] / "shared" / "datasets"
 
@@ -21,8 +21,8 @@ def shared_datasets() -> Path:
 
 def random_rotations(rng: np.random.Generator, k: int, dim: int) -> np.ndarray:
     if dim == 2:
-        return rot2(rng.uniform(-np.pi, np.pi, k))
-    return exp_so3(rng.normal(size=(k, 3)))
+        return so2_exp(rng.uniform(-np.pi, np.pi, k))
+    return so3_exp(rng.normal(size=(k, 3)))
 
 
 def random_spd(rng: np.random.Generator, k: int, q: int, scale: float = 10.0) -> np.ndarray:

@@ -10,12 +10,12 @@ from __future__ import annotations
 import numpy as np
 
 from posecrb.core.graph import PoseGraph
-from posecrb.lie.so import exp_so3, rot2
+from posecrb.lie.so import so2_exp, so3_exp
 
 
 def random_rotations(n: int, dim: int, rng: np.random.Generator) -> np.ndarray:
     if dim == 2:
-        return rot2(rng.uniform(-np.pi, np.pi, n))
+        return so2_exp(rng.uniform(-np.pi, np.pi, n))
     q = rng.standard_normal((n, 4))
     q /= np.linalg.norm(q, axis=1, keepdims=True)
     from posecrb.io.rotations import quat_to_rot
@@ -25,8 +25,8 @@ def random_rotations(n: int, dim: int, rng: np.random.Generator) -> np.ndarray:
 
 def _small_rotations(m: int, dim: int, sigma: float, rng: np.random.Generator) -> np.ndarray:
     if dim == 2:
-        return rot2(sigma * rng.standard_normal(m))
-    return exp_so3(sigma * rng.standard_normal((m, 3)))
+        return so2_exp(sigma * rng.standard_normal(m))
+    return so3_exp(sigma * rng.standard_normal((m, 3)))
 
 
 def random_pose_graph(n: int, dim: int, rng: np.random.Generator, *, loop_closures: int | None = None,

@@ -13,7 +13,7 @@ from click.testing import CliRunner
 
 from posecrb.core.errors import UsageError
 from posecrb.experiments.crlb_sweep import anchor_poses, crlb_sweep, parse_levels, pose_errors, rotation_errors
-from posecrb.lie.so import exp_so3, hat3, rot2
+from posecrb.lie.so import so2_exp, so3_exp, so3_hat
 from posecrb.models.paper.fim import paper_fim
 from posecrb.sim import generators as synth
 
@@ -33,19 +33,19 @@ def test_parse_levels():
 def test_error_coordinates_match_the_fim_perturbation():
     rng = np.random.default_rng(0)
     # 2D: R_est = R_true Exp(theta E) -> error theta
-    rt = rot2(rng.uniform(-3, 3, 4))
+    rt = so2_exp(rng.uniform(-3, 3, 4))
     th = rng.normal(scale=0.1, size=4)
-    assert np.allclose(rotation_errors(rt, rt @ rot2(th))[:, 0], th)
+    assert np.allclose(rotation_errors(rt, rt @ so2_exp(th))[:, 0], th)
     # 3D: R_est = R_true Exp(phi_k E_k), E_k = G_k / sqrt 2 -> rotation vector phi / sqrt 2
-    r3 = exp_so3(rng.normal(size=(4, 3)))
+    r3 = so3_exp(rng.normal(size=(4, 3)))
     phi = rng.normal(scale=0.1, size=(4, 3))
-    assert np.allclose(rotation_errors(r3, r3 @ exp_so3(phi / np.sqrt(2))), phi)
+    assert np.allclose(rotation_errors(r3, r3 @ so3_exp(phi / np.sqrt(2))), phi)
     # errors do not depend on the gauge of the estimate
     tt = rng.normal(size=(4, 3))
     te = tt + rng.normal(scale=0.01, size=(4, 3))
-    g_r, g_t = exp_so3(np.array([0.3, -1.0, 2.0])), np.array([5.0, -2.0, 1.0])
-    e1 = pose_errors(r3, tt, r3 @ exp_so3(phi), te, 1)
-    e2 = pose_errors(r3, tt, g_r @ r3 @ exp_so3(phi), te @ g_r.T + g_t, 1)
+    g_r, g_t = so3_exp(np.array([0.3, -1.0, 2.0])), np.array([5.0, -2.0, 1.0])
+    e1 = pose_errors(r3, tt, r3 @ so3_exp(phi), te, 1)
+    e2 = pose_errors(r3, tt, g_r @ r3 @ so3_exp(phi), te @ g_r.T + g_t, 1)
     assert np.allclose(e1[0], e2[0]) and np.allclose(e1[1], e2[1])
     ar, at = anchor_poses(r3, tt, 2)
     assert np.allclose(ar[2], np.eye(3)) and np.allclose(at[2], 0)
@@ -59,7 +59,7 @@ def _dense_model_fim(g, rot, trans, anchor):
         u = rot[i].T @ (trans[j] - trans[i])
         jac = np.zeros((6, 6 * n))
         jac[:3, 6 * i:6 * i + 3], jac[:3, 6 * j:6 * j + 3] = -rot[i].T, rot[i].T
-        jac[:3, 6 * i + 3:6 * i + 6] = hat3(u) / np.sqrt(2)
+        jac[:3, 6 * i + 3:6 * i + 6] = so3_hat(u) / np.sqrt(2)
         jac[3:, 6 * j + 3:6 * j + 6], jac[3:, 6 * i + 3:6 * i + 6] = np.eye(3), -(rot[i].T @ rot[j]).T
         f += jac.T @ np.diag([tau[k]] * 3 + [w[k]] * 3) @ jac
     keep = np.ones(6 * n, bool)
@@ -72,7 +72,7 @@ def test_consistent_fim_is_the_simulated_models_fim():
     analytic dense reference above (the FD reference is in test_fim.py)."""
     g = synth.random_graph(np.random.default_rng(1), 7, 12, 3, info="isotropic")
     rng = np.random.default_rng(2)
-    rot, trans = exp_so3(rng.normal(size=(g.n, 3))), rng.normal(size=(g.n, 3))
+    rot, trans = so3_exp(rng.normal(size=(g.n, 3))), rng.normal(size=(g.n, 3))
     for anchor in (0, 3):
         fc = paper_fim(g, rot, trans, anchor, variant="consistent").to_layout("poses").matrix.toarray()
         assert np.allclose(fc, _dense_model_fim(g, rot, trans, anchor), atol=1e-9 * np.abs(fc).max())
@@ -184,9 +184,9 @@ def test_thesis_quick_experiment_converges_with_m():
         assert all(r.frob_rel < 3 * r.frob_rel_noise for r in rows)   # efficient at MC precision
     # horizontal errors: zero mean per component
     rng = np.random.default_rng(0)
-    rt = rot2(rng.uniform(-1, 1, 5))
+    rt = so2_exp(rng.uniform(-1, 1, 5))
     tt = rng.normal(size=(5, 2))
-    re_ = rt @ rot2(rng.normal(scale=0.1, size=5))
+    re_ = rt @ so2_exp(rng.normal(scale=0.1, size=5))
     te = tt + rng.normal(scale=0.1, size=(5, 2))
     labels = np.array([0, 0, 1, 1, 1])
     e = horizontal_errors(rt, tt, re_, te, labels)

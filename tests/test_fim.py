@@ -12,7 +12,7 @@ from scipy.spatial.transform import Rotation
 
 from posecrb.core.errors import DisconnectedGraph, NotPositiveDefinite
 from posecrb.core.noise import rotation_weight
-from posecrb.lie.so import exp_so3, rot2
+from posecrb.lie.so import so2_exp, so3_exp
 from posecrb.models.paper.bounds import t_optimality
 from posecrb.models.paper.fim import FIM_VARIANTS, fim_logdet, fim_symbolic, paper_fim, trace_fim
 
@@ -23,8 +23,8 @@ from .numerics import assert_within, logdet_atol, psd_sum_tolerance, sum_atol
 def perturbed(rot: np.ndarray, dim: int, delta: np.ndarray) -> np.ndarray:
     """R Exp(delta) along the paper's basis: angle in 2D, E_k = G_k / sqrt 2 in 3D."""
     if dim == 2:
-        return rot @ rot2(np.array(delta[0]))
-    return rot @ exp_so3(np.asarray(delta) / np.sqrt(2.0))
+        return rot @ so2_exp(np.array(delta[0]))
+    return rot @ so3_exp(np.asarray(delta) / np.sqrt(2.0))
 
 
 def residuals(graph, rot, trans) -> np.ndarray:

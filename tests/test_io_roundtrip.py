@@ -17,7 +17,7 @@ from hypothesis import strategies as st
 
 from posecrb.core.graph import PoseGraph
 from posecrb.io import load, write_g2o
-from posecrb.lie.so import exp_so3, rot2
+from posecrb.lie.so import so2_exp, so3_exp
 
 EPS = np.finfo(float).eps
 MAX_ID = 2 ** 53  # largest vertex id drawn
@@ -36,8 +36,8 @@ def _vectors(k: int, count: int, elements=_finite) -> st.SearchStrategy[np.ndarr
 def _rotations(draw, dim: int, count: int) -> np.ndarray:
     """Rotations of every angle up to pi (the writer's angle / quaternion must cover all of SO(d))."""
     if dim == 2:
-        return rot2(draw(_vectors(1, count, st.floats(-np.pi, np.pi)))[:, 0])
-    return exp_so3(draw(_vectors(3, count, st.floats(-1.8, 1.8))))
+        return so2_exp(draw(_vectors(1, count, st.floats(-np.pi, np.pi)))[:, 0])
+    return so3_exp(draw(_vectors(3, count, st.floats(-1.8, 1.8))))
 
 
 def _information(draw, q: int, count: int) -> np.ndarray:

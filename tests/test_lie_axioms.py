@@ -33,16 +33,9 @@ from posecrb.lie.se import (
     se3_log,
     se_compose,
     se_inverse,
-    so3_jr,
-    so3_jr_inv,
-    so3_log,
     to_homogeneous,
 )
-
-# The library's names for the closed forms, in one place.
-from posecrb.lie.so import angle2 as so2_log
-from posecrb.lie.so import exp_so3 as so3_exp
-from posecrb.lie.so import rot2 as so2_exp
+from posecrb.lie.so import so2_exp, so2_log, so3_exp, so3_jr, so3_jr_inv, so3_log
 
 EPS = np.finfo(float).eps
 

@@ -10,7 +10,7 @@ from click.testing import CliRunner
 from posecrb.core.errors import DisconnectedGraph
 from posecrb.core.graph import PoseGraph
 from posecrb.io import load
-from posecrb.lie.so import project_to_so, rot2
+from posecrb.lie.so import so2_exp, so_project
 from posecrb.solver import solve
 from posecrb.solver.problem import Problem
 from posecrb.solver.staircase import RelaxedModel, verify
@@ -64,7 +64,7 @@ def test_random_local_solves_never_beat_certified(dim):
         R0 = random_rotations(g.n, dim, np.random.default_rng(seed))
         res = trust_region(model, np.ascontiguousarray(np.swapaxes(R0, 1, 2)), TROptions(max_iterations=200))
         Rl = np.swapaxes(res.state.Z, 1, 2)
-        Rl = project_to_so(Rl) if dim == 3 else Rl
+        Rl = so_project(Rl) if dim == 3 else Rl
         tl = p.translations(np.ascontiguousarray(np.swapaxes(Rl, 1, 2)).reshape(-1, dim))
         assert objective_loop(g, Rl, tl) >= best.objective - 1e-8 * best.objective
         # full solver from random initial rotations reaches the same certified value
@@ -110,7 +110,7 @@ def test_escape_from_saddle():
     info = np.tile(np.diag([1.0, 1.0, 10.0]), (m, 1, 1))
     g = PoseGraph(dim=2, ids=np.arange(n), src=src, dst=dst, rot=np.tile(np.eye(2), (m, 1, 1)),
                   trans=np.zeros((m, 2)), info=info, format="synthetic")
-    winding = rot2(2 * np.pi * np.arange(n) / n)
+    winding = so2_exp(2 * np.pi * np.arange(n) / n)
     res = solve(g, init=winding, r0=2, rmax=4)
     assert res.certified
     assert res.rank >= 3

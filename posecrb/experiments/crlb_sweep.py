@@ -98,10 +98,10 @@ def rotation_errors(rot_true: np.ndarray, rot_est: np.ndarray) -> np.ndarray:
     """
     rel = np.swapaxes(rot_true, -1, -2) @ rot_est
     if rot_true.shape[-1] == 2:
-        from ..lie.so import angle2
+        from ..lie.so import so2_log
 
-        return angle2(rel)[:, None]
-    from ..lie.se import so3_log
+        return so2_log(rel)[:, None]
+    from ..lie.so import so3_log
 
     return np.sqrt(2.0) * so3_log(rel)
 

@@ -8,7 +8,7 @@ import numpy as np
 
 from ..core.files import atomic_write
 from ..core.graph import PoseGraph
-from ..lie.so import angle2
+from ..lie.so import so2_log
 from .rotations import rot_to_quat
 
 
@@ -33,8 +33,8 @@ def write_g2o(graph: PoseGraph, path: str | os.PathLike, rot: np.ndarray | None 
     info = graph.info[:, iu[0], iu[1]]
     if graph.dim == 2:
         vtag, etag = "VERTEX_SE2", "EDGE_SE2"
-        vcols = None if rot is None else np.column_stack([trans, angle2(rot)])
-        ecols = np.column_stack([graph.trans, angle2(graph.rot), info])
+        vcols = None if rot is None else np.column_stack([trans, so2_log(rot)])
+        ecols = np.column_stack([graph.trans, so2_log(graph.rot), info])
     else:
         vtag, etag = "VERTEX_SE3:QUAT", "EDGE_SE3:QUAT"
         vcols = None if rot is None else np.column_stack([trans, rot_to_quat(rot)])

@@ -27,7 +27,7 @@ from ..core.errors import ParseError, UsageError
 from ..core.files import read_regular_file
 from ..core.graph import PoseGraph
 from ..core.noise import isotropic_precisions, rotation_weight
-from ..lie.so import rot2
+from ..lie.so import so2_exp
 from .records import RECORDS, SKIPPED_TAGS, TORO2_INFO_ORDER, RecordKind
 from .rotations import euler_to_rot, quat_to_rot
 
@@ -256,7 +256,7 @@ def _decode_edges(path: str, rec: RecordKind, ids: np.ndarray, vals: np.ndarray,
     t = vals[:, :d]
     _check_magnitude(path, lines, rec.tag, t, MAX_TRANSLATION, "translation component")
     if d == 2:
-        r = rot2(vals[:, 2])
+        r = so2_exp(vals[:, 2])
         raw = vals[:, 3:9]
         if rec.family == "toro":
             raw = raw[:, [TORO2_INFO_ORDER[rc] for rc in zip(*np.triu_indices(3))]]
@@ -284,7 +284,7 @@ def _decode_vertices(path: str, rec: RecordKind, ids: np.ndarray, vals: np.ndarr
     trans = vals[:, :d]
     _check_magnitude(path, lines, rec.tag, trans, MAX_TRANSLATION, "translation component")
     if d == 2:
-        return vid, rot2(vals[:, 2]), trans
+        return vid, so2_exp(vals[:, 2]), trans
     if rec.family == "g2o":
         return vid, _quaternions(path, vals[:, 3:7], lines, rec.tag), trans
     return vid, euler_to_rot(vals[:, 3], vals[:, 4], vals[:, 5]), trans

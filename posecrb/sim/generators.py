@@ -30,7 +30,7 @@ from typing import Iterable, Sequence
 import numpy as np
 
 from ..core.graph import PoseGraph, rotation_dimension
-from ..lie.so import exp_so3, rot2
+from ..lie.so import so2_exp, so3_exp
 
 KINDS = ("grid2d", "grid3d", "sphere", "torus", "octagon", "demo")
 
@@ -102,14 +102,14 @@ def _frames(x_axis: np.ndarray, z_axis: np.ndarray) -> np.ndarray:
 
 def _yaw_rotations(yaw: np.ndarray, dim: int) -> np.ndarray:
     if dim == 2:
-        return rot2(yaw)
-    return exp_so3(np.column_stack([np.zeros_like(yaw), np.zeros_like(yaw), yaw]))
+        return so2_exp(yaw)
+    return so3_exp(np.column_stack([np.zeros_like(yaw), np.zeros_like(yaw), yaw]))
 
 
 def uniform_rotations(n: int, dim: int, rng: np.random.Generator) -> np.ndarray:
     """(n, d, d) Haar-uniform rotations (uniform angle in 2D, normalised Gaussian quaternions in 3D)."""
     if dim == 2:
-        return rot2(rng.uniform(-np.pi, np.pi, n))
+        return so2_exp(rng.uniform(-np.pi, np.pi, n))
     from ..io.rotations import quat_to_rot
 
     q = rng.standard_normal((n, 4))
@@ -293,7 +293,7 @@ def octagon(extra_edges: int | Iterable[tuple[int, int]] = 0, *, radius: float =
             raise ValueError(f"octagon edges must join two distinct poses 0..7, got {bad}")
     ang = 2 * np.pi * np.arange(8) / 8
     trans = radius * np.column_stack([np.cos(ang), np.sin(ang)])
-    rot = rot2(ang + np.pi / 2)
+    rot = so2_exp(ang + np.pi / 2)
     src = np.concatenate([np.arange(7), np.array([e[0] for e in extra], dtype=np.int64)])
     dst = np.concatenate([np.arange(1, 8), np.array([e[1] for e in extra], dtype=np.int64)])
     return _assemble(2, rot, trans, src, dst, tau, kappa, noise, gen)
@@ -410,7 +410,7 @@ def random_graph(rng: np.random.Generator, n: int, m: int, dim: int, *, info: st
         xi = np.linalg.solve(np.swapaxes(chol, 1, 2), rng.standard_normal((m, inf.shape[1]))[..., None])[..., 0]
         xt, xr = xi[:, :dim], xi[:, dim:]
         mtrans = graph.trans + xt
-        mrot = graph.rot @ (rot2(xr[:, 0]) if dim == 2 else exp_so3(xr))
+        mrot = graph.rot @ (so2_exp(xr[:, 0]) if dim == 2 else so3_exp(xr))
     else:
         raise ValueError(f"noise must be none, isotropic or gaussian, got {noise!r}")
     return replace(graph, rot=mrot, trans=mtrans)

@@ -92,9 +92,9 @@ def sample_langevin_angle_so2(kappa, size: int, rng: np.random.Generator) -> np.
 
 def sample_langevin_so2(kappa, size: int, rng: np.random.Generator) -> np.ndarray:
     """(size, 2, 2) draws of Z ~ Lang(I, kappa) on SO(2) (paper eq. 5)."""
-    from ..lie.so import rot2
+    from ..lie.so import so2_exp
 
-    return rot2(sample_langevin_angle_so2(kappa, size, rng))
+    return so2_exp(sample_langevin_angle_so2(kappa, size, rng))
 
 
 def sample_langevin_angle_so3(kappa, size: int, rng: np.random.Generator) -> np.ndarray:
@@ -114,12 +114,12 @@ def sample_langevin_so3(kappa, size: int, rng: np.random.Generator) -> np.ndarra
     Class function: the angle comes from ``sample_langevin_angle_so3`` and the
     axis is uniform on the sphere, independent of the angle.
     """
-    from ..lie.so import exp_so3
+    from ..lie.so import so3_exp
 
     t = sample_langevin_angle_so3(kappa, size, rng)
     axis = rng.standard_normal((size, 3))
     axis /= np.linalg.norm(axis, axis=1, keepdims=True)
-    return exp_so3(axis * t[:, None])
+    return so3_exp(axis * t[:, None])
 
 
 def sample_langevin(kappa, size: int, dim: int, rng: np.random.Generator) -> np.ndarray:

@@ -8,7 +8,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..lie.so import project_to_so
+from ..lie.so import so_project
 from ..linalg.cholesky import cholesky
 from .problem import Problem
 
@@ -25,5 +25,5 @@ def chordal_rotations(problem: Problem, anchor: int = 0) -> np.ndarray:
     Z = np.empty((n * d, d))
     Z[keep] = factor(np.asarray(rhs))
     Z[~keep] = np.eye(d)
-    Zt = project_to_so(Z.reshape(n, d, d))   # blocks are R_i^T
+    Zt = so_project(Z.reshape(n, d, d))   # blocks are R_i^T
     return np.ascontiguousarray(np.swapaxes(Zt, 1, 2))

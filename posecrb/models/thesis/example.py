@@ -17,7 +17,7 @@ import numpy as np
 
 from ...core.graph import PoseGraph
 from ...lie.se import se_compose, se_exp, se_inverse
-from ...lie.so import rot2
+from ...lie.so import so2_exp
 
 IDS = (1, 2, 3, 4, 5)
 # (theta, t_x, t_y) of the true poses T_i (sec. 6.2; the matrices printed there are these,
@@ -55,7 +55,7 @@ ANCHORS = [int(i) for i in _index(ANCHOR_IDS)]   # internal indices [0, 2]
 
 def true_poses() -> tuple[np.ndarray, np.ndarray]:
     """The thesis' true poses ``T_i`` as (rotations (5, 2, 2), translations (5, 2))."""
-    return rot2(POSE_PARAMS[:, 0]), POSE_PARAMS[:, 1:].copy()
+    return so2_exp(POSE_PARAMS[:, 0]), POSE_PARAMS[:, 1:].copy()
 
 
 def true_estimate() -> tuple[np.ndarray, np.ndarray]:
