@@ -311,9 +311,10 @@ def _all_params():
     def walk(cmd, path):
         for p in cmd.params:
             yield path, p
-        if isinstance(cmd, click.Group):
-            for name, sub in cmd.commands.items():
-                yield from walk(sub, path + [name])
+        if isinstance(cmd, click.Group):    # the top-level group loads its commands on request
+            ctx = click.Context(cmd)
+            for name in cmd.list_commands(ctx):
+                yield from walk(cmd.get_command(ctx, name), path + [name])
     yield from walk(cli, [])
 
 

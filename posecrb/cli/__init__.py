@@ -6,19 +6,20 @@ Exceptions become exit codes in exactly one place (``main``):
 Python warnings (numpy's RuntimeWarning included) never reach the user as raw text:
 ``main`` routes each through the posecrb logger as one line on stderr (filters such as
 ``-W error::RuntimeWarning`` still apply, which is how the tests prove none occurs).
-Subcommands live in ``posecrb.cli.commands.<name>`` and are discovered
-automatically; each module exposes a click command as ``command``.
+Subcommands live in ``posecrb.cli.commands.<name>``, each module exposing a click command as
+``command``; they are listed in ``COMMANDS`` and imported only when invoked, so ``posecrb --help``
+loads neither numpy/scipy nor numba.
 """
 from __future__ import annotations
 
 import importlib
 import logging
 import os
-import pkgutil
 import sys
 import warnings
 
 import click
+from click.utils import make_default_short_help
 
 from .. import __version__
 from ..core.errors import PosecrbError, UsageError
@@ -41,7 +42,61 @@ def _configure_logging(verbose: int, quiet: bool) -> None:
                     logging.INFO if verbose else logging.WARNING)
 
 
-@click.group(context_settings={"help_option_names": ["-h", "--help"], "max_content_width": 100})
+# The command table: name -> (module under posecrb.cli.commands, short help shown by `posecrb --help`).
+# `posecrb --help` lists commands from this table without importing any command module (start-up
+# time: the command modules import scipy, sksparse and numba); tests/test_cli_lazy.py checks that
+# every entry matches its command's own help.
+COMMANDS: dict[str, tuple[str, str]] = {
+    "bounds": ("bounds", "D-optimality of each FILE: FIM log-det at an estimate and its graph-only bounds (one "
+                         "Table I/II row per file)."),
+    "crlb": ("crlb", "Cramér-Rao lower bound of FILE at an estimate: exact trace, MSE bound, per-pose blocks."),
+    "datasets": ("datasets", "Dataset manifest, lookup, download (verified) and synthetic graphs."),
+    "experiment": ("experiment", "The paper's and the thesis's experiments (Monte Carlo CRLB, T- vs D-optimality, "
+                                 "thesis ch. 6)."),
+    "fim": ("fim", "Fisher information matrix of FILE at an estimate: size, nnz, log-det, trace, rank."),
+    "info": ("info", "Describe pose-graph FILE(s): format, dimension, sizes, connectivity, degrees, noise ranges."),
+    "regress": ("regress", "Recompute lb, ub, ub_lambda (tolerance 1e-9 relative) and fim_logdet, objective, "
+                           "trace_crlb at the certified optimum (1e-6; from the model's Fisher information, "
+                           "fim_variant=consistent, recorded in the file) and compare them with the expected file."),
+    "select": ("select", "Measurement selection: keep K edges, D-optimal, with a certificate."),
+    "solve": ("solve", "Certifiably correct pose-graph optimisation of FILE (SE-Sync's Riemannian staircase)."),
+    "tables": ("tables", "Rebuild the paper's Tables I-IV: FIM log-det at the certified optimum, ub and lb with "
+                         "their times (I/II) and the construction time of the whole FIM vs the weighted Laplacians "
+                         "(III/IV)."),
+}
+
+
+class LazyGroup(click.Group):
+    """A click group whose subcommands come from ``COMMANDS`` and are imported on first use."""
+
+    def list_commands(self, ctx: click.Context) -> list[str]:
+        return sorted(COMMANDS)
+
+    def get_command(self, ctx: click.Context, cmd_name: str) -> click.Command | None:
+        if cmd_name not in COMMANDS:
+            return None
+        module = importlib.import_module(f"{__name__}.commands.{COMMANDS[cmd_name][0]}")
+        command: click.Command = module.command
+        return command
+
+    def format_commands(self, ctx: click.Context, formatter: click.HelpFormatter) -> None:
+        """The "Commands" section from the table (as click renders it), without importing any command."""
+        limit = formatter.width - 6 - max(len(name) for name in COMMANDS)
+        rows = [(name, _short_help(name, limit)) for name in sorted(COMMANDS)]
+        with formatter.section("Commands"):
+            formatter.write_dl(rows)
+
+
+def _short_help(name: str, limit: int) -> str:
+    """click's short help: the explicit ``short_help`` whole, else the help's first sentence cut at limit."""
+    text = COMMANDS[name][1]
+    return text if name in _EXPLICIT_SHORT_HELP else make_default_short_help(text, limit)
+
+
+_EXPLICIT_SHORT_HELP = {"select"}   # commands declared with short_help= (shown whole, wrapped)
+
+
+@click.group(cls=LazyGroup, context_settings={"help_option_names": ["-h", "--help"], "max_content_width": 100})
 @click.version_option(__version__, prog_name="posecrb")
 @click.option("-v", "--verbose", count=True, help="More log output on stderr (-vv for debug).")
 @click.option("-q", "--quiet", is_flag=True, help="Only errors on stderr.")
@@ -54,21 +109,6 @@ def cli(verbose: int, quiet: bool) -> None:
     warnings to stderr. Exit codes: 0 ok, 1 data or solver error, 2 usage error.
     """
     _configure_logging(verbose, quiet)
-
-
-def _register_commands() -> None:
-    from . import commands
-
-    for mod in sorted(pkgutil.iter_modules(commands.__path__), key=lambda m: m.name):
-        if mod.name.startswith("_"):
-            continue
-        module = importlib.import_module(f"{commands.__name__}.{mod.name}")
-        command = getattr(module, "command", None)
-        if isinstance(command, click.Command):
-            cli.add_command(command)
-
-
-_register_commands()
 
 
 def _warning_origin(filename: str) -> str:
