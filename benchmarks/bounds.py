@@ -4,7 +4,7 @@ Prints, for every dataset found: parse time, lb / ub / ub_lambda times as posecr
 reports them (median of REPEAT after a warm-up), and the time of calling
 scikit-sparse's ``cholesky`` directly on the same two Laplacians (each with its
 own analysis), which is the floor the lb computation is measured against.
-Targets (issue 2): parsing ais2klinik <= 0.25 s; lb <= 1.3x the bare factorizations.
+Targets: parsing ais2klinik <= 0.25 s; lb <= 1.3x the bare factorizations.
 Usage: python benchmarks/bounds.py [--repeat K] [NAME ...]
 """
 from __future__ import annotations

@@ -1,7 +1,7 @@
 """Benchmark: the full CSAIL CRLB sweep (Fig. 6: 20 levels x 100 trials) with a 2-process pool,
 plus the per-trial cost (perturb + certified solve + errors) measured serially.
 
-Target (issue 6): the full sweep in at most 10 minutes with --jobs 2. Prints figures; asserts nothing.
+Target: the full sweep in at most 10 minutes with --jobs 2. Prints figures; asserts nothing.
 Usage: python benchmarks/experiments.py [--levels 1:20] [--trials 100] [--jobs 2] [--data-dir DIR]
 """
 from __future__ import annotations

@@ -1,10 +1,10 @@
-"""Benchmark of ``posecrb.solver.solve`` on every shared dataset (issue 3).
+"""Benchmark of ``posecrb.solver.solve`` on every reference dataset.
 
 For each dataset: median wall time of parse + solve over --repeat runs (warm-up once when
 repeat > 1; the timed region is ``load(path)`` followed by ``solve(graph)``, excluding the
 Python interpreter start-up and imports), the phase times of the median run, Hessian-vector
 products, the objective, its relative error against SE-Sync C++'s optimum, and SE-Sync
-C++'s whole-process time measured on this machine kind (issue 3's table).
+C++'s whole-process time measured on this machine kind (the table below).
 
 The reference objectives were computed by SE-Sync's g2o reader, which builds each 3D
 measurement from the UNNORMALISED quaternion (Eigen's toRotationMatrix), so the timed runs
@@ -20,6 +20,7 @@ read the same either way).
 from __future__ import annotations
 
 import argparse
+import os
 import logging
 import sys
 import time
@@ -28,7 +29,7 @@ from pathlib import Path
 from posecrb.io import load
 from posecrb.solver import solve
 
-# (F*, SE-Sync C++ seconds) from issue 3.
+# (F*, SE-Sync C++ seconds): SE-Sync C++'s certified optima and its run times.
 REFERENCE = {
     "CSAIL": (31.703715992, 0.09), "MIT": (61.154116091, 0.08), "intel": (52.348227593, 0.19),
     "kitti_05": (276.51437895, 0.24), "manhattan": (6431.3913895, 0.47), "kitti_02": (108.35114045, 0.49),
@@ -63,7 +64,8 @@ def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     ap.add_argument("names", nargs="*")
     ap.add_argument("--repeat", type=int, default=1)
-    ap.add_argument("--data-dir", default=str(Path(__file__).resolve().parents[2] / "shared" / "datasets"))
+    ap.add_argument("--data-dir", default=os.environ.get("POSECRB_DATA", "datasets").split(os.pathsep)[0],
+                    help="directory of the datasets [default: the first entry of $POSECRB_DATA, else ./datasets]")
     ap.add_argument("--toro", action="store_true", help="also run the TORO files in DATA_DIR/toro")
     ap.add_argument("--sesync-compat", action=argparse.BooleanOptionalAction, default=True,
                     help="time the SE-Sync reading of 3D quaternions (unnormalised), as the references were "

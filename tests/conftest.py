@@ -1,6 +1,7 @@
-"""Shared fixtures: the workplace's real datasets and small random pose graphs."""
+"""Shared fixtures: the real datasets ($POSECRB_DATA) and small random pose graphs."""
 from __future__ import annotations
 
+import os
 from pathlib import Path
 
 import numpy as np
@@ -9,14 +10,15 @@ import pytest
 from posecrb.core.graph import PoseGraph
 from posecrb.lie.so import so2_exp, so3_exp
 
-SHARED = Path(__file__).resolve().parents[2] / "shared" / "datasets"
 
 
 @pytest.fixture(scope="session")
 def shared_datasets() -> Path:
-    if not SHARED.is_dir():
-        pytest.skip("../shared/datasets not present (real-data tests need the workplace's datasets)")
-    return SHARED
+    """The first directory of $POSECRB_DATA: the real datasets (see README, Setup); skip without it."""
+    first = os.environ.get("POSECRB_DATA", "").split(os.pathsep)[0]
+    if not first or not Path(first).is_dir():
+        pytest.skip("real-data tests need $POSECRB_DATA pointing at the datasets directory")
+    return Path(first)
 
 
 def random_rotations(rng: np.random.Generator, k: int, dim: int) -> np.ndarray:

@@ -3,7 +3,7 @@
 Edges are an odometry chain plus random loop closures; each measurement is the true
 relative pose ``X_i^{-1} X_j`` perturbed by isotropic noise (rotation: exp of a Gaussian
 tangent vector; translation: Gaussian), with information matrices encoding the given
-(tau, kappa) in the SE-Sync convention (DESIGN.md section 3).
+(tau, kappa) in the SE-Sync convention (docs/design.md#noise-model).
 """
 from __future__ import annotations
 

@@ -146,7 +146,7 @@ def test_3d_bounds_are_finite_and_ordered(shared_datasets, name):
 
 
 def test_table2_fit_reproduces_published_lower_bounds(shared_datasets):
-    # The empirical w = 0.5515 kappa^2 reproduces Table II's lb to ~4-5 digits (DESIGN.md section 4).
+    # The empirical w = 0.5515 kappa^2 reproduces Table II's lb to ~4-5 digits (docs/design.md#rotation-weights).
     published = {"tinyGrid3D": 2.4163e2, "smallGrid3D": 4.3815e3, "sphere2500": 9.9054e4, "torus3D": 2.4985e5}
     for name, lb in published.items():
         b = compute_bounds(load(shared_datasets / f"{name}.g2o"), rotation_model="table2")

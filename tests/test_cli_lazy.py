@@ -8,7 +8,7 @@ import sys
 import click
 import pytest
 
-from posecrb.cli import COMMANDS, _EXPLICIT_SHORT_HELP, cli
+from posecrb.cli import _EXPLICIT_SHORT_HELP, COMMANDS, cli
 
 
 @pytest.mark.parametrize("name", sorted(COMMANDS))

@@ -32,7 +32,7 @@ PAPER_TABLE_1 = [("CSAIL", 1045, 1172), ("Intel", 1728, 2512), ("manhattan", 350
 PAPER_TABLE_2 = [("tiny-grid", 9, 11), ("small-grid", 125, 297), ("garage", 1661, 6275),
                  ("sphere", 2500, 4949), ("torus", 5000, 9048), ("cubicle", 5750, 16869),
                  ("grid", 8000, 22236), ("rim", 10195, 29743)]
-# Typed in from ../shared/datasets/SOURCES.md: EDGE line counts of every shared file.
+# Typed in from the datasets' SOURCES.md: EDGE line counts of every shared file.
 SOURCES_EDGES = {
     "CSAIL.g2o": 1172, "MIT.g2o": 827, "intel.g2o": 2512, "manhattan.g2o": 5453, "kitti_00.g2o": 4677,
     "kitti_02.g2o": 4703, "kitti_05.g2o": 2826, "city10000.g2o": 20687, "ais2klinik.g2o": 16727,
@@ -170,6 +170,7 @@ def _corrupt_copy(src: Path, dst_dir: Path) -> Path:
 
 def test_list_reports_found_missing_and_mismatch(shared_datasets, tmp_path, isolated_cache):
     bad = _corrupt_copy(shared_datasets / "tinyGrid3D.g2o", tmp_path / "data")
+    shutil.copy(shared_datasets / "intel.g2o", tmp_path / "data")
     status = {s.entry.name: s for s in dsv.list_datasets(tmp_path / "data")}
     assert status["tinyGrid3D"].status == "checksum mismatch" and status["tinyGrid3D"].path == bad
     assert status["intel"].status == "found"
@@ -177,7 +178,8 @@ def test_list_reports_found_missing_and_mismatch(shared_datasets, tmp_path, isol
     assert status["rim"].status == "missing"
 
 
-def test_verify_files_flags_a_mismatch_and_unknown_files(shared_datasets, tmp_path, isolated_cache):
+def test_verify_files_flags_a_mismatch_and_unknown_files(shared_datasets, tmp_path, isolated_cache, monkeypatch):
+    monkeypatch.setenv("POSECRB_DATA", str(shared_datasets))   # the real files, after --data-dir
     data = tmp_path / "data"
     _corrupt_copy(shared_datasets / "tinyGrid3D.g2o", data)
     shutil.copy(shared_datasets / "tinyGrid3D.g2o", data / "mine.g2o")

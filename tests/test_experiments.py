@@ -1,4 +1,4 @@
-"""Experiments of issue 6: CRLB sweep, thesis case study, octagon; CLI wiring.
+"""Experiments: CRLB sweep, thesis case study, octagon; CLI wiring.
 
 References: closed forms for the error coordinates, a dense from-scratch FIM of the simulated
 model, numpy pinv, finite differences of the thesis log-likelihood, the noise-free solver output.
@@ -261,7 +261,7 @@ def test_cli_crlb(tmp_path):
     assert main(["experiment", "crlb", str(path), "--scheduler", "tcp://x:1"]) == 2
 
 
-# ---------------------------------------------------------------- quick modes (the CI run of issue 6)
+# ---------------------------------------------------------------- quick modes (what CI runs)
 @pytest.mark.parametrize("args", [["crlb", "CSAIL"], ["crlb", "tinyGrid3D"], ["thesis"], ["octagon"]])
 def test_quick_mode_of_each_experiment(shared_datasets, args):
     r = _run(["experiment", *args, "--quick", "--format", "json"])

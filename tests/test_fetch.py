@@ -1,6 +1,6 @@
 """fetch against a local HTTP server on 127.0.0.1 (no external network).
 
-The server serves copies of real files from ../shared/datasets placed in tmp_path;
+The server serves copies of real files from $POSECRB_DATA placed in tmp_path;
 special path prefixes make it misbehave: ``/cut/`` announces the full
 Content-Length and closes after half the bytes, ``/cut-nolength/`` does the same
 without a Content-Length, ``/missing`` answers 404.
@@ -111,10 +111,10 @@ def test_toro_file_goes_to_toro_subdir(server, tmp_path):
 
 def test_default_destination_is_the_user_cache(server, tmp_path, monkeypatch):
     url, _, _ = server
-    monkeypatch.chdir(tmp_path)   # ./datasets and ../shared relative to cwd do not exist here
+    monkeypatch.chdir(tmp_path)   # ./datasets relative to cwd does not exist here
     entry = load_manifest().get("tinyGrid3D")
     res = fetch(entry, url=f"{url}/tinyGrid3D.g2o", data_dir=tmp_path / "nothing")
-    # A verified copy may be found on the search path (the workplace's shared datasets);
+    # A verified copy may be found on the search path ($POSECRB_DATA);
     # otherwise the file lands in $XDG_CACHE_HOME/posecrb.
     if res.status == "downloaded":
         assert res.path == tmp_path / "xdg" / "posecrb" / "tinyGrid3D.g2o"

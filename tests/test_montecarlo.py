@@ -1,4 +1,4 @@
-"""Monte Carlo engine: seeds, ordering, and bit-identical results across executors (issue 6)."""
+"""Monte Carlo engine: seeds, ordering, and bit-identical results across executors."""
 from __future__ import annotations
 
 import numpy as np

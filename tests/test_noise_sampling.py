@@ -1,4 +1,4 @@
-"""Langevin / Gaussian samplers and eq. (80) measurement regeneration (issue 6).
+"""Langevin / Gaussian samplers and eq. (80) measurement regeneration.
 
 References are independent of the samplers: numerically integrated angle
 densities (scipy quad, cross-checked against the Bessel closed forms of the

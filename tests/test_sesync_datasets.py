@@ -1,4 +1,4 @@
-"""All shared datasets against SE-Sync C++'s certified optima (issue 3).
+"""All shared datasets against SE-Sync C++'s certified optima.
 
 Why the file is read twice. SE-Sync's g2o reader builds each 3D measurement rotation with
 Eigen's ``Quaternion(qw, qx, qy, qz).toRotationMatrix()`` WITHOUT normalising the quaternion,
@@ -6,7 +6,7 @@ so its R~ is slightly non-orthogonal (files print 6-9 digits), and its data matr
 ``kappa I`` on the rotation diagonal blocks and ``-kappa R~`` off the diagonal. Its objective
 is therefore ``sum kappa (2d - 2 tr(R_j^T R_i R~)) + tau ||t_j - t_i - R_i t~||^2``, which is not
 ``kappa ||R_j - R_i R~||_F^2`` when R~ is not orthogonal. The issue's reference values were
-computed that way. posecrb normalises quaternions by default (DESIGN.md section 2), so:
+computed that way. posecrb normalises quaternions by default (docs/design.md#sesync-quaternions), so:
 
 - ``load(path, quaternions="raw")`` (SE-Sync's reading) reproduces the references: every
   dataset certifies and matches to ~1e-8 relative or better, except parking-garage, whose
@@ -23,7 +23,7 @@ computed that way. posecrb normalises quaternions by default (DESIGN.md section 
 
 The expected objective at an estimate is evaluated here independently of posecrb: the g2o
 text is split by hand, R~ comes from Eigen's formula written out, tau and kappa from the
-information blocks (DESIGN.md section 3), and the rotation term from SE-Sync's definition.
+information blocks (docs/design.md#noise-model), and the rotation term from SE-Sync's definition.
 """
 from __future__ import annotations
 

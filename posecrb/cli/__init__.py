@@ -104,9 +104,8 @@ def cli(verbose: int, quiet: bool) -> None:
     """Fisher information, Cramér-Rao bounds and D-optimality bounds for pose-graph SLAM.
 
     FILE arguments take a path to a g2o or TORO file, or a bare dataset name
-    (e.g. `intel`) looked up in --data-dir, $POSECRB_DATA, ./datasets,
-    ../shared/datasets and ~/.cache/posecrb. Results go to stdout, logs and
-    warnings to stderr. Exit codes: 0 ok, 1 data or solver error, 2 usage error.
+    (e.g. `intel`) looked up in --data-dir, $POSECRB_DATA, ./datasets and
+    ~/.cache/posecrb. Results go to stdout, logs and warnings to stderr. Exit codes: 0 ok, 1 data or solver error, 2 usage error.
     """
     _configure_logging(verbose, quiet)
 
@@ -176,7 +175,7 @@ def _main(argv: list[str] | None) -> int:
         if os.environ.get("POSECRB_DEBUG"):
             raise
         click.echo(f"posecrb: internal error: {type(exc).__name__}: {exc} "
-                   "(set POSECRB_DEBUG=1 for a traceback)", err=True)
+                   "(a bug in posecrb: please report it; set POSECRB_DEBUG=1 for a traceback)", err=True)
         return 1
     return 0
 

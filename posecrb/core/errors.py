@@ -1,4 +1,16 @@
-"""Exception hierarchy. The CLI maps these to exit codes in one place (posecrb.cli).
+"""Exception hierarchy (docs/design.md#errors). The CLI maps these to exit codes in one place
+(``posecrb.cli.main``): ``UsageError`` -> 2, any other ``PosecrbError`` -> 1, anything else (a bug,
+``InternalError`` included) -> 1 with "internal error ... please report it".
+
+    PosecrbError
+    ├── UsageError (also a ValueError)   an argument the caller can fix
+    ├── ParseError                       file:line and reason
+    ├── DatasetNotFound
+    ├── NumericalError
+    │   └── NotPositiveDefinite
+    ├── DisconnectedGraph
+    └── SolverError
+    InternalError (a RuntimeError, deliberately not a PosecrbError): a broken invariant
 
 Every error a user can cause through data carries enough context to act on it:
 file and line for parse errors, matrix name and reason for factorization failures,
@@ -30,7 +42,21 @@ class DatasetNotFound(PosecrbError):
         )
 
 
-class NotPositiveDefinite(PosecrbError):
+class UsageError(PosecrbError, ValueError):
+    """A usage error the library detects (exit code 2), e.g. an anchor id not in the graph.
+
+    Also a ValueError, so library callers that catch ValueError for a bad argument keep working."""
+
+
+class NumericalError(PosecrbError):
+    """A computation that cannot give a trustworthy number (reported, never a silent value)."""
+
+
+class InternalError(RuntimeError):
+    """A broken internal invariant: a bug in posecrb, not a problem with the data or the options."""
+
+
+class NotPositiveDefinite(NumericalError):
     """A matrix that must be symmetric positive definite is not (reported, never a silent NaN)."""
 
     def __init__(self, matrix: str, reason: str, column: int | None = None):
@@ -64,10 +90,6 @@ class SolverError(PosecrbError):
     """The solver could not produce a certified estimate."""
 
 
-class UsageError(Exception):
-    """A usage error the library detects (exit code 2), e.g. an anchor id not in the graph."""
-
-
 def status_of(exc: BaseException) -> str:
     """Short status word for a failed row in a multi-dataset report."""
     if isinstance(exc, DatasetNotFound):
@@ -80,4 +102,6 @@ def status_of(exc: BaseException) -> str:
         return "not positive definite"
     if isinstance(exc, SolverError):
         return "uncertified"
+    if isinstance(exc, NumericalError):
+        return "numerical error"
     return "error"

@@ -197,7 +197,7 @@ def atomic_write(path: str | os.PathLike, mode: str = "w", *, encoding: str | No
     ``Terminated`` (SIGTERM) included, the temporary is removed and ``path`` is untouched.
     """
     if mode not in ("w", "wb"):
-        raise ValueError(f"atomic_write mode must be 'w' or 'wb', not {mode!r}")
+        raise UsageError(f"atomic_write mode must be 'w' or 'wb', not {mode!r}")
     target = os.path.abspath(os.fspath(path))
     directory, base = os.path.split(target)
     fd, tmp = tempfile.mkstemp(prefix=f".{base}.", suffix=suffix, dir=directory)

@@ -1,7 +1,7 @@
 """The pose graph: measurements as edge arrays, ids remapped to 0..n-1.
 
 A measurement on edge k = (src[k], dst[k]) is the relative pose X_i^{-1} X_j
-(g2o / SE-Sync convention, DESIGN.md section 2): rotation ``rot[k]`` and
+(g2o / SE-Sync convention, docs/design.md#formats): rotation ``rot[k]`` and
 translation ``trans[k]`` expressed in frame i. ``info[k]`` is the file's
 information matrix in g2o order (translation block first, then rotation).
 """
@@ -72,7 +72,7 @@ class PoseGraph:
     def has_vertices(self) -> bool:
         return self.vertex_rot is not None
 
-    # ---- noise model (DESIGN.md section 3) ---------------------------------
+    # ---- noise model (docs/design.md#noise-model) ---------------------------
     @cached_property
     def _precisions(self) -> tuple[np.ndarray, np.ndarray]:
         return isotropic_precisions(self.info, self.dim)
@@ -137,7 +137,7 @@ class PoseGraph:
         return k
 
     def anchor_index(self, anchor_id: int | None) -> int:
-        """Internal index of the anchor; default the smallest id (DESIGN.md section 3)."""
+        """Internal index of the anchor; default the smallest id (docs/design.md#anchor)."""
         return 0 if anchor_id is None else self.index_of(anchor_id)
 
     def with_vertices(self, rot: np.ndarray, trans: np.ndarray) -> "PoseGraph":

@@ -1,6 +1,6 @@
 """Noise model: information matrices -> isotropic (tau, kappa), rotation weights.
 
-DESIGN.md section 3. tau is the isotropic Gaussian translation precision
+docs/design.md#noise-model. tau is the isotropic Gaussian translation precision
 (1/delta^2 of the paper's eq. 3) and kappa the Langevin concentration of eq. 5,
 both with SE-Sync's conventions:
 
@@ -15,9 +15,11 @@ from math import factorial
 import numpy as np
 from scipy.special import ive
 
+from .errors import UsageError
+
 # Table II of the paper is reproduced by w = TABLE2_FIT * kappa^2 (an empirical fit
 # measured on the published lower bounds, NOT eq. 59; with eq. 64 as printed it also
-# reproduces the printed FIM column); see DESIGN.md section 4.
+# reproduces the printed FIM column); see docs/design.md#rotation-weights.
 TABLE2_FIT = 0.5515
 
 
@@ -37,7 +39,7 @@ def isotropic_precisions(info: np.ndarray, dim: int) -> tuple[np.ndarray, np.nda
         tr_cov_t = np.trace(np.linalg.inv(info[:, :3, :3]), axis1=1, axis2=2)
         tr_cov_r = np.trace(np.linalg.inv(info[:, 3:, 3:]), axis1=1, axis2=2)
         return 3.0 / tr_cov_t, 3.0 / (2.0 * tr_cov_r)
-    raise ValueError(f"dimension must be 2 or 3, got {dim}")
+    raise UsageError(f"dimension must be 2 or 3, got {dim}")
 
 
 def _asymptotic_coefficients(v: int, terms: int) -> list[Fraction]:
@@ -102,7 +104,7 @@ def rotation_weight(kappa: np.ndarray, dim: int, model: str = "eq59") -> np.ndar
     """
     kappa = np.asarray(kappa, dtype=float)
     if model not in ROTATION_WEIGHT_MODELS:
-        raise ValueError(f"unknown rotation weight model {model!r}; choose from {ROTATION_WEIGHT_MODELS}")
+        raise UsageError(f"unknown rotation weight model {model!r}; choose from {ROTATION_WEIGHT_MODELS}")
     if dim == 2:
         return 2.0 * kappa
     if model == "table2":
@@ -113,7 +115,7 @@ def rotation_weight(kappa: np.ndarray, dim: int, model: str = "eq59") -> np.ndar
 def isotropic_information(tau, kappa, dim: int) -> np.ndarray:
     """(m, q, q) g2o-order information matrices that SE-Sync's rule maps back to (tau, kappa).
 
-    Inverse of ``isotropic_precisions`` (DESIGN.md section 3): 2D
+    Inverse of ``isotropic_precisions`` (docs/design.md#noise-model): 2D
     ``diag(tau, tau, kappa)``; 3D ``diag(tau I3, 2 kappa I3)`` (because
     ``kappa = 3 / (2 tr(inv I_RR))``). With these, SE-Sync's objective
     ``sum kappa ||R_j - R_i R~||_F^2 + tau ||t_j - t_i - R_i t~||^2`` is twice the
@@ -128,7 +130,7 @@ def isotropic_information(tau, kappa, dim: int) -> np.ndarray:
     elif dim == 3:
         diag = np.concatenate([np.repeat(tau[:, None], 3, 1), np.repeat(2.0 * kappa[:, None], 3, 1)], axis=1)
     else:
-        raise ValueError(f"dimension must be 2 or 3, got {dim}")
+        raise UsageError(f"dimension must be 2 or 3, got {dim}")
     q = diag.shape[1]
     info = np.zeros((m, q, q))
     info[:, np.arange(q), np.arange(q)] = diag

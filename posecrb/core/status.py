@@ -16,6 +16,8 @@ from __future__ import annotations
 import logging
 from dataclasses import dataclass
 
+from .errors import InternalError
+
 STATES = ("ok", "warning", "unavailable")
 
 
@@ -30,9 +32,9 @@ class Status:
 
     def __post_init__(self) -> None:
         if self.state not in STATES:
-            raise ValueError(f"status must be one of {STATES}, got {self.state!r}")
+            raise InternalError(f"status must be one of {STATES}, got {self.state!r}")
         if self.state != "ok" and not self.reason:
-            raise ValueError("a warning or an unavailable status needs a reason")
+            raise InternalError("a warning or an unavailable status needs a reason")
 
     @classmethod
     def warning(cls, reason: str, hint: str | None = None) -> "Status":

@@ -1,4 +1,4 @@
-"""Timing protocol (DESIGN.md section 8): warm-up once, then the median of k repeats.
+"""Timing protocol (docs/design.md#timing-protocol): warm-up once, then the median of k repeats.
 
 ``time.perf_counter`` wraps exactly the callable; callers document what is inside.
 """
@@ -8,6 +8,8 @@ import statistics
 import time
 from typing import Callable, TypeVar
 
+from .errors import UsageError
+
 T = TypeVar("T")
 
 
@@ -15,7 +17,7 @@ def timed(fn: Callable[[], T], repeat: int = 1, warmup: bool = True) -> tuple[T,
     """Run ``fn`` (once more first if ``warmup`` and repeat > 1) and return its last value and
     the median wall time over ``repeat`` runs, in seconds."""
     if repeat < 1:
-        raise ValueError("repeat must be >= 1")
+        raise UsageError("repeat must be >= 1")
     if warmup and repeat > 1:
         fn()
     times, value = [], None

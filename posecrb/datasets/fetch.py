@@ -129,7 +129,7 @@ def fetch(name: str | DatasetEntry, *, dest: str | os.PathLike | None = None, ur
     """Download one manifest dataset and verify it.
 
     ``dest``: directory (default ``posecrb.datasets.search.cache_dir()``); the file lands in
-    ``dest/<subdir>/<file>`` (TORO files under ``toro/``, as in ../shared/datasets).
+    ``dest/<subdir>/<file>`` (TORO files under ``toro/``, the layout of every data directory).
     ``url`` overrides the manifest URL (mirrors, tests); only an override may be
     plain ``http://``. Without ``dest``, a verified copy anywhere on the search path
     (``--data-dir``, $POSECRB_DATA, ...) counts as present and nothing is downloaded.

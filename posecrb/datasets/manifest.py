@@ -1,4 +1,4 @@
-"""The dataset manifest (DESIGN.md section 9): what each third-party file is and how to check it.
+"""The dataset manifest (docs/design.md#datasets): what each third-party file is and how to check it.
 
 The single source of truth is ``posecrb/data/manifest.toml`` (package data, so it is
 found after ``pip install``); ``datasets/manifest.toml`` in the repository is a
@@ -11,13 +11,12 @@ from __future__ import annotations
 
 import hashlib
 import os
+import tomllib
 from dataclasses import dataclass, field
 from functools import lru_cache
 from importlib import resources
 from pathlib import Path
 from typing import Iterator
-
-import tomllib
 
 from ..core.errors import PosecrbError
 
@@ -51,7 +50,7 @@ class DatasetEntry:
 
     @property
     def relpath(self) -> str:
-        """Path under a data directory, mirroring ../shared/datasets (TORO files in toro/)."""
+        """Path under a data directory (TORO files in toro/)."""
         return f"{self.subdir}/{self.file}" if self.subdir else self.file
 
     @property

@@ -1,11 +1,8 @@
-"""Dataset lookup: a bare name resolves through the search path of DESIGN.md section 9.
+"""Dataset lookup: a bare name resolves through the search path of docs/design.md#datasets.
 
-Search path, first hit wins: ``--data-dir``, ``$POSECRB_DATA``, ``./datasets``,
-``../shared/datasets`` (this workplace), the user cache ``~/.cache/posecrb``.
-Each directory is searched together with its ``toro/`` subfolder. "../shared/datasets"
-is looked for relative to the working directory, each of its ancestors and the
-repository holding this package, so a bare name works from any directory of the
-workplace.
+Search path, first hit wins: ``--data-dir``, ``$POSECRB_DATA`` (one or more directories,
+``os.pathsep``-separated), ``./datasets``, the user cache ``~/.cache/posecrb``.
+Each directory is searched together with its ``toro/`` subfolder.
 
 The second half ties the search path to the manifest (``posecrb.datasets.manifest``):
 ``locate`` an entry's file, ``list_datasets`` (found / missing / checksum mismatch)
@@ -29,17 +26,6 @@ def cache_dir() -> Path:
     return Path(base) / "posecrb"
 
 
-def _workplace_shared() -> list[Path]:
-    """``shared/datasets`` beside the repository and beside any ancestor of the working directory."""
-    out = []
-    repo = Path(__file__).resolve().parents[2]
-    for base in [repo.parent, *Path.cwd().resolve().parents]:
-        cand = base / "shared" / "datasets"
-        if cand.is_dir() and cand not in out:
-            out.append(cand)
-    return out
-
-
 def search_path(data_dir: str | os.PathLike | None = None) -> list[Path]:
     dirs: list[Path] = []
     if data_dir:
@@ -47,8 +33,7 @@ def search_path(data_dir: str | os.PathLike | None = None) -> list[Path]:
     env = os.environ.get("POSECRB_DATA")
     if env:
         dirs += [Path(p) for p in env.split(os.pathsep) if p]
-    dirs += [Path("datasets"), Path("..") / "shared" / "datasets"]
-    dirs += _workplace_shared()
+    dirs.append(Path("datasets"))
     dirs.append(cache_dir())
     out: list[Path] = []
     for d in dirs:
@@ -111,7 +96,7 @@ def discover(data_dir: str | os.PathLike | None = None) -> list[Path]:
     return list(seen.values())
 
 
-# ---- the manifest on the search path (issue 5) ---------------------------------
+# ---- the manifest on the search path -------------------------------------------
 # Everything below extends the lookup above with the manifest (posecrb.datasets.manifest):
 # which paper/shared datasets are present, where, and whether their bytes are the
 # published ones.

@@ -1,4 +1,4 @@
-"""The paper's and the thesis's experiments (issue 6).
+"""The paper's and the thesis's experiments.
 
 * ``crlb_sweep``: Monte Carlo MSE of the certified MLE vs the CRLB (paper sec. IX-C, Fig. 6/7);
 * ``thesis``: empirical covariance of the intrinsic MLE vs anchored / quotient CRBs (thesis ch. 6);

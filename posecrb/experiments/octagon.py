@@ -25,6 +25,7 @@ from typing import Callable
 
 import numpy as np
 
+from ..core.errors import UsageError
 from ..sim.montecarlo import Task, make_tasks, run_tasks
 
 DEFAULT_RADIUS = 0.1   # the paper gives no size; small enough that sum tau ||p||^2 is small (sec. IX-A)
@@ -122,7 +123,7 @@ def octagon_experiment(trials: int = 50, seed: int = 0, *, radius: float = DEFAU
     from ..sim.generators import octagon_candidate_edges
 
     if trials < 1:
-        raise ValueError("trials must be >= 1")
+        raise UsageError("trials must be >= 1")
     n_cand = len(octagon_candidate_edges())
     levels = list(range(n_cand + 1))
     tasks = make_tasks(seed, 1, [(k,) for k in levels])

@@ -37,6 +37,7 @@ from typing import Callable, Sequence
 
 import numpy as np
 
+from ..core.errors import UsageError
 from ..sim.montecarlo import Task, make_tasks, run_tasks
 
 DEFAULT_M = (1, 2, 5, 10, 20, 50, 100, 150)
@@ -273,9 +274,9 @@ def thesis_experiment(ms: Sequence[int] = DEFAULT_M, trials: int = 200, seed: in
     """Graphs 6.8 / 6.9 of the thesis, with the scale-free companion metrics."""
     ms = sorted(set(int(m) for m in ms))
     if not ms or ms[0] < 1:
-        raise ValueError("m values must be >= 1")
+        raise UsageError("m values must be >= 1")
     if trials < 2:
-        raise ValueError("trials must be >= 2")
+        raise UsageError("trials must be >= 2")
     tasks = make_tasks(seed, trials, [(m,) for m in ms])
     results = run_tasks(_thesis_trial, [{"m": m} for m in ms], tasks, executor=executor, jobs=jobs,
                         scheduler=scheduler, progress=progress)

@@ -23,7 +23,7 @@ from itertools import chain
 
 import numpy as np
 
-from ..core.errors import ParseError, UsageError
+from ..core.errors import InternalError, ParseError, UsageError
 from ..core.files import read_regular_file
 from ..core.graph import PoseGraph
 from ..core.noise import isotropic_precisions, rotation_weight
@@ -138,7 +138,7 @@ def _numeric_block(path: str, rows: list[list[str]], lines: np.ndarray,
             for tok in r[1 + nid:]:
                 if single.fullmatch(tok) is None:
                     raise ParseError(path, int(lines[k]), f"{rec.tag}: {tok!r} is not a number")
-        raise AssertionError("unreachable: every token matches the number grammar")
+        raise InternalError("unreachable: every token matches the number grammar")
     vals = vals.reshape(len(rows), rec.fields - nid)
     finite = np.isfinite(vals).all(axis=1)
     if not finite.all():

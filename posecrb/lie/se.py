@@ -1,6 +1,6 @@
 """SE(2) / SE(3) in closed form, batched over leading array dimensions (thesis ch. 2.5, 6.2).
 
-Conventions (DESIGN.md section 5, thesis sec. 6.2):
+Conventions (docs/design.md#lie-groups, thesis sec. 6.2):
 
 * Lie algebra coordinates put the rotation first: SE(2) ``xi = (omega, v_x, v_y)``,
   SE(3) ``xi = (omega_1, omega_2, omega_3, v_1, v_2, v_3)``;

@@ -1,6 +1,6 @@
 """Sparse Cholesky through CHOLMOD (scikit-sparse); every log-determinant goes through here.
 
-DESIGN.md section 7. ``SymbolicCholesky`` holds one fill-reducing ordering
+docs/design.md#linear-algebra. ``SymbolicCholesky`` holds one fill-reducing ordering
 (CHOLMOD's ``analyze``) and factors any matrix with the same sparsity pattern
 with it, which is Algorithm 1's "compute the ordering once, reuse it".
 A matrix that is not positive definite raises ``NotPositiveDefinite`` naming
@@ -12,7 +12,7 @@ import numpy as np
 import scipy.sparse as sp
 from sksparse.cholmod import CholmodNotPositiveDefiniteError, Factor, analyze
 
-from ..core.errors import NotPositiveDefinite
+from ..core.errors import NotPositiveDefinite, UsageError
 
 
 def _as_csc(a: sp.spmatrix) -> sp.csc_matrix:
@@ -41,7 +41,7 @@ class SymbolicCholesky:
     def factor_logdet(self, a: sp.spmatrix, name: str = "matrix", beta: float = 0.0) -> tuple[Factor, float]:
         """``factor`` and the log-determinant it already checked (no second pass over the factor)."""
         if a.shape != self.shape:
-            raise ValueError(f"{name}: shape {a.shape} does not match the analysed pattern {self.shape}")
+            raise UsageError(f"{name}: shape {a.shape} does not match the analysed pattern {self.shape}")
         a = _as_csc(a)
         try:
             f = self._symbolic.cholesky(a, beta=beta)

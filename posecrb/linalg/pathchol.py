@@ -16,6 +16,8 @@ from __future__ import annotations
 import numpy as np
 import scipy.sparse as sp
 
+from ..core.errors import InternalError
+
 try:  # numba is a declared dependency
     from numba import njit
 except ImportError:  # pragma: no cover
@@ -365,7 +367,7 @@ class PathFactor:
         self.lval = np.array(lower.data, dtype=np.float64)
         n = self.indptr.size - 1
         if np.any(self.indices[self.indptr[:-1]] != np.arange(n)):  # pragma: no cover - CHOLMOD's L
-            raise RuntimeError("Cholesky factor without its diagonal first in every column")
+            raise InternalError("Cholesky factor without its diagonal first in every column")
         has_sub = self.indptr[1:] - self.indptr[:-1] > 1
         self.parent = np.full(n, -1, dtype=np.int64)
         self.parent[has_sub] = self.indices[self.indptr[:-1][has_sub] + 1]

@@ -30,6 +30,7 @@ import logging
 import numpy as np
 import scipy.sparse as sp
 
+from ..core.errors import NumericalError, UsageError
 from .cholesky import SymbolicCholesky
 
 log = logging.getLogger("posecrb")
@@ -200,7 +201,7 @@ class SelectedInverse:
         with _one_blas_thread():
             zval, status = _takahashi(self.indptr, self.indices, np.asarray(lower.data, dtype=np.float64))
         if status:
-            raise RuntimeError(f"{name}: Cholesky pattern not closed at column {status - 1}; "
+            raise NumericalError(f"{name}: Cholesky pattern not closed at column {status - 1}; "
                                "cannot run the Takahashi recurrences")
         self.zval = zval
         self.n = self.perm.size
@@ -257,7 +258,7 @@ def inverse_block_diagonal(a: sp.spmatrix, block: int, name: str = "matrix", fac
     """
     n = a.shape[0]
     if a.shape != (n, n) or n % block:
-        raise ValueError(f"{name}: shape {a.shape} is not square with a multiple of {block} rows")
+        raise UsageError(f"{name}: shape {a.shape} is not square with a multiple of {block} rows")
     nb = n // block
     if nb == 0:
         return np.zeros((0, block, block))
@@ -274,7 +275,7 @@ def inverse_block_diagonal(a: sp.spmatrix, block: int, name: str = "matrix", fac
     sel = SelectedInverse(_factor(padded, name), name)
     vals = sel.entries(r, c)
     if np.isnan(vals).any():  # pragma: no cover - CHOLMOD keeps the padded pattern
-        raise RuntimeError(f"{name}: factor pattern lost diagonal-block entries")
+        raise NumericalError(f"{name}: factor pattern lost diagonal-block entries")
     return vals.reshape(nb, block, block)
 
 

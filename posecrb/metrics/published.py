@@ -1,4 +1,4 @@
-"""The paper's printed Tables I-IV, typed in from ../shared/seeds/000_16e38ecb9dc985d8.txt.
+"""The paper's printed Tables I-IV, typed in from the paper (Chen et al., Tables I-IV).
 
 Used only by ``posecrb tables --compare-paper`` to print the published value next to
 each computed one. Keys are the paper's dataset names; ``PAPER_NAME`` maps ours.

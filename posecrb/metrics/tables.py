@@ -1,4 +1,4 @@
-"""Tables I-IV of the paper on every available dataset (DESIGN.md section 8).
+"""Tables I-IV of the paper on every available dataset (docs/design.md#tables).
 
 One ``dataset_row`` per dataset computes everything (parse, bounds, certified
 solve, FIM at the optimum and its log-det, construction times); the four tables

@@ -17,6 +17,8 @@ from typing import Any, Iterable, Sequence
 
 import numpy as np
 
+from ..core.errors import UsageError
+
 FORMATS = ("table", "json", "csv", "markdown")
 
 
@@ -158,7 +160,7 @@ def print_rows(rows: list[dict[str, Any]], fmt: str, columns: Sequence[str] | No
         width = None if sys.stdout.isatty() else 250
         Console(soft_wrap=False, width=width).print(to_rich_table(rows, columns, title, headers, caption))
     else:  # pragma: no cover - click validates choices
-        raise ValueError(fmt)
+        raise UsageError(fmt)
 
 
 def iter_keys(rows: Iterable[dict[str, Any]]) -> list[str]:

@@ -8,7 +8,7 @@ Given fixed edges F (default: the odometry chain) and candidates C, choose S wit
 * ``tree``: the paper's lower bound ``d logdet L_tau + d_r logdet L_w`` (eq. 75, Algorithm 1),
   the weighted tree-connectivity of the translation and rotation graphs;
 * ``fim``: ``logdet F`` of the anchored Fisher information (eq. 42 / 64, frame-consistent
-  rotation coupling, docs/design.md section 4) at a fixed estimate, by default the
+  rotation coupling, docs/design.md#paper-fim) at a fixed estimate, by default the
   certified optimum of the full graph;
 * ``fiedler``: the algebraic connectivity ``lambda_2`` of the rotation-weighted Laplacian
   (the objective of MAC, Doherty et al. 2022), for comparison.
@@ -58,7 +58,7 @@ import numpy as np
 import scipy.sparse as sp
 from scipy.sparse.csgraph import connected_components, minimum_spanning_tree
 
-from ..core.errors import ParseError, PosecrbError, UsageError
+from ..core.errors import InternalError, ParseError, PosecrbError, UsageError
 from ..core.graph import PoseGraph
 from ..linalg.cholesky import SymbolicCholesky
 from ..linalg.laplacian import laplacian, reduced_index
@@ -285,7 +285,7 @@ class _Block:
         s = np.zeros(r.size)
         s[ok] = sel.entries(r[ok], c[ok])
         if np.isnan(s).any():  # pragma: no cover - the pattern holds every edge's block
-            raise RuntimeError(f"{self.name}: an edge block is missing from the factor's pattern")
+            raise InternalError(f"{self.name}: an edge block is missing from the factor's pattern")
         s = s.reshape(k, p, p)
         return np.einsum("kpa,kpq,kqb->kab", U, s, U)
 
@@ -445,7 +445,7 @@ def edge_information_factors(graph: PoseGraph, rot: np.ndarray, trans: np.ndarra
     elif variant in ("eq64", "consistent"):
         u[:, q + d:, d:q] = -sw * np.eye(dr)
     else:
-        raise ValueError(f"unknown FIM variant {variant!r}")
+        raise UsageError(f"unknown FIM variant {variant!r}")
     red = reduced_index(graph.n, anchor)
     pi, pj = red[graph.src], red[graph.dst]
     rows = np.concatenate([pi[:, None] * q + np.arange(q), pj[:, None] * q + np.arange(q)], axis=1)

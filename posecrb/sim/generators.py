@@ -1,4 +1,4 @@
-"""Synthetic pose graphs of our own (DESIGN.md section 9), with the ground truth attached.
+"""Synthetic pose graphs of our own (docs/design.md#datasets), with the ground truth attached.
 
 Every generator returns a ``PoseGraph`` whose vertices (``vertex_rot``,
 ``vertex_trans``) are the ground truth and whose measurements are the relative
@@ -10,7 +10,7 @@ noise model, eq. (3)-(5) and (80):
 * rotation ``R~_ij = R_i^T R_j Z_ij``, ``Z_ij ~ Lang(I, kappa)`` with density
   proportional to ``exp(kappa tr Z)`` (exact sampler ``posecrb.sim.sampling.sample_langevin``).
 
-Information matrices follow SE-Sync's convention (DESIGN.md section 3,
+Information matrices follow SE-Sync's convention (docs/design.md#noise-model,
 ``posecrb.sim.sampling.isotropic_information``): 2D ``diag(tau, tau, kappa)``, 3D
 ``diag(tau I3, 2 kappa I3)``, so that ``graph.tau`` and ``graph.kappa`` read back
 exactly the values used to generate the noise.
@@ -29,6 +29,7 @@ from typing import Iterable, Sequence
 
 import numpy as np
 
+from ..core.errors import UsageError
 from ..core.graph import PoseGraph, rotation_dimension
 from ..lie.so import so2_exp, so3_exp
 
@@ -54,7 +55,7 @@ def _rng(rng: np.random.Generator | int | None, needed: bool) -> np.random.Gener
         return rng
     if rng is None:
         if needed:
-            raise ValueError("noisy generation needs an explicit seed or numpy Generator (rng=...)")
+            raise UsageError("noisy generation needs an explicit seed or numpy Generator (rng=...)")
         return None
     return np.random.default_rng(rng)
 
@@ -82,7 +83,7 @@ def _assemble(dim: int, rot: np.ndarray, trans: np.ndarray, src: np.ndarray, dst
     tau = np.broadcast_to(np.asarray(tau, dtype=float), (m,)).copy()
     kappa = np.broadcast_to(np.asarray(kappa, dtype=float), (m,)).copy()
     if np.any(tau <= 0) or np.any(kappa <= 0):
-        raise ValueError("tau and kappa must be > 0")
+        raise UsageError("tau and kappa must be > 0")
     mrot, mtrans = relative_poses(rot, trans, src, dst)
     if noise:
         mrot, mtrans = _isotropic_noise(mrot, mtrans, tau, kappa, dim, rng)
@@ -143,13 +144,13 @@ def grid(dim: int, side: int, *, poses: int | None = None, spacing: float = 1.0,
     draws Haar-uniform rotations from ``rng``.
     """
     if dim not in (2, 3):
-        raise ValueError(f"dimension must be 2 or 3, got {dim}")
+        raise UsageError(f"dimension must be 2 or 3, got {dim}")
     if side < 2:
-        raise ValueError("grid side must be >= 2")
+        raise UsageError("grid side must be >= 2")
     total = side ** dim
     n = total if poses is None else int(poses)
     if not 2 <= n <= total:
-        raise ValueError(f"poses must be in [2, {total}] for side {side}")
+        raise UsageError(f"poses must be in [2, {total}] for side {side}")
     rng = _rng(rng, noise or orientation == "random")
     coords = boustrophedon(side, dim, n)
     trans = spacing * coords.astype(float)
@@ -166,7 +167,7 @@ def grid(dim: int, side: int, *, poses: int | None = None, spacing: float = 1.0,
         yaw = yaw[np.maximum.accumulate(np.where(has, np.arange(n), 0))]
         rot = _yaw_rotations(yaw, dim)
     else:
-        raise ValueError(f"orientation must be 'travel' or 'random', got {orientation!r}")
+        raise UsageError(f"orientation must be 'travel' or 'random', got {orientation!r}")
 
     # Lattice neighbours: cell index -> walk index, -1 for unvisited cells.
     index = np.full(total, -1, dtype=np.int64)
@@ -217,7 +218,7 @@ def sphere(rings: int = 50, per_ring: int = 50, *, poses: int | None = None, rad
     total = rings * per_ring
     n = total if poses is None else int(poses)
     if rings < 1 or per_ring < 3 or not 2 <= n <= total:
-        raise ValueError(f"need rings >= 1, per_ring >= 3 and 2 <= poses <= {total}")
+        raise UsageError(f"need rings >= 1, per_ring >= 3 and 2 <= poses <= {total}")
     rng = _rng(rng, noise)
     k = np.arange(n)
     phi = np.pi * (k // per_ring + 1) / (rings + 1)
@@ -241,7 +242,7 @@ def torus(rings: int = 100, per_ring: int = 50, *, poses: int | None = None, maj
     total = rings * per_ring
     n = total if poses is None else int(poses)
     if rings < 3 or per_ring < 3 or not 2 <= n <= total:
-        raise ValueError(f"need rings >= 3, per_ring >= 3 and 2 <= poses <= {total}")
+        raise UsageError(f"need rings >= 3, per_ring >= 3 and 2 <= poses <= {total}")
     rng = _rng(rng, noise)
     k = np.arange(n)
     u = 2 * np.pi * (k // per_ring) / rings
@@ -281,7 +282,7 @@ def octagon(extra_edges: int | Iterable[tuple[int, int]] = 0, *, radius: float =
     if isinstance(extra_edges, (int, np.integer)):
         k = int(extra_edges)
         if not 0 <= k <= len(cand):
-            raise ValueError(f"extra_edges must be in [0, {len(cand)}]")
+            raise UsageError(f"extra_edges must be in [0, {len(cand)}]")
         gen = _rng(rng, noise)
         pick = gen.permutation(len(cand))[:k] if gen is not None else np.arange(k)
         extra = [cand[p] for p in pick]
@@ -290,7 +291,7 @@ def octagon(extra_edges: int | Iterable[tuple[int, int]] = 0, *, radius: float =
         gen = _rng(rng, noise)
         bad = [(i, j) for i, j in extra if not (0 <= i < 8 and 0 <= j < 8) or i == j]
         if bad:
-            raise ValueError(f"octagon edges must join two distinct poses 0..7, got {bad}")
+            raise UsageError(f"octagon edges must join two distinct poses 0..7, got {bad}")
     ang = 2 * np.pi * np.arange(8) / 8
     trans = radius * np.column_stack([np.cos(ang), np.sin(ang)])
     rot = so2_exp(ang + np.pi / 2)
@@ -333,7 +334,7 @@ def random_information(rng: np.random.Generator, m: int, dim: int, kind: str = "
         kappa = np.exp(rng.uniform(*np.log(kappa_range), m))
         return isotropic_information(tau, kappa, dim)
     if kind not in ("block", "full"):
-        raise ValueError(f"kind must be isotropic, block or full, got {kind!r}")
+        raise UsageError(f"kind must be isotropic, block or full, got {kind!r}")
     bt, st = _random_spd(rng, m, dim, *tau_range)
     br, sr = _random_spd(rng, m, r, *kappa_range)
     info = np.zeros((m, q, q))
@@ -365,9 +366,9 @@ def random_graph(rng: np.random.Generator, n: int, m: int, dim: int, *, info: st
     (translation, rotation) tangent order, applied as ``t + xi_t`` and ``R Exp(xi_r)``).
     """
     if dim not in (2, 3):
-        raise ValueError(f"dimension must be 2 or 3, got {dim}")
+        raise UsageError(f"dimension must be 2 or 3, got {dim}")
     if n < 2 or m < n - 1:
-        raise ValueError(f"need n >= 2 and m >= n - 1 for a connected graph (n={n}, m={m})")
+        raise UsageError(f"need n >= 2 and m >= n - 1 for a connected graph (n={n}, m={m})")
     perm = rng.permutation(n)
     parent = perm[np.floor(rng.random(n - 1) * np.arange(1, n)).astype(np.int64)]
     a, b = [perm[1:]], [parent]
@@ -412,7 +413,7 @@ def random_graph(rng: np.random.Generator, n: int, m: int, dim: int, *, info: st
         mtrans = graph.trans + xt
         mrot = graph.rot @ (so2_exp(xr[:, 0]) if dim == 2 else so3_exp(xr))
     else:
-        raise ValueError(f"noise must be none, isotropic or gaussian, got {noise!r}")
+        raise UsageError(f"noise must be none, isotropic or gaussian, got {noise!r}")
     return replace(graph, rot=mrot, trans=mtrans)
 
 
@@ -444,12 +445,12 @@ def generate(kind: str, poses: int | None = None, *, tau: float | None = None, k
     ``octagon_candidate_edges()`` (random when a seed is given); demo: ``builtin_demo()``.
     """
     if kind not in KINDS:
-        raise ValueError(f"unknown generator {kind!r}; choose from {', '.join(KINDS)}")
+        raise UsageError(f"unknown generator {kind!r}; choose from {', '.join(KINDS)}")
     if kind == "demo":
         return builtin_demo()
     if kind == "octagon":
         if poses not in (None, 8):
-            raise ValueError("the octagon has 8 poses")
+            raise UsageError("the octagon has 8 poses")
         return octagon(extra_edges, tau=OCTAGON_TAU if tau is None else tau,
                        kappa=OCTAGON_KAPPA if kappa is None else kappa, noise=noise, rng=seed)
     tau = DEFAULT_TAU if tau is None else tau

@@ -59,14 +59,14 @@ def level_key(value: float) -> int:
     """
     key = int(round(float(value) * 1_000_000))
     if key < 0:
-        raise ValueError(f"level key needs a non-negative value, got {value}")
+        raise UsageError(f"level key needs a non-negative value, got {value}")
     return key
 
 
 def trial_seeds(seed: int, n: int, key: Sequence[int] = ()) -> list[np.random.SeedSequence]:
     """``n`` independent child seeds: ``SeedSequence(seed, spawn_key=key).spawn(n)``."""
     if n < 0:
-        raise ValueError("number of trials must be >= 0")
+        raise UsageError("number of trials must be >= 0")
     return np.random.SeedSequence(int(seed), spawn_key=tuple(int(k) for k in key)).spawn(n)
 
 

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from ..core.errors import InternalError, UsageError
 from ..core.noise import isotropic_information
 
 _SMALL_C = 1e-3        # below this concentration the piece-1 proposal drops e^{-cu}
@@ -13,7 +14,7 @@ _MAX_ROUNDS = 10_000   # acceptance is >= ~0.3 for every c, so this is never rea
 def _concentrations(kappa, size: int) -> np.ndarray:
     k = np.broadcast_to(np.asarray(kappa, dtype=float), (size,)).copy()
     if not np.all(np.isfinite(k)) or np.any(k <= 0):
-        raise ValueError("Langevin concentration kappa must be finite and > 0")
+        raise UsageError("Langevin concentration kappa must be finite and > 0")
     return k
 
 
@@ -69,7 +70,7 @@ def _sample_versine(a: float, c: np.ndarray, rng: np.random.Generator) -> tuple[
         u[idx] = np.where(pick2, u2, uu)[ok]
         v[idx] = np.where(pick2, vv, 2.0 - uu)[ok]
         pending = pending[~ok]
-    raise RuntimeError("Langevin sampler did not terminate")  # pragma: no cover
+    raise InternalError("Langevin sampler did not terminate")  # pragma: no cover
 
 
 def _angle_from_versine(u: np.ndarray, v: np.ndarray) -> np.ndarray:
@@ -128,14 +129,14 @@ def sample_langevin(kappa, size: int, dim: int, rng: np.random.Generator) -> np.
         return sample_langevin_so2(kappa, size, rng)
     if dim == 3:
         return sample_langevin_so3(kappa, size, rng)
-    raise ValueError(f"dimension must be 2 or 3, got {dim}")
+    raise UsageError(f"dimension must be 2 or 3, got {dim}")
 
 
 def sample_isotropic_gaussian(tau, size: int, dim: int, rng: np.random.Generator) -> np.ndarray:
     """(size, d) draws of y ~ N(0, I / tau) (paper eq. 3, tau = delta^-2)."""
     tau = np.broadcast_to(np.asarray(tau, dtype=float), (size,))
     if np.any(tau <= 0) or not np.all(np.isfinite(tau)):
-        raise ValueError("translation precision tau must be finite and > 0")
+        raise UsageError("translation precision tau must be finite and > 0")
     return rng.standard_normal((size, dim)) / np.sqrt(tau)[:, None]
 
 
@@ -152,9 +153,9 @@ def scaled_precisions(graph, kc: float = 1.0, scale: str = "both", tau=None, kap
     only the Langevin concentration carries k_c.
     """
     if scale not in NOISE_SCALES:
-        raise ValueError(f"scale must be one of {NOISE_SCALES}, got {scale!r}")
+        raise UsageError(f"scale must be one of {NOISE_SCALES}, got {scale!r}")
     if not (np.isfinite(kc) and kc > 0):
-        raise ValueError(f"k_c must be > 0, got {kc}")
+        raise UsageError(f"k_c must be > 0, got {kc}")
     m = graph.m
     t = np.broadcast_to(np.asarray(graph.tau if tau is None else tau, dtype=float), (m,))
     k = np.broadcast_to(np.asarray(graph.kappa if kappa is None else kappa, dtype=float), (m,))

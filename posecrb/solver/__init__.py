@@ -1,4 +1,4 @@
-"""Certifiably correct pose-graph optimisation (SE-Sync, Rosen et al. 2019); DESIGN.md section 6."""
+"""Certifiably correct pose-graph optimisation (SE-Sync, Rosen et al. 2019); docs/design.md#solver."""
 from .solve import SolveResult, solve
 
 __all__ = ["SolveResult", "solve"]

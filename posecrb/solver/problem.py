@@ -1,6 +1,6 @@
 """SE-Sync data matrices built from a PoseGraph, and the reduced objective applied as an operator.
 
-Notation (Rosen et al., SE-Sync, IJRR 2019, section 4; DESIGN.md section 6). With
+Notation (Rosen et al., SE-Sync, IJRR 2019, section 4; docs/design.md#solver). With
 ``X = [t R]`` (d x (n + dn)) the maximum-likelihood objective is
 
     F(t, R) = sum_e kappa_e ||R_j - R_i R~_e||_F^2 + tau_e ||t_j - t_i - R_i t~_e||^2
@@ -44,6 +44,7 @@ import numpy as np
 import scipy.sparse as sp
 from sksparse.cholmod import Factor
 
+from ..core.errors import InternalError
 from ..core.graph import PoseGraph
 from ..linalg.cholesky import SymbolicCholesky, cholesky
 from ..linalg.laplacian import reduced_laplacian
@@ -219,7 +220,8 @@ class Problem:
         def positions(rows: np.ndarray, cols: np.ndarray) -> np.ndarray:
             k = cols.astype(np.int64) * N + rows
             pos = np.searchsorted(keys, k)
-            assert np.array_equal(keys[np.minimum(pos, keys.size - 1)], k), "entry outside the analysed pattern"
+            if not np.array_equal(keys[np.minimum(pos, keys.size - 1)], k):
+                raise InternalError("entry outside the analysed pattern")
             return pos
 
         # add.at: a block that stored duplicate entries would still sum them, as scipy does.

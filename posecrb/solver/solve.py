@@ -1,4 +1,4 @@
-"""``solve``: SE-Sync's certifiably correct maximum-likelihood pose-graph estimator (DESIGN.md section 6).
+"""``solve``: SE-Sync's certifiably correct maximum-likelihood pose-graph estimator (docs/design.md#solver).
 
 Pipeline (Rosen et al., IJRR 2019, Algorithms 1-2): build the sparse data
 (problem.py), chordal initialisation (chordal.py), Riemannian staircase with a

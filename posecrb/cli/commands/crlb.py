@@ -38,17 +38,13 @@ def parse_pose_ids(text: str | None) -> bool | list[int]:
         # digits only (int() would take 1_0 and non-ASCII digits), ids that fit int64
         if re.fullmatch(r"[0-9]+(?:-[0-9]+)?", part) is None or max(map(int, part.split("-"))) > INT64_MAX:
             raise UsageError(f"--poses: {part!r} is not a pose id or an id range a-b")
-        try:
-            if "-" in part[1:]:
-                lo, hi = part.split("-", 1) if not part.startswith("-") else (part, "")
-                lo_i, hi_i = int(lo), int(hi)
-                if hi_i < lo_i or hi_i - lo_i > 10 ** 7:   # (a huge range would exhaust memory)
-                    raise ValueError
-                out.extend(range(lo_i, hi_i + 1))
-            else:
-                out.append(int(part))
-        except ValueError:
-            raise UsageError(f"--poses: {part!r} is not a pose id or an id range a-b") from None
+        if "-" in part[1:]:
+            lo_i, hi_i = map(int, part.split("-", 1))   # both digits only (checked above)
+            if hi_i < lo_i or hi_i - lo_i > 10 ** 7:     # (a huge range would exhaust memory)
+                raise UsageError(f"--poses: {part!r} is not a pose id or an id range a-b")
+            out.extend(range(lo_i, hi_i + 1))
+        else:
+            out.append(int(part))
     return out
 
 

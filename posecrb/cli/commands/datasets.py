@@ -6,7 +6,7 @@ from pathlib import Path
 
 import click
 
-from ...core.errors import PosecrbError, UsageError
+from ...core.errors import PosecrbError
 from ...datasets import search as ds
 from ...datasets import verify as dsv
 from ...report.render import print_rows
@@ -21,10 +21,10 @@ LIST_COLUMNS = ["name", "dim", "poses", "edges", "table", "paper_name", "status"
 def command() -> None:
     """Dataset manifest, lookup, download (verified) and synthetic graphs.
 
-    The manifest lists every shared g2o/TORO dataset plus grid3D and rim with the
-    expected counts, the pinned download URL and the checksum. Bare names are looked
-    up in --data-dir, $POSECRB_DATA, ./datasets, ../shared/datasets and the user
-    cache ~/.cache/posecrb (where `fetch` downloads to).
+    The manifest lists every g2o/TORO dataset of the paper's tables (and a few more)
+    with the expected counts, the pinned download URL and the checksum. Bare names
+    are looked up in --data-dir, $POSECRB_DATA, ./datasets and the user cache
+    ~/.cache/posecrb (where `fetch` downloads to).
     """
 
 
@@ -195,10 +195,7 @@ def synth_cmd(kind: str, poses: int | None, sigma: float | None, tau: float | No
     if kind == "demo" and (poses or sigma or tau or kappa or noise_free):
         raise click.UsageError("`demo` is fixed: no --poses/--noise/--tau/--kappa/--noise-free")
     check_output_file(out, option="--out", create_parents=True)
-    try:
-        graph = generate(kind, poses, tau=tau, kappa=kappa, noise=noisy, seed=seed, extra_edges=extra_edges)
-    except ValueError as exc:
-        raise UsageError(str(exc)) from None
+    graph = generate(kind, poses, tau=tau, kappa=kappa, noise=noisy, seed=seed, extra_edges=extra_edges)
     Path(out).parent.mkdir(parents=True, exist_ok=True)
     write_g2o(graph, out)
     noisy = noisy or kind == "demo"

@@ -1,4 +1,4 @@
-"""``posecrb solve``: certified maximum-likelihood estimate (SE-Sync style), DESIGN.md section 6."""
+"""``posecrb solve``: certified maximum-likelihood estimate (SE-Sync style), docs/design.md#solver."""
 from __future__ import annotations
 
 import click

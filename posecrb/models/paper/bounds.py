@@ -1,7 +1,7 @@
 """Graph-only bounds on the D-optimality metric and T-optimality (paper sections VII-A, VII-B).
 
 With d = 2|3, d_r = 1|3 and the reduced weighted Laplacians L_tau (translation
-weights tau) and L_w (rotation weights w, DESIGN.md section 3):
+weights tau) and L_w (rotation weights w, docs/design.md#noise-model):
 
 * ``lb = d logdet(L_tau) + d_r logdet(L_w)`` (eq. 75 left, Algorithm 1: one
   fill-reducing ordering shared by both factorizations);

@@ -1,7 +1,7 @@
 """The paper's anchored Fisher information matrix on (R^d x SO(d))^{n_p} at an estimate.
 
 2D: eq. (42); 3D: eq. (64) (Chen et al., sections IV-V), in the coordinates of
-DESIGN.md sections 3-4. The FIM is the Gauss-Newton information of the translation
+docs/design.md#noise-model and #fim-variants. The FIM is the Gauss-Newton information of the translation
 residuals
 
     r_ij = R_i^T (x_j - x_i) - p_ij,      weight tau_ij I_d,
@@ -57,6 +57,7 @@ from dataclasses import dataclass, field
 import numpy as np
 import scipy.sparse as sp
 
+from ...core.errors import UsageError
 from ...core.graph import PoseGraph, rotation_dimension
 from ...core.noise import rotation_weight as _rotation_weight
 from ...linalg.cholesky import SymbolicCholesky
@@ -152,7 +153,7 @@ def _layout_permutation(n_free: int, d: int, dr: int, layout: str) -> np.ndarray
     if layout == "blocks":
         return np.arange(n_free * (d + dr))
     if layout != "poses":
-        raise ValueError(f"layout must be one of {LAYOUTS}, got {layout!r}")
+        raise UsageError(f"layout must be one of {LAYOUTS}, got {layout!r}")
     pose = np.arange(n_free)[:, None]
     trans = pose * d + np.arange(d)[None, :]
     rot = n_free * d + pose * dr + np.arange(dr)[None, :]
@@ -164,10 +165,10 @@ def _check_estimate(graph: PoseGraph, rot: np.ndarray, trans: np.ndarray) -> tup
     rot = np.asarray(rot, dtype=float)
     trans = np.asarray(trans, dtype=float)
     if rot.shape != (n, d, d) or trans.shape != (n, d):
-        raise ValueError(f"estimate shapes {rot.shape}, {trans.shape} do not match the graph "
+        raise UsageError(f"estimate shapes {rot.shape}, {trans.shape} do not match the graph "
                          f"({n} poses, {d}D): expected ({n}, {d}, {d}) and ({n}, {d})")
     if not (np.isfinite(rot).all() and np.isfinite(trans).all()):
-        raise ValueError("the estimate has non-finite values")
+        raise UsageError("the estimate has non-finite values")
     return rot, trans
 
 
@@ -195,7 +196,7 @@ def paper_fim(graph: PoseGraph, rot: np.ndarray, trans: np.ndarray, anchor: int 
     ``rot`` (n, d, d) and ``trans`` (n, d) are world poses ``X_i = (R_i, x_i)`` in the graph's
     internal order; ``anchor`` is an internal index (``graph.anchor_index(id)``).
     ``rotation_model`` picks the rotation weight: ``"eq59"`` (default, eq. 39-41 / 59) or
-    ``"table2"`` (the empirical fit that reproduces Table II, see DESIGN.md section 4).
+    ``"table2"`` (the empirical fit that reproduces Table II, see docs/design.md#fim-variants).
     ``variant`` picks the rotation Laplacian (module docstring): ``"consistent"`` (default) is
     the Fisher information of the model in the body-frame coordinates that eq. (52)-(54) and
     (63) use, off-diagonal blocks ``-w R_i^T R_j`` for an edge i -> j; ``"eq64"`` is eq. (64)
@@ -207,11 +208,11 @@ def paper_fim(graph: PoseGraph, rot: np.ndarray, trans: np.ndarray, anchor: int 
 
     t0 = time.perf_counter()
     if variant not in FIM_VARIANTS:
-        raise ValueError(f"variant must be one of {FIM_VARIANTS}, got {variant!r}")
+        raise UsageError(f"variant must be one of {FIM_VARIANTS}, got {variant!r}")
     graph.require_connected()
     rot, trans = _check_estimate(graph, rot, trans)
     if not 0 <= anchor < graph.n:
-        raise ValueError(f"anchor index {anchor} out of range 0..{graph.n - 1}")
+        raise UsageError(f"anchor index {anchor} out of range 0..{graph.n - 1}")
     d, dr, n = graph.dim, graph.rot_dim, graph.n
     npf = n - 1
     tau = graph.tau

@@ -6,7 +6,7 @@ left-multiplicative noise (4.3) in (omega, v_x, v_y) coordinates, and anchors ``
 (sec. 6.4, 6.7). Expected: the FIM has exactly ``3 c = 6`` zero eigenvalues (sec. 6.6).
 
 The thesis' poses ``T_i`` (sec. 6.2) are stored as the graph's vertices ``X_i = T_i^{-1}`` so that
-the file convention ``X_i^{-1} X_j = T_i T_j^{-1}`` holds (DESIGN.md section 5), and each arc's
+the file convention ``X_i^{-1} X_j = T_i T_j^{-1}`` holds (docs/design.md#thesis-example), and each arc's
 information is stored in g2o convention such that ``posecrb.models.thesis.fim`` recovers exactly
 ``Omega_ij = Sigma_ij^{-1}`` (``posecrb.models.thesis.fim.right_information_from_left``).
 Pose ids are the thesis' labels 1..5; internal indices are 0..4.
@@ -15,6 +15,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from ...core.errors import UsageError
 from ...core.graph import PoseGraph
 from ...lie.se import se_compose, se_exp, se_inverse
 from ...lie.so import so2_exp
@@ -104,7 +105,7 @@ def sample_graph(rng: np.random.Generator, m: int = 1) -> PoseGraph:
     is then ``m F_1`` (4.12). Vertices are the truth.
     """
     if m < 1:
-        raise ValueError("m must be >= 1")
+        raise UsageError("m must be >= 1")
     k = len(EDGES)
     chol = np.sqrt(SIGMA_DIAG)
     xi = rng.standard_normal((k, m, 3)) * chol[:, None, :]

@@ -1,7 +1,7 @@
 """The thesis model on SE(d)^n: right-invariant Fisher information, gauge, anchored and quotient CRBs.
 
 Bertini, "On Intrinsic Cramér-Rao Bounds on the Lie Group SE(d)^n" (the thesis), chapters 4-5;
-DESIGN.md section 5.
+docs/design.md#thesis-fim.
 
 Model and coordinates
 ---------------------
@@ -14,7 +14,7 @@ Model and coordinates
   perturbation of pose i expressed in the world frame about the world origin. Per-pose
   blocks and traces of the bounds therefore carry lever-arm terms (rotation uncertainty
   times the distance of the pose from the origin) and are not comparable with the paper
-  model's body-frame coordinates (DESIGN.md section 4); they are the thesis' quantities.
+  model's body-frame coordinates (docs/design.md#frames); they are the thesis' quantities.
 * Left-multiplicative noise ``H_ij = Exp(xi_ij) T_i T_j^{-1}`` (4.3), ``xi_ij ~ N(0, Omega_ij^{-1})``;
   residual ``r_ij = Log(H_ij T_j T_i^{-1})`` (Prop. 4.3.2); Jacobian blocks (4.7)
   ``J_i = -Jr^{-1}(r_ij) Ad_{T_i}``, ``J_j = +Jr^{-1}(r_ij) Ad_{T_i}``;
@@ -40,8 +40,8 @@ Indefinite information matrices (``indefinite=``): some real files (cubicle.g2o)
 whose cross terms make the whole matrix indefinite, which no Gaussian can have. Policies:
 
 * ``"blocks"`` (default): for those edges only, drop the translation-rotation cross terms and
-  keep the two diagonal blocks, i.e. the information the isotropic model of DESIGN.md
-  section 3 also uses; positive definite by the reader's checks, and it adds no information
+  keep the two diagonal blocks, i.e. the information the isotropic model of
+  docs/design.md#noise-model also uses; positive definite by the reader's checks, and it adds no information
   along directions the file's diagonal calls weak.
 * ``"project"``: nearest positive semidefinite matrix in Frobenius norm (negative eigenvalues
   clipped to zero, Higham 1988). Can leave ``Omega`` singular, hence a larger nullity.
@@ -196,7 +196,7 @@ def _check_estimate(graph: PoseGraph, rot: np.ndarray, trans: np.ndarray) -> tup
     rot, trans = np.asarray(rot, float), np.asarray(trans, float)
     d = graph.dim
     if rot.shape != (graph.n, d, d) or trans.shape != (graph.n, d):
-        raise ValueError(f"estimate shapes {rot.shape}, {trans.shape} do not match "
+        raise UsageError(f"estimate shapes {rot.shape}, {trans.shape} do not match "
                          f"the graph's (n, d, d) = ({graph.n}, {d}, {d}) and (n, d)")
     return rot, trans
 
@@ -320,7 +320,7 @@ def sed_fim(graph: PoseGraph, rot: np.ndarray, trans: np.ndarray, *, indefinite:
     else:
         omega = np.asarray(information, float)
         if omega.shape != (graph.m, q, q):
-            raise ValueError(f"information must have shape {(graph.m, q, q)}, got {omega.shape}")
+            raise UsageError(f"information must have shape {(graph.m, q, q)}, got {omega.shape}")
         n_bad = 0
     res, a = edge_kinematics(graph, rot, trans)
     w = np.swapaxes(a, 1, 2) @ omega @ a

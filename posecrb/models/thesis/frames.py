@@ -39,7 +39,7 @@ from typing import Sequence
 import numpy as np
 import scipy.sparse as sp
 
-from ...core.errors import UsageError
+from ...core.errors import InternalError, UsageError
 from ...core.graph import PoseGraph
 from ...lie.se import se_adjoint, se_inverse
 
@@ -58,7 +58,7 @@ def gtsam_order(dim: int) -> np.ndarray:
         return np.array([1, 2, 0])
     if dim == 3:
         return np.arange(6)
-    raise ValueError(f"dimension must be 2 or 3, got {dim}")
+    raise UsageError(f"dimension must be 2 or 3, got {dim}")
 
 
 def coordinate_names(dim: int, frame: str = "world") -> list[str]:
@@ -129,7 +129,7 @@ def convert_information(matrix: sp.spmatrix, rot: np.ndarray, trans: np.ndarray,
     n = np.shape(rot)[0]
     q = matrix.shape[0] // n if n else 0
     if matrix.shape != (n * q, n * q) or (n and q not in (3, 6)):
-        raise ValueError(f"information matrix of shape {matrix.shape} does not match {n} poses")
+        raise UsageError(f"information matrix of shape {matrix.shape} does not match {n} poses")
     # coordinates in the source frame are W^{-1}-images: x_src = W x_to with W the inverse map
     w = _block_diagonal(_maps(rot, trans, "world" if to == "body" else "body"))
     out = (w.T @ sp.csc_matrix(matrix) @ w).tocsc()
@@ -161,7 +161,7 @@ def sed_crb_in_frame(graph: PoseGraph, rot: np.ndarray, trans: np.ndarray, frame
     res = sed_crb(graph, rot, trans, anchors=anchors, quotient=quotient, per_pose=True, **sed_options)
     keys = np.fromiter(res.per_pose.keys(), np.int64, res.n)
     if not np.array_equal(keys, np.arange(res.n)):  # the stacking below relies on pose order
-        raise RuntimeError("sed_crb returned per-pose blocks out of pose order")
+        raise InternalError("sed_crb returned per-pose blocks out of pose order")
     blocks = np.stack(list(res.per_pose.values())) if res.n else np.zeros((0, res.q, res.q))
     body = convert_covariance_blocks(blocks, rot, trans, "body")
     trace = float(np.trace(body, axis1=1, axis2=2).sum())
