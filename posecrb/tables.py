@@ -192,7 +192,9 @@ def _belongs_missing(name: str, dim: int) -> bool:
 
 
 def footnote(table: int, rotation_model: str) -> str | None:
-    if table in (2, 4):
+    """The note under Table II. The rotation weight changes the 3D metrics, not the
+    construction times, so Table IV (times only) has none."""
+    if table == 2:
         if rotation_model == "table2":
             return ("3D rotation weight: w = 0.5515*kappa^2, an EMPIRICAL fit to the published Table II, "
                     "NOT eq. (59).")

@@ -29,15 +29,31 @@ def _progress(total: int):
                     console=Console(stderr=True), transient=True, disable=not sys.stderr.isatty())
 
 
-def _render(rows, tables, fmt, compare, rotation_model) -> str:
+def _shown(rows, tables, compare, rotation_model, explicit):
+    """(table, rows, columns, note) of every table that has rows; each distinct note only once.
+
+    A table without rows (Tables II/IV when every dataset is 2D) is not printed: said on
+    stderr, as a warning when it was asked for with --table."""
+    out, seen = [], set()
+    for t in tables:
+        trs, cols = table_rows(rows, t, compare)
+        if not trs:
+            (log.warning if explicit else log.info)("%s: no %dD dataset, not printed", TITLES[t].split(":")[0],
+                                                     2 if t in (1, 3) else 3)
+            continue
+        note = footnote(t, rotation_model)
+        out.append((t, trs, cols, note if note not in seen else None))
+        seen.add(note)
+    return out
+
+
+def _render(rows, tables, fmt, compare, rotation_model, explicit=False) -> str:
     parts = []
     if fmt == "json":
         return to_json({"rows": rows, "tables": {ROMAN[t]: table_rows(rows, t, compare)[0] for t in tables}})
     if fmt == "csv":
         return to_csv(rows)
-    for t in tables:
-        trs, cols = table_rows(rows, t, compare)
-        note = footnote(t, rotation_model)
+    for t, trs, cols, note in _shown(rows, tables, compare, rotation_model, explicit):
         if fmt == "markdown":
             parts.append(f"### {TITLES[t]}\n\n" + to_markdown(trs, cols, HEADERS) + (f"\n{note}\n" if note else ""))
         elif fmt == "latex":
@@ -63,8 +79,11 @@ def _render(rows, tables, fmt, compare, rotation_model) -> str:
 @click.option("--rotation-weight", "rotation_model", type=click.Choice(ROTATION_WEIGHT_MODELS), default="eq59",
               show_default=True, help="3D rotation weight: eq. (59), or table2 = 0.5515*kappa^2, an EMPIRICAL "
                                       "fit reproducing the published Table II (not eq. 59).")
+@click.option("--plot", "plot_path", type=click.Path(dir_okay=False), default=None,
+              help="Also draw one figure (PNG or SVG, by the extension): FIM log-det and ub relative to lb per "
+                   "dataset, and every time against the paper's printed one.")
 @data_dir_option
-def command(all_, tables, names, repeat, jobs, fmt, out_dir, compare_paper, rotation_model, data_dir):
+def command(all_, tables, names, repeat, jobs, fmt, out_dir, compare_paper, rotation_model, plot_path, data_dir):
     """Rebuild the paper's Tables I-IV: FIM log-det at the certified optimum, ub and lb with their
     times (I/II) and the construction time of the whole FIM vs the weighted Laplacians (III/IV).
 
@@ -75,7 +94,12 @@ def command(all_, tables, names, repeat, jobs, fmt, out_dir, compare_paper, rota
     """
     if all_ and names:
         raise click.UsageError("--all and --datasets are exclusive")
+    if plot_path:
+        from ..plots import check_figure_path
+
+        check_figure_path(plot_path)  # before the work: a bad target is a usage error, not a lost run
     requested = [n.strip() for n in names.split(",") if n.strip()] if names else None
+    explicit = bool(tables)
     tables = sorted(set(tables)) or [1, 2, 3, 4]
     settings = TableSettings(repeat=repeat, rotation_model=rotation_model, data_dir=data_dir)
     todo = dataset_names(requested, data_dir)
@@ -108,11 +132,10 @@ def command(all_, tables, names, repeat, jobs, fmt, out_dir, compare_paper, rota
         from ..report import to_rich_table
 
         console = Console(width=None if sys.stdout.isatty() else 250)
-        for t in tables:
-            trs, cols = table_rows(rows, t, compare_paper)
-            console.print(to_rich_table(trs, cols, TITLES[t], HEADERS, caption=footnote(t, rotation_model)))
+        for t, trs, cols, note in _shown(rows, tables, compare_paper, rotation_model, explicit):
+            console.print(to_rich_table(trs, cols, TITLES[t], HEADERS, caption=note))
     else:
-        click.echo(_render(rows, tables, fmt, compare_paper, rotation_model), nl=False)
+        click.echo(_render(rows, tables, fmt, compare_paper, rotation_model, explicit), nl=False)
 
     if out_dir:
         out = Path(out_dir)
@@ -128,6 +151,14 @@ def command(all_, tables, names, repeat, jobs, fmt, out_dir, compare_paper, rota
         (out / "rows.json").write_text(to_json(rows))
         (out / "run.json").write_text(json.dumps(run_record(settings, rows, sys.argv), indent=2) + "\n")
         log.info("wrote %s", os.fspath(out))
+
+    if plot_path:
+        from ..plots import plot_tables
+
+        try:
+            log.info("wrote %s", plot_tables(rows, plot_path, note=f"3D rotation weight: {rotation_model}"))
+        except ValueError as exc:
+            log.warning("no figure written: %s", exc)
 
     bad = failed(rows, requested)
     if bad:
