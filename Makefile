@@ -81,7 +81,7 @@ run: install
 	@$(PY) -m posecrb --version >&2
 	# The manifest's missing datasets first (verified, progress bar); without network this says so once
 	# and the tables use the datasets found, or the built-in synthetic graph when there is none.
-	$(PY) -m posecrb datasets fetch --all --offline-ok >/dev/null
+	$(PY) -m posecrb -v datasets fetch --all --offline-ok >/dev/null
 	$(PY) -m posecrb tables --all
 
 test: install

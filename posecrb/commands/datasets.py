@@ -47,12 +47,15 @@ def path_cmd(name: str, data_dir: str | None) -> None:
 
 
 def _progress_bar():
+    """Download bars on a terminal; elsewhere (logs, CI) none: each download is logged instead (-v)."""
+    import sys
+
     from rich.console import Console
     from rich.progress import (BarColumn, DownloadColumn, Progress, TextColumn, TimeRemainingColumn,
                                TransferSpeedColumn)
 
     return Progress(TextColumn("{task.description}"), BarColumn(), DownloadColumn(), TransferSpeedColumn(),
-                    TimeRemainingColumn(), console=Console(stderr=True))
+                    TimeRemainingColumn(), console=Console(stderr=True), disable=not sys.stderr.isatty())
 
 
 @command.command("fetch")
