@@ -127,8 +127,9 @@ def fetch_cmd(names: tuple[str, ...], all_: bool, dest: str | None, url: str | N
                single_json=False, title="posecrb datasets fetch")
     if offline:
         reasons = "; ".join(dict.fromkeys(r.error for r in offline))
+        names = [r.name for r in offline]
         log.warning("no network (%s): %d dataset(s) not downloaded: %s", reasons, len(offline),
-                    ", ".join(r.name for r in offline))
+                    ", ".join(names) if len(names) <= 6 else ", ".join(names[:4]) + f", ... and {len(names) - 4} more")
     for r in failed:
         log.warning("%s", r.error)
     if failed or (offline and not offline_ok):
