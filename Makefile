@@ -73,6 +73,8 @@ endif
 	  sys.exit(os.path.dirname(os.path.dirname(os.path.realpath(posecrb.__file__))) != os.path.realpath('.'))" \
 	  2>/dev/null || { say "installing posecrb (editable, dev extras) into $$($(PY) -c 'import sys; print(sys.prefix)')"; \
 	                   $(PY) -m pip install -q -e '.[dev]'; \
+	                   $(PY) -m pip install -q 'gtsam>=4.2' 2>/dev/null \
+	                     || say "gtsam not installable here: the GTSAM comparison tests will be skipped"; \
 	                   say "the posecrb command: $$(dirname $(PY))/posecrb (or activate: . $$(dirname $(PY))/activate)"; }
 
 # Recipes run silently (.ONESHELL: one shell per recipe); what matters is said on stderr, starting
