@@ -32,32 +32,57 @@ log = logging.getLogger("posecrb")
 class RelaxedModel:
     """f(Z) = tr(Z^T Q Z) on St(d, r)^n with gradient, Hessian and a Schur-complement preconditioner."""
 
-    def __init__(self, problem: Problem, precond_factor=None, adaptive_shift: float | None = None):
+    def __init__(self, problem: Problem, precond_factor=None, adaptive_shift: float | None = None,
+                 refactor_hvps: int | None = 30):
         self.problem = problem
         self.base_factor = precond_factor
         self.precond_factor = precond_factor
         self.adaptive_shift = adaptive_shift
+        self.refactor_hvps = refactor_hvps
+        self.lambda_hint = 0.0      # lambda_min(Q - Lambda) at the last saddle (<= 0), set by the staircase
         self.hvps = 0
         self.factorizations = 0
+        self._factored_at: np.ndarray | None = None     # Z of the iterate the adaptive factor was built at
         self._gram: tuple[np.ndarray, tuple[np.ndarray, np.ndarray]] | None = None   # (Z, gram_eigh(Z))
 
-    def prepare(self, state: State) -> None:
-        """Refactor the preconditioner as (Q - Lambda(Y) + s I)^{-1} at a new iterate.
+    def prepare(self, state: State, last_hvps: int | None = None) -> None:
+        """Refactor the preconditioner as (Q - Lambda(Y) + s I)^{-1} at the iterate, when it pays.
 
         Near a minimiser the Riemannian Hessian is 2 Proj S with S = Q - Lambda, so this
-        is close to an exact Newton preconditioner; where S + s I is not positive
-        definite (far from a minimiser) the Lambda-free factor (Q + delta I)^{-1} is used.
+        is close to an exact Newton preconditioner. Refactoring costs one sparse Cholesky,
+        which on most problems is worth more than the Hessian-vector products it saves, so
+        with ``refactor_hvps`` set the current factor (first the Lambda-free (Q + delta I)^{-1},
+        SE-Sync's choice) is kept until a truncated-CG run needs more than ``refactor_hvps``
+        products (``last_hvps``); ``refactor_hvps=None`` refactors at every accepted iterate.
+
+        Where S + s I is not positive definite (away from a minimiser, typically right after a
+        staircase escape) the shift grows past the negative curvature: first to
+        ``s + 2 |lambda_hint|`` (the certificate's lambda_min at the saddle just left), then tenfold;
+        the Lambda-free factor is the last resort, because it ignores Lambda, the dominant
+        diagonal part of the Hessian, and makes truncated CG take hundreds of steps.
         """
         if self.adaptive_shift is None or self.base_factor is None:
             return
-        try:
-            self.precond_factor = self.problem.factor_full(state.lam, self.adaptive_shift,
-                                                           name="preconditioner M_red(Lambda, s)")
-            log.debug("preconditioner: (Q - Lambda + s I)^-1")
-        except NotPositiveDefinite:
-            self.precond_factor = self.base_factor
-            log.debug("preconditioner: Q - Lambda + s I not PD, using (Q + delta I)^-1")
-        self.factorizations += 1
+        if self._factored_at is state.Z:
+            return
+        if self.refactor_hvps is not None and (last_hvps is None or last_hvps <= self.refactor_hvps):
+            return
+        s = self.adaptive_shift
+        shifts = [s]
+        if self.lambda_hint < 0:
+            shifts += [s + 2.0 * abs(self.lambda_hint), s + 20.0 * abs(self.lambda_hint)]
+        self._factored_at = state.Z
+        for shift in shifts:
+            self.factorizations += 1
+            try:
+                self.precond_factor = self.problem.factor_full(state.lam, shift,
+                                                               name="preconditioner M_red(Lambda, s)")
+            except NotPositiveDefinite:
+                continue
+            log.debug("preconditioner: (Q - Lambda + %.3e I)^-1", shift)
+            return
+        self.precond_factor = self.base_factor
+        log.debug("preconditioner: Q - Lambda + s I not PD, using (Q + delta I)^-1")
 
     def evaluate(self, Z: np.ndarray) -> State:
         p = self.problem

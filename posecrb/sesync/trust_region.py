@@ -150,12 +150,14 @@ def trust_region(model: Model, Z0: np.ndarray, opt: TROptions, state: State | No
             rel = (x.f - cand.f) / max(abs(x.f), 1e-300)
             x = cand
             if prepare is not None:
-                prepare(x)
+                prepare(x, k)
             pg = model.precondition(x, x.grad)
             decrement = 0.5 * inner(pg, x.grad)
             if rel <= opt.rel_decrease_tol:
                 status = "relative decrease"
                 break
+        elif prepare is not None:
+            prepare(x, k)   # a rejected but expensive tCG: a better preconditioner at the same point
         if model_decrease <= 1e-15 * max(abs(x.f), 1e-300):
             status = "model decrease below machine precision"
             break
