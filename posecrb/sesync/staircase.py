@@ -23,7 +23,8 @@ from scipy.sparse.linalg import ArpackNoConvergence, LinearOperator, eigsh
 
 from ..errors import NotPositiveDefinite, SolverError
 from .problem import Problem
-from .stiefel import gram_eigh, lift, project, remove_vertical, retract, sym_block_diag_product
+from .stiefel import (gram_eigh, hessian_blocks, lift, project, remove_vertical, retract, sym_block_diag_product,
+                      to_components)
 from .trust_region import State
 
 log = logging.getLogger("posecrb")
@@ -44,6 +45,18 @@ class RelaxedModel:
         self.factorizations = 0
         self._factored_at: np.ndarray | None = None     # Z of the iterate the adaptive factor was built at
         self._gram: tuple[np.ndarray, tuple[np.ndarray, np.ndarray]] | None = None   # (Z, gram_eigh(Z))
+        self._comp: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None   # (Z, Z, Lambda) component-major
+
+    def _components(self, state: State) -> tuple[np.ndarray, np.ndarray]:
+        """Z and Lambda of ``state`` in the component-major layout of the block kernels, cached
+        per point (tCG applies the Hessian and projection many times at one point)."""
+        if self._comp is None or self._comp[0] is not state.Z:
+            self._comp = (state.Z, to_components(state.Z), to_components(state.lam))
+        return self._comp[1], self._comp[2]
+
+    def project(self, state: State, W: np.ndarray) -> np.ndarray:
+        """Tangent projection at ``state``'s point (stiefel.project with the cached layout)."""
+        return project(state.Z, W, self._components(state)[0])
 
     def prepare(self, state: State, last_hvps: int | None = None) -> None:
         """Refactor the preconditioner as (Q - Lambda(Y) + s I)^{-1} at the iterate, when it pays.
@@ -100,7 +113,8 @@ class RelaxedModel:
         self.hvps += 1
         n, d, r = V.shape
         QV = self.problem.Q_product(V.reshape(n * d, r)).reshape(n, d, r)
-        return 2.0 * project(state.Z, QV - state.lam @ V)
+        Zt, lamt = self._components(state)
+        return hessian_blocks(Zt, lamt, V, QV)
 
     def precondition(self, state: State, R: np.ndarray) -> np.ndarray:
         if self.precond_factor is None:
@@ -112,7 +126,7 @@ class RelaxedModel:
         gram = self._gram[1]
         R = remove_vertical(state.Z, R, gram)
         W = self.problem.schur_solve(self.precond_factor, R.reshape(n * d, r)).reshape(n, d, r)
-        return remove_vertical(state.Z, project(state.Z, 0.5 * W), gram)
+        return remove_vertical(state.Z, project(state.Z, W, self._components(state)[0], scale=0.5), gram)
 
 
 @dataclass

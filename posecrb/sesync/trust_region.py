@@ -77,6 +77,7 @@ def _tcg(model: Model, state: State, delta: float, opt: TROptions):
     e_Pe = 0.0
     model_value = 0.0
     hvps = 0
+    proj = getattr(model, "project", None)
     stop = norm_r0 * min(opt.kappa, norm_r0 ** opt.theta)
     for j in range(opt.max_inner):
         Hd = model.hvp(state, delta_dir)
@@ -103,7 +104,8 @@ def _tcg(model: Model, state: State, delta: float, opt: TROptions):
         zold_rold = z_r
         z_r = inner(z, r)
         beta = z_r / zold_rold
-        delta_dir = project(state.Z, -z + beta * delta_dir)
+        w = beta * delta_dir - z
+        delta_dir = proj(state, w) if proj is not None else project(state.Z, w)
         e_Pd = beta * (e_Pd + alpha * d_Pd)
         d_Pd = z_r + beta * beta * d_Pd
     return eta, Heta, hvps, "max inner", False
