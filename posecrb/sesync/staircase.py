@@ -11,6 +11,21 @@ Verification uses the sparse identity ``(Q - Lambda + s I)^{-1} = [M_red(s)^{-1}
 (SE-Sync's first test); its factor also drives a shift-invert Lanczos for the value of
 lambda_min. When it fails, increasing shifts locate a PD shift sigma and shift-invert
 Lanczos at -sigma returns the negative eigenpair for the escape.
+
+What "certified" means (the tolerance eta, ``certificate_tol``, default 1e-3): posecrb accepts
+``lambda_min(Q - Lambda) >= -eta`` on the translation-ELIMINATED certificate. For any feasible
+point Z of the SDP (diagonal blocks I_d), ``tr(Q Z) >= f(Y) + n d lambda_min(Q - Lambda)``, so a
+certified solve proves ``F* >= f(Y) - n d eta``: an absolute suboptimality bound of at most
+``n d eta`` plus the rounding gap (``SolveResult.duality_gap``). SE-Sync's C++ test is looser:
+it factors ``M - Lambda + eta I`` with eta added to the translation rows as well. Its Schur
+complement is ``C - Lambda + eta I - V^T (L(W^tau) + eta I)^{-1} V``, which exceeds
+``Q - Lambda + eta I`` by ``V^T [L^{-1} - (L + eta I)^{-1}] V`` -- large where L(W^tau) has small
+eigenvalues (big, weakly connected graphs) -- and the dual bound it implies is only
+``F* >= f(Y) - eta (n d + sum_i |t_i - t_0|^2)``, with the translations' spread in it. On the
+noisy 2D grid of 100,489 poses, SE-Sync's test passes at a rank-3 point where
+``lambda_min(Q - Lambda) = -3.7e-3``; there ``n d eta = 201`` but
+``eta sum |t_i - t_0|^2 = 6.7e6`` against F ~ 3.0e5, i.e. no bound at all. posecrb keeps the
+strict test, escapes to rank 4 there and certifies ``lambda_min = -1e-8`` (F lower by 0.015).
 """
 from __future__ import annotations
 
@@ -41,6 +56,7 @@ class RelaxedModel:
         self.adaptive_shift = adaptive_shift
         self.refactor_hvps = refactor_hvps
         self.lambda_hint = 0.0      # lambda_min(Q - Lambda) at the last saddle (<= 0), set by the staircase
+        self.refactor_next = False  # refactor at the next prepare() whatever the HVP count (after an escape)
         self.hvps = 0
         self.factorizations = 0
         self._factored_at: np.ndarray | None = None     # Z of the iterate the adaptive factor was built at
@@ -71,6 +87,8 @@ class RelaxedModel:
         Where S + s I is not positive definite (away from a minimiser, typically right after a
         staircase escape) the shift grows past the negative curvature: first to
         ``s + 2 |lambda_hint|`` (the certificate's lambda_min at the saddle just left), then tenfold;
+        after an escape (``refactor_next``) the factor is rebuilt at once, since the Lambda-free one
+        is poor there;
         the Lambda-free factor is the last resort, because it ignores Lambda, the dominant
         diagonal part of the Hessian, and makes truncated CG take hundreds of steps.
         """
@@ -78,8 +96,10 @@ class RelaxedModel:
             return
         if self._factored_at is state.Z:
             return
-        if self.refactor_hvps is not None and (last_hvps is None or last_hvps <= self.refactor_hvps):
+        if (self.refactor_hvps is not None and not self.refactor_next
+                and (last_hvps is None or last_hvps <= self.refactor_hvps)):
             return
+        self.refactor_next = False
         s = self.adaptive_shift
         shifts = [s]
         if self.lambda_hint < 0:
