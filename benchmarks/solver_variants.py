@@ -11,6 +11,7 @@ baseline variant. Variants (keyword arguments of posecrb.sesync.solve):
   every-iterate refactor_hvps=None: (Q - Lambda + s I)^-1 refactored at every accepted iterate
                 (the default refactors only after a truncated CG run of more than 30 products)
   refactor>K    refactor_hvps=K
+  theta=1       truncated CG stops at ||r|| <= ||r0|| min(kappa, ||r0||^1) (Manopt; default exponent 0.5)
   r0=5          start the staircase at rank 5 (SE-Sync's default) instead of d + 1
   no-precond    precondition=False (the unpreconditioned trust region, for scale)
 BLAS is single-threaded (the solver limits it itself). Usage:
@@ -33,6 +34,7 @@ VARIANTS = {
     "refactor>10": {"refactor_hvps": 10},
     "refactor>60": {"refactor_hvps": 60},
     "r0=5": {"r0": 5},
+    "theta=1": {"theta": 1.0},
     "no-precond": {"precondition": False},
 }
 DEFAULT_NAMES = ["city10000", "ais2klinik", "parking-garage", "sphere2500", "sphere_bignoise_vertex3",

@@ -44,7 +44,10 @@ class TROptions:
     max_iterations: int = 500
     max_inner: int = 1000
     kappa: float = 0.1           # tCG linear convergence target
-    theta: float = 1.0           # tCG superlinear exponent: ||r|| <= ||r0|| min(kappa, ||r0||^theta)
+    # tCG superlinear exponent: ||r|| <= ||r0|| min(kappa, ||r0||^theta). 0.5 rather than Manopt's 1:
+    # fewer products per run on ill-conditioned levels (2D 10^5-pose grid at rank 4: 794 -> 467 HVPs;
+    # ais2klinik 283 -> 237) with the same stopping tests, so the same optimum.
+    theta: float = 0.5
     rho_accept: float = 0.1
     grad_tol: float = 0.0        # absolute Riemannian gradient norm
     decrement_tol: float = 1e-11  # stop when 0.5 <g, P g> <= decrement_tol * max(|f|, 1)
