@@ -38,8 +38,16 @@ from scipy.sparse.linalg import ArpackNoConvergence, LinearOperator, eigsh
 
 from ..errors import NotPositiveDefinite, SolverError
 from .problem import Problem
-from .stiefel import (gram_eigh, hessian_blocks, lift, project, remove_vertical, retract, sym_block_diag_product,
-                      to_components)
+from .stiefel import (
+    gram_eigh,
+    hessian_blocks,
+    lift,
+    project,
+    remove_vertical,
+    retract,
+    sym_block_diag_product,
+    to_components,
+)
 from .trust_region import State
 
 log = logging.getLogger("posecrb")
