@@ -7,8 +7,11 @@ Hessian-vector products, rank, certificate and the objective's relative differen
 baseline variant. Variants (keyword arguments of posecrb.solver.solve):
   base          the defaults
   fixed-precond adaptive_precond=None: the regularised factor (Q + delta I)^-1 built once, as
-                SE-Sync's RegularizedCholesky, instead of (Q - Lambda + s I)^-1 refactored at
-                every accepted iterate
+                SE-Sync's RegularizedCholesky, never (Q - Lambda + s I)^-1
+  every-iterate refactor_hvps=None: (Q - Lambda + s I)^-1 refactored at every accepted iterate
+                (the default refactors only after a truncated CG run of more than 30 products)
+  refactor>K    refactor_hvps=K
+  theta=1       truncated CG stops at ||r|| <= ||r0|| min(kappa, ||r0||^1) (Manopt; default exponent 0.5)
   r0=5          start the staircase at rank 5 (SE-Sync's default) instead of d + 1
   no-precond    precondition=False (the unpreconditioned trust region, for scale)
 BLAS is single-threaded (the solver limits it itself). Usage:
@@ -27,7 +30,11 @@ from _common import data_dir, print_header, suite_files
 VARIANTS = {
     "base": {},
     "fixed-precond": {"adaptive_precond": None},
+    "every-iterate": {"refactor_hvps": None},
+    "refactor>10": {"refactor_hvps": 10},
+    "refactor>60": {"refactor_hvps": 60},
     "r0=5": {"r0": 5},
+    "theta=1": {"theta": 1.0},
     "no-precond": {"precondition": False},
 }
 DEFAULT_NAMES = ["city10000", "ais2klinik", "parking-garage", "sphere2500", "sphere_bignoise_vertex3",

@@ -342,3 +342,63 @@ def test_cli_fetch_options_are_validated(tmp_path, capsys):
     assert "--dest" in capsys.readouterr().err
     assert main(["datasets", "fetch", "intel", "--dest", str(f / "sub")]) == 2     # parent is a file
     assert "is not a directory" in capsys.readouterr().err
+
+
+def test_probe_answers_and_refusals(server):
+    url, _, _ = server
+    from posecrb.datasets.fetch import probe
+
+    assert probe(f"{url}/intel.g2o", timeout=5) is None
+    assert probe(f"{url}/nothing/here.g2o", timeout=5) is None     # an HTTP error still proves the network
+    assert probe("http://127.0.0.1:1/x", timeout=5)                  # refused: a reason
+
+
+def test_probe_gives_up_after_its_timeout():
+    """A server that accepts the connection but never answers must not hold the caller."""
+    import socket
+    import time
+
+    from posecrb.datasets.fetch import probe
+
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        s.listen(1)                                                  # the kernel accepts, nobody answers
+        t0 = time.perf_counter()
+        reason = probe(f"http://127.0.0.1:{s.getsockname()[1]}/x", timeout=0.3)
+        elapsed = time.perf_counter() - t0
+    assert reason and elapsed < 2.0
+
+
+def test_fetch_many_offline_server_is_probed_once_and_not_attempted(tmp_path, monkeypatch):
+    man = load_manifest()
+    calls = []
+    monkeypatch.setattr("posecrb.datasets.fetch.probe", lambda url, timeout: calls.append(url) or "simulated outage")
+    res = fetch_many(["tinyGrid3D", "intel"], dest=tmp_path / "dest", manifest=man, probe_timeout=1.0)
+    assert [r.status for r in res] == ["offline", "offline"]
+    assert all("simulated outage" in r.error for r in res)
+    assert len(calls) == 1                                           # one server, one probe
+    assert files_in(tmp_path / "dest") == []
+
+
+def test_fetch_many_present_files_need_no_probe(tmp_path, shared_datasets, monkeypatch):
+    dest = tmp_path / "dest"
+    dest.mkdir()
+    shutil.copy(shared_datasets / "tinyGrid3D.g2o", dest / "tinyGrid3D.g2o")
+    monkeypatch.setattr("posecrb.datasets.fetch.probe", lambda url, timeout: pytest.fail("probed although present"))
+    res = fetch_many(["tinyGrid3D"], dest=dest, probe_timeout=1.0)
+    assert [r.status for r in res] == ["present"]
+
+
+def test_cli_offline_is_said_once_and_offline_ok_exits_zero(tmp_path, monkeypatch, capsys):
+    monkeypatch.setattr("posecrb.datasets.fetch.probe", lambda url, timeout: "simulated outage")
+    dest = tmp_path / "dest"
+    assert main(["datasets", "fetch", "--all", "--dest", str(dest), "--format", "csv"]) == 1
+    err = capsys.readouterr().err
+    assert err.count("no network") == 1 and "simulated outage" in err
+    assert main(["datasets", "fetch", "--all", "--offline-ok", "--dest", str(dest), "--format", "csv"]) == 0
+    out, err = capsys.readouterr()
+    assert err.count("no network") == 1 and "error" not in err
+    assert {r.split(",")[1] for r in out.splitlines()[1:]} == {"offline"}
+    assert main(["datasets", "fetch", "rim", "--offline-ok", "--dest", str(dest)]) == 0
+    assert main(["datasets", "fetch", "rim", "--dest", str(dest)]) == 1
+    assert files_in(dest) == []

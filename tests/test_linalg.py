@@ -57,3 +57,55 @@ def test_lambda_min_matches_dense():
         ev = np.linalg.eigvalsh(a.toarray())
         # symmetric eigenvalues are perturbed by at most the backward error ~ n eps ||A||_2
         assert lambda_min(a) == pytest.approx(ev[0], abs=MARGIN * n * EPS * ev[-1])
+
+
+_CYCLE_SCRIPT = r"""
+import ctypes, gc, os, sys
+import scipy.sparse as sp
+if sys.argv[1] == "posecrb":
+    import posecrb.linalg  # noqa: F401  (the fix is applied on import)
+from sksparse.cholmod import analyze
+# Where scikit-sparse 0.4.16 + SuiteSparse 5 write when a Factor's _common was cleared to None:
+# None + 24 (object header and vtable pointer of Common) + 1972 (cholmod_common.status).
+probe = ctypes.c_int.from_address(id(None) + 24 + 1972)
+before = probe.value
+gc.disable()
+for _ in range(3):
+    f = analyze(sp.identity(5, format="csc") * 2.0)   # allocated before the cycle: cleared first
+    box = type("Box", (), {})()
+    box.f, box.me = f, box
+    del f, box
+gc.collect()
+print(before, probe.value, flush=True)
+os._exit(0)                                        # never finalize an interpreter that may be corrupted
+"""
+
+
+def test_factor_in_a_reference_cycle_is_freed_with_its_common():
+    """scikit-sparse's Factor, collected inside a reference cycle, must not reach CHOLMOD with
+    ``_common`` already cleared to None (CHOLMOD then writes -4 past None: memory corruption)."""
+    import ctypes
+    import os
+    import subprocess
+    import sys
+    from pathlib import Path
+
+    from sksparse.cholmod import Factor
+
+    get_slot = ctypes.pythonapi.PyType_GetSlot
+    get_slot.restype, get_slot.argtypes = ctypes.c_void_p, [ctypes.py_object, ctypes.c_int]
+    assert get_slot(Factor, 51) is None                # Py_tp_clear emptied by posecrb.linalg
+
+    env = {**os.environ, "PYTHONPATH": str(Path(__file__).resolve().parents[1])}
+
+    def run(mode):
+        out = subprocess.run([sys.executable, "-c", _CYCLE_SCRIPT, mode], capture_output=True, text=True,
+                             env=env, timeout=120, check=True).stdout.split()
+        return int(out[0]), int(out[1])
+
+    bare = run("bare")
+    if bare[0] == bare[1]:
+        pytest.skip("this scikit-sparse/CHOLMOD build does not write at the probed address")
+    assert bare[1] == -4                               # the defect, reproduced without posecrb
+    fixed = run("posecrb")
+    assert fixed[0] == fixed[1]

@@ -70,3 +70,18 @@ def test_save_expected_is_atomic_and_leaves_no_temporary(tmp_path):
     save_expected({"version": 1, "datasets": {"a": {"lb": 1.0}}}, target)
     assert json.loads(target.read_text())["datasets"]["a"]["lb"] == 1.0
     assert [p.name for p in tmp_path.iterdir()] == ["expected.json"]
+
+
+def test_trace_crlb_tolerance_follows_the_inverse_accuracy():
+    """An ill-conditioned FIM cannot give trace(F^-1) to 1e-6: the tolerance is at least ten times
+    the inverse's estimated relative error (cond x eps), and only for trace_crlb."""
+    from posecrb.metrics.regress import compare
+
+    expected = {"trace_crlb": 1.0, "fim_logdet": 1.0}
+    drift = 1 + 8e-6
+    tight = {d.quantity: d.ok for d in compare("x", expected, {"trace_crlb": drift, "fim_logdet": drift})}
+    assert tight == {"trace_crlb": False, "fim_logdet": False}
+    loose = {d.quantity: d for d in compare("x", expected, {"trace_crlb": drift, "fim_logdet": drift,
+                                                           "trace_crlb_error_bound": 4e-6})}
+    assert loose["trace_crlb"].ok and loose["trace_crlb"].tolerance == pytest.approx(4e-5)
+    assert not loose["fim_logdet"].ok

@@ -126,3 +126,26 @@ def test_translations_match_least_squares():
     x = np.linalg.lstsq(A, b, rcond=None)[0].reshape(n - 1, d)
     np.testing.assert_allclose(T[1:], x, atol=1e-10)
     np.testing.assert_allclose(T[0], 0)
+
+
+@pytest.mark.parametrize("d,r", [(2, 2), (2, 3), (3, 4), (3, 5)])
+def test_block_kernels_match_per_block_products(d, r):
+    """The component-major block operations against a plain loop of d x r matrix products."""
+    from posecrb.solver.stiefel import hessian_blocks, sym_block_diag_product, to_components
+
+    rng = np.random.default_rng(10 * d + r)
+    n = 7
+    Z = random_point(n, d, r, rng)
+    W, V = rng.standard_normal((n, d, r)), rng.standard_normal((n, d, r))
+    L = rng.standard_normal((n, d, d))
+    lam = L + np.swapaxes(L, 1, 2)
+    for i in range(n):
+        S = 0.5 * (W[i] @ Z[i].T + Z[i] @ W[i].T)
+        np.testing.assert_allclose(sym_block_diag_product(W, Z)[i], S, rtol=0, atol=1e-14 * r)
+        np.testing.assert_allclose(project(Z, W)[i], W[i] - S @ Z[i], rtol=0, atol=1e-14 * r * d)
+        np.testing.assert_allclose(project(Z, W, scale=0.5)[i], 0.5 * (W[i] - S @ Z[i]), rtol=0, atol=1e-14 * r * d)
+        G = W[i] - lam[i] @ V[i]
+        SG = 0.5 * (G @ Z[i].T + Z[i] @ G.T)
+        want = 2.0 * (G - SG @ Z[i])
+        got = hessian_blocks(to_components(Z), to_components(lam), V, W)[i]
+        np.testing.assert_allclose(got, want, rtol=0, atol=1e-13 * r * d * max(1.0, np.abs(lam).max()))

@@ -263,3 +263,38 @@ def test_non_orthogonal_measurements_use_sesync_objective(dim):
     defect = float(np.sum(g.kappa * (dim - np.einsum("eab,eab->e", g.rot, g.rot))))
     assert res.objective - objective_loop(g, res.rot, res.trans) == pytest.approx(defect, rel=1e-9)
     assert res.relaxation_value == pytest.approx(res.objective, rel=1e-9)
+
+
+def test_preconditioner_after_escape_is_shifted_not_lambda_free():
+    """At a saddle (Q - Lambda + s I indefinite) the rebuilt preconditioner is the inverse of
+    Q - Lambda + (s + 2|lambda_min|) I, checked against a dense inverse, not (Q + delta I)^{-1}."""
+    n = 16
+    src = np.arange(n)
+    dst = (np.arange(n) + 1) % n
+    src, dst = np.minimum(src, dst), np.maximum(src, dst)
+    info = np.tile(np.diag([1.0, 1.0, 10.0]), (n, 1, 1))
+    g = PoseGraph(dim=2, ids=np.arange(n), src=src, dst=dst, rot=np.tile(np.eye(2), (n, 1, 1)),
+                  trans=np.zeros((n, 2)), info=info, format="synthetic")
+    p = Problem.from_graph(g)
+    s = 1e-10 * p.gershgorin_max()
+    base = p.factor_full(None, p.gershgorin_max() / 1e6, name="base")
+    model = RelaxedModel(p, base, adaptive_shift=s)
+    winding = np.ascontiguousarray(np.swapaxes(rot2(2 * np.pi * np.arange(n) / n), 1, 2))
+    res = trust_region(model, lift(winding, 2), TROptions())
+    state = res.state
+    cert = verify(p, state, 1e-6, np.random.default_rng(0))
+    assert not cert.certified and cert.lambda_min < 0
+    Sd = p.Q_product(np.eye(2 * n))
+    for i in range(n):
+        Sd[2 * i:2 * i + 2, 2 * i:2 * i + 2] -= state.lam[i]
+    Sd = 0.5 * (Sd + Sd.T)
+    assert np.linalg.eigvalsh(Sd)[0] + s < 0            # the plain adaptive factor cannot exist here
+    model.lambda_hint, model.refactor_next = cert.lambda_min, True
+    model.prepare(state)
+    assert model.precond_factor is not base
+    shift = s + 2 * abs(cert.lambda_min)
+    W = np.random.default_rng(3).standard_normal((2 * n, 2))
+    want = np.linalg.solve(Sd + shift * np.eye(2 * n), W)
+    cond = np.linalg.cond(Sd + shift * np.eye(2 * n))
+    np.testing.assert_allclose(p.schur_solve(model.precond_factor, W), want, rtol=0,
+                               atol=MARGIN * cond * EPS * np.abs(want).max() * 2 * n)

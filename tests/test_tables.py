@@ -138,3 +138,92 @@ def test_default_table_two_is_the_model_and_says_so_once(shared_datasets, capfd)
     rows = {r["dataset"]: r for r in json.loads(out)["rows"]}
     assert rows["CSAIL"]["fim_variant"] == "eq64"     # 2D: the same matrix, labelled as computed
     assert main(["tables", "--datasets", "CSAIL", "--as-published", "--rotation-weight", "eq59"]) == 2
+
+
+def test_tables_without_rows_are_not_printed_and_the_note_once(shared_datasets, capfd):
+    rc, out, _ = _run(capfd, "--format", "markdown")
+    assert rc == 0
+    assert [b.splitlines()[0] for b in out.split("### ") if b.strip()] == [
+        "Table I: metric results, 2D datasets", "Table II: metric results, 3D datasets",
+        "Table III: matrix construction time, 2D datasets", "Table IV: matrix construction time, 3D datasets"]
+    assert out.count("differ from the printed Table II by design") == 1                        # Table II's note, not repeated under IV
+    rc, out, _ = _run(capfd)                                        # the terminal table
+    assert " ".join(out.split()).count("differ from the printed Table II by design") == 1 and "Table IV" in out
+    rc = main(["tables", "--datasets", "CSAIL", "--repeat", "1", "--format", "markdown"])
+    out, err = capfd.readouterr()
+    assert rc == 0 and "Table I:" in out and "Table III:" in out
+    assert "Table II:" not in out and "Table IV:" not in out and "kappa" not in out
+    rc = main(["tables", "--datasets", "CSAIL", "--repeat", "1", "--table", "2"])
+    out, err = capfd.readouterr()
+    assert rc == 0 and out == "" and "Table II: no 3D dataset, not printed" in err
+
+
+def test_first_run_without_any_dataset_uses_the_builtin_graph(tmp_path, monkeypatch, capfd):
+    """A stock machine: nothing on the search path. One warning, only the 2D tables (it is 2D)."""
+    monkeypatch.setattr("posecrb.datasets.search.search_path", lambda data_dir=None: [tmp_path / "nothing"])
+    rc = main(["tables", "--all", "--repeat", "1"])
+    out, err = capfd.readouterr()
+    assert rc == 0
+    assert err.count("built-in synthetic graph") == 1 and err.count("warning") == 1
+    assert "builtin_demo" in out and "Table I:" in out and "Table III:" in out
+    assert "Table II:" not in out and "Table IV:" not in out
+
+
+@pytest.mark.parametrize("ext", ["png", "svg"])
+def test_plot_writes_one_figure_atomically(shared_datasets, capfd, tmp_path, ext):
+    target = tmp_path / "fig" / f"tables.{ext}"
+    rc, _, _ = _run(capfd, "--format", "csv", "--plot", str(target))
+    assert rc == 0
+    data = target.read_bytes()
+    if ext == "png":
+        assert data.startswith(b"\x89PNG\r\n\x1a\n")
+    else:
+        text = data.decode()
+        assert text.lstrip().startswith("<?xml") and "<svg" in text and text.rstrip().endswith("</svg>")
+        assert "CSAIL" in text and "tinyGrid3D" in text                # text stays text in the SVG
+    assert sorted(p.name for p in target.parent.iterdir()) == [target.name]   # no temporary file left
+
+
+def test_plot_target_is_checked_before_the_work(tmp_path, capfd):
+    # exit 2 (usage), not 1 (the dataset does not exist): nothing was computed
+    for bad in (tmp_path / "t.pdf", tmp_path / "t", tmp_path):
+        assert main(["tables", "--datasets", "nosuchdataset", "--plot", str(bad)]) == 2
+    (tmp_path / "file").write_text("")
+    assert main(["tables", "--datasets", "nosuchdataset", "--plot", str(tmp_path / "file" / "t.png")]) == 2
+    err = capfd.readouterr().err
+    assert ".pdf" in err and "not a directory" in err
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["file"]
+
+
+def test_plot_tables_values(tmp_path):
+    """The figure's numbers: (x - lb)/lb and our/paper time ratios, read back from the SVG's data."""
+    from posecrb.plots import plot_tables
+
+    rows = [{"dataset": "CSAIL", "dim": 2, "status": "ok", "lb": 100.0, "fim_logdet": 101.0, "ub": 110.0,
+             "fim_time": 2.3284e-3, "lb_time": 3.6712e-3 / 2},
+            {"dataset": "mine", "dim": 3, "status": "ok", "lb": 10.0, "fim_logdet": 10.5, "ub": 12.0},
+            {"dataset": "grid3D", "status": "not found"}]
+    import matplotlib.pyplot as plt
+
+    captured = {}
+    orig = plt.Axes.scatter
+
+    def spy(ax, x, y, *a, **kw):
+        captured.setdefault(kw.get("label"), []).append((list(x), list(y)))
+        return orig(ax, x, y, *a, **kw)
+
+    plt.Axes.scatter = spy
+    try:
+        plot_tables(rows, tmp_path / "t.png")
+    finally:
+        plt.Axes.scatter = orig
+    (fx, fy), = captured["FIM log-det\n(certified optimum)"]
+    (ux, uy), = captured["upper bound ub (eq. 75)"]
+    assert fx == [0, 1] and fy == pytest.approx([0.01, 0.05]) and uy == pytest.approx([0.1, 0.2])
+    (tx, ty), = captured["FIM log-det (Table I/II)"]
+    assert ty == pytest.approx([1.0])                             # same time as printed -> 1
+    (tx, ty), = captured["lb (Table I/II)"]
+    assert ty == pytest.approx([0.5])
+    with pytest.raises(ValueError):
+        plot_tables([{"dataset": "grid3D", "status": "not found"}], tmp_path / "u.png")
+    assert not (tmp_path / "u.png").exists()

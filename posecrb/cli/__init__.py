@@ -97,7 +97,9 @@ _EXPLICIT_SHORT_HELP = {"select"}   # commands declared with short_help= (shown 
 
 
 @click.group(cls=LazyGroup, context_settings={"help_option_names": ["-h", "--help"], "max_content_width": 100})
-@click.version_option(__version__, prog_name="posecrb")
+@click.version_option(__version__, prog_name="posecrb",
+                      message=f"%(prog)s %(version)s from {os.path.dirname(os.path.dirname(os.path.abspath(__file__)))} "
+                              f"(Python {sys.version.split()[0]}, {sys.executable})")
 @click.option("-v", "--verbose", count=True, help="More log output on stderr (-vv for debug).")
 @click.option("-q", "--quiet", is_flag=True, help="Only errors on stderr.")
 def cli(verbose: int, quiet: bool) -> None:

@@ -16,6 +16,7 @@ from __future__ import annotations
 import http.client
 import logging
 import os
+import threading
 import time
 import urllib.error
 import urllib.parse
@@ -36,6 +37,7 @@ Progress = Callable[[int, "int | None"], None]   # (bytes so far, total bytes or
 _CHUNK = 1 << 16
 DEFAULT_DEADLINE = 600.0            # seconds, per file
 MAX_UNKNOWN_SIZE = 256 * 1024 ** 2  # cap for manifest entries without a size (grid3D, rim)
+PROBE_TIMEOUT = 3.0                 # seconds: an offline machine must not hold `make run` for long
 
 
 class FetchError(PosecrbError):
@@ -46,7 +48,7 @@ class FetchError(PosecrbError):
 class FetchResult:
     name: str
     path: Path
-    status: str          # "downloaded" | "present"
+    status: str          # "downloaded" | "present" | "failed" | "offline" (fetch_many)
     nbytes: int
     algorithm: str
     digest: str
@@ -122,24 +124,15 @@ def _download(url: str, fh, progress: Progress | None, timeout: float, deadline:
     return done
 
 
-def fetch(name: str | DatasetEntry, *, dest: str | os.PathLike | None = None, url: str | None = None,
-          manifest: Manifest | None = None, progress: Progress | None = None, timeout: float = 60.0,
-          data_dir: str | os.PathLike | None = None, deadline: float | None = DEFAULT_DEADLINE,
-          max_bytes: int | None = None) -> FetchResult:
-    """Download one manifest dataset and verify it.
+def present(entry: DatasetEntry, *, dest: str | os.PathLike | None = None,
+            data_dir: str | os.PathLike | None = None) -> FetchResult | None:
+    """The verified copy of ``entry`` that makes a download unnecessary, or None.
 
-    ``dest``: directory (default ``posecrb.datasets.search.cache_dir()``); the file lands in
-    ``dest/<subdir>/<file>`` (TORO files under ``toro/``, the layout of every data directory).
-    ``url`` overrides the manifest URL (mirrors, tests); only an override may be
-    plain ``http://``. Without ``dest``, a verified copy anywhere on the search path
-    (``--data-dir``, $POSECRB_DATA, ...) counts as present and nothing is downloaded.
-    ``deadline``: overall seconds for the download (None: no limit); ``max_bytes``: size
-    cap (default ``size_cap(entry)``).
+    Candidates: the download target, and without ``dest`` also the first file of that name on
+    the search path. A target that exists but does not verify is reported (it will be replaced).
     """
-    entry = name if isinstance(name, DatasetEntry) else (manifest or load_manifest()).get(name)
     target = target_path(entry, dest)
     algo, expected = entry.checksum
-
     candidates = [target]
     if dest is None:
         on_path = locate(entry, data_dir)
@@ -153,6 +146,67 @@ def fetch(name: str | DatasetEntry, *, dest: str | os.PathLike | None = None, ur
             if cand == target:
                 log.warning("%s: existing file does not match the manifest (%s %s); "
                             "it will be replaced by a verified download", cand, algo, v.actual)
+    return None
+
+
+def probe(url: str, timeout: float = PROBE_TIMEOUT) -> str | None:
+    """None if the server of ``url`` answers an HTTPS HEAD request within ``timeout`` seconds,
+    else why not (no name resolution, refused, no answer in time).
+
+    Any HTTP answer, even an error status, proves the network works. The request runs in a
+    daemon thread so that a hanging name lookup (which no socket timeout bounds) cannot hold
+    the caller longer than ``timeout``.
+    """
+    result: list[str | None] = []
+
+    def ask() -> None:
+        req = urllib.request.Request(url, method="HEAD", headers={"User-Agent": f"posecrb/{__version__}"})
+        try:
+            with urllib.request.urlopen(req, timeout=timeout):
+                result.append(None)
+        except urllib.error.HTTPError:
+            result.append(None)
+        except urllib.error.URLError as exc:
+            reason = exc.reason
+            result.append(getattr(reason, "strerror", None) or str(reason))
+        except (http.client.HTTPException, OSError) as exc:
+            result.append(f"{type(exc).__name__}: {exc}")
+
+    thread = threading.Thread(target=ask, name="posecrb-probe", daemon=True)
+    thread.start()
+    thread.join(timeout)
+    if not result:
+        return f"no answer within {timeout:g} s"
+    return result[0]
+
+
+def fetch(name: str | DatasetEntry, *, dest: str | os.PathLike | None = None, url: str | None = None,
+          manifest: Manifest | None = None, progress: Progress | None = None, timeout: float = 60.0,
+          data_dir: str | os.PathLike | None = None, deadline: float | None = DEFAULT_DEADLINE,
+          max_bytes: int | None = None) -> FetchResult:
+    """Download one manifest dataset and verify it.
+
+    ``dest``: directory (default ``posecrb.datasets.search.cache_dir()``); the file lands in
+    ``dest/<subdir>/<file>`` (TORO files under ``toro/``).
+    ``url`` overrides the manifest URL (mirrors, tests); only an override may be
+    plain ``http://``. Without ``dest``, a verified copy anywhere on the search path
+    (``--data-dir``, $POSECRB_DATA, ...) counts as present and nothing is downloaded.
+    ``deadline``: overall seconds for the download (None: no limit); ``max_bytes``: size
+    cap (default ``size_cap(entry)``).
+    """
+    entry = name if isinstance(name, DatasetEntry) else (manifest or load_manifest()).get(name)
+    found = present(entry, dest=dest, data_dir=data_dir)
+    if found is not None:
+        return found
+    return _download_verified(entry, dest, url, progress, timeout, deadline, max_bytes)
+
+
+def _download_verified(entry: DatasetEntry, dest: str | os.PathLike | None, url: str | None,
+                       progress: Progress | None, timeout: float, deadline: float | None = DEFAULT_DEADLINE,
+                       max_bytes: int | None = None) -> FetchResult:
+    """The download half of ``fetch`` (the caller checked that no verified copy exists)."""
+    target = target_path(entry, dest)
+    algo, expected = entry.checksum
 
     src = url or entry.url
     _check_url(src, allow_http=url is not None)
@@ -188,18 +242,38 @@ class _AlreadyPresent(Exception):
 def fetch_many(names: Iterable[str | DatasetEntry], *, dest: str | os.PathLike | None = None,
                manifest: Manifest | None = None, progress_factory: Callable[[DatasetEntry], Progress | None] | None = None,
                timeout: float = 60.0, data_dir: str | os.PathLike | None = None,
-               deadline: float | None = DEFAULT_DEADLINE) -> list[FetchResult]:
-    """``fetch`` each dataset; a failure is recorded (status ``failed``) and the others continue."""
+               deadline: float | None = DEFAULT_DEADLINE, probe_timeout: float | None = None) -> list[FetchResult]:
+    """``fetch`` each dataset; a failure is recorded (status ``failed``) and the others continue.
+
+    With ``probe_timeout``, each server that has something to download is first probed
+    (``probe``) for at most that many seconds; the datasets of a server that does not answer
+    get status ``offline`` (``error`` says why) and are not attempted, so an offline machine
+    learns so in seconds instead of one long timeout per file.
+    """
     manifest = manifest or load_manifest()
+    entries = [name if isinstance(name, DatasetEntry) else manifest.get(name) for name in names]
+    have = {e.name: present(e, dest=dest, data_dir=data_dir) for e in entries}
+    reason_by_host: dict[str, str | None] = {}
+    if probe_timeout is not None:
+        for e in entries:
+            host = urllib.parse.urlsplit(e.url).netloc
+            if have[e.name] is None and host not in reason_by_host:
+                reason_by_host[host] = probe(e.url, probe_timeout)
     out: list[FetchResult] = []
-    for name in names:
-        entry = name if isinstance(name, DatasetEntry) else manifest.get(name)
-        try:
-            out.append(fetch(entry, dest=dest, manifest=manifest, timeout=timeout, data_dir=data_dir,
-                             deadline=deadline,
-                             progress=progress_factory(entry) if progress_factory else None))
-        except FetchError as exc:
-            algo, expected = entry.checksum
-            out.append(FetchResult(entry.name, target_path(entry, dest), "failed", 0, algo, expected,
-                                   entry.url, str(exc)))
+    for entry in entries:
+        algo, expected = entry.checksum
+        host = urllib.parse.urlsplit(entry.url).netloc
+        if have[entry.name] is not None:
+            out.append(have[entry.name])
+        elif reason_by_host.get(host):
+            out.append(FetchResult(entry.name, target_path(entry, dest), "offline", 0, algo, expected,
+                                   entry.url, f"{host}: {reason_by_host[host]}"))
+        else:
+            try:
+                out.append(_download_verified(entry, dest, None,
+                                              progress_factory(entry) if progress_factory else None, timeout,
+                                              deadline))
+            except FetchError as exc:
+                out.append(FetchResult(entry.name, target_path(entry, dest), "failed", 0, algo, expected,
+                                       entry.url, str(exc)))
     return out

@@ -1,11 +1,15 @@
-"""Figures of the experiments (matplotlib, Agg backend: no display needed).
+"""Figures (matplotlib, Agg backend: no display needed).
 
-Each function takes an experiment result and a path, writes one small PNG and
-returns the path. They mirror the paper's Fig. 4-7 and the thesis's Graphs 6.8-6.9.
+Each function takes a result and a path, writes one small figure (PNG, or SVG by the
+path's extension) and returns the path. They mirror the paper's Fig. 4-7 and the thesis's
+Graphs 6.8-6.9; ``plot_tables`` summarises Tables I-IV in one figure.
 """
 from __future__ import annotations
 
+import os
+import tempfile
 from pathlib import Path
+from typing import Iterable, Sequence
 
 import matplotlib
 
@@ -13,7 +17,30 @@ matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 
+from .errors import UsageError  # noqa: E402
+
 DPI = 100
+FIGURE_FORMATS = (".png", ".svg")
+
+
+def check_figure_path(path: str | os.PathLike) -> Path:
+    """The figure target, checked before any work: extension .png or .svg, not a directory,
+    and its directory (or the nearest existing ancestor, which ``_save`` will extend) writable.
+    Raises UsageError (exit 2)."""
+    path = Path(path)
+    if path.suffix.lower() not in FIGURE_FORMATS:
+        raise UsageError(f"{path}: figure format from the extension must be one of "
+                         f"{', '.join(FIGURE_FORMATS)} (got {path.suffix or 'none'!r})")
+    if path.is_dir():
+        raise UsageError(f"{path}: is a directory")
+    parent = path.parent
+    while not parent.exists() and parent != parent.parent:
+        parent = parent.parent
+    if not parent.is_dir():
+        raise UsageError(f"{path}: {parent} is not a directory")
+    if not os.access(parent, os.W_OK | os.X_OK):
+        raise UsageError(f"{path}: directory {parent} is not writable")
+    return path
 
 
 def _save(fig, path) -> Path:
@@ -25,7 +52,8 @@ def _save(fig, path) -> Path:
     path.parent.mkdir(parents=True, exist_ok=True)
     try:
         fig.tight_layout()
-        with atomic_write(path, "wb") as fh:
+        # SVG text stays text: searchable, selectable, smaller than glyph paths.
+        with atomic_write(path, "wb") as fh, plt.rc_context({"svg.fonttype": "none"}):
             fig.savefig(fh, dpi=DPI, format=path.suffix[1:].lower() or "png")
     finally:
         plt.close(fig)
@@ -103,4 +131,101 @@ def plot_octagon(result, path) -> Path:
         ax.grid(True, alpha=0.3)
         ax.legend(fontsize=8)
     fig.suptitle(f"octagon: 8 poses, odometry + 0..21 extra edges ({len(result.graphs)} graphs)", fontsize=10)
+    return _save(fig, path)
+
+
+# Table I/II quantities: colour per quantity, the same in both panels.
+_COLOURS = {"fim": "tab:blue", "ub": "tab:orange", "lb": "tab:green", "fim_build": "tab:purple",
+            "laplacians_build": "tab:brown"}
+_TIMES = (  # (our column, paper key, label, marker, colour)
+    ("fim_time", "fim_time", "FIM log-det (Table I/II)", "o", _COLOURS["fim"]),
+    ("ub_time", "ub_time", "ub (Table I/II)", "^", _COLOURS["ub"]),
+    ("lb_time", "lb_time", "lb (Table I/II)", "v", _COLOURS["lb"]),
+    ("fim_build_time", "fim_build_time", "whole FIM construction (III/IV)", "s", _COLOURS["fim_build"]),
+    ("laplacians_build_time", "laplacians_build_time", "weighted Laplacians (III/IV)", "D",
+     _COLOURS["laplacians_build"]),
+)
+
+
+def _plottable(rows: Iterable[dict]) -> list[dict]:
+    return [r for r in rows if all(isinstance(r.get(k), (int, float)) for k in ("lb", "ub", "fim_logdet"))
+            and r["lb"] > 0]
+
+
+def plot_tables(rows: Sequence[dict], path, note: str | None = None) -> Path:
+    """Tables I-IV at a glance, one column per dataset (2D then 3D).
+
+    Top: the FIM log-det and ub as their relative distance above lb, ``(x - lb)/lb``
+    (log scale; lb itself is the floor, 0). Bottom: each measured time divided by the
+    paper's printed time for the same quantity (log scale; 1 = as fast as printed, below
+    = faster), for the datasets the paper has. ``rows`` are ``posecrb.tables`` rows; rows
+    without lb/ub/FIM (not found, failed) are left out. Raises ValueError when none is left.
+    """
+    from .paper_tables import paper_row
+
+    data = _plottable(rows)
+    if not data:
+        raise ValueError("no dataset with lb, ub and FIM log-det to plot")
+    data.sort(key=lambda r: r.get("dim", 0))          # stable: 2D rows first, each in table order
+    x = np.arange(len(data))
+    lb = np.array([r["lb"] for r in data], dtype=float)
+    gap_fim = (np.array([r["fim_logdet"] for r in data], dtype=float) - lb) / lb
+    gap_ub = (np.array([r["ub"] for r in data], dtype=float) - lb) / lb
+
+    fig, (top, bottom) = plt.subplots(2, 1, sharex=True, figsize=(max(8.5, 0.42 * len(data) + 5.0), 6.6),
+                                      gridspec_kw={"height_ratios": [1, 1]})
+    top.vlines(x, np.minimum(gap_fim, gap_ub), np.maximum(gap_fim, gap_ub), color="0.75", lw=1.5, zorder=1)
+    top.scatter(x, gap_fim, marker="o", color=_COLOURS["fim"], zorder=3,
+                label="FIM log-det\n(certified optimum)")
+    top.scatter(x, gap_ub, marker="^", color=_COLOURS["ub"], zorder=3, label="upper bound ub (eq. 75)")
+    top.set_yscale("log")
+    top.set_ylabel("(x − lb) / lb\n(log; lb, eq. 75, is the floor)")
+    # Legends outside the axes: they never hide a point.
+    top.legend(fontsize=8, loc="upper left", bbox_to_anchor=(1.01, 1.0), title="above the lower bound lb",
+               title_fontsize=8, frameon=False)
+
+    shown = 0
+    for col, key, label, marker, colour in _TIMES:
+        xs, ys = [], []
+        for k, r in enumerate(data):
+            p = paper_row(r["dataset"])
+            ours, theirs = r.get(col), (p or {}).get(key)
+            if p is not None and isinstance(ours, (int, float)) and theirs and ours > 0:
+                xs.append(k)
+                ys.append(ours / theirs)
+        if xs:
+            bottom.scatter(np.array(xs) + (shown - 2) * 0.08, ys, marker=marker, color=colour, s=22,
+                           label=label, zorder=3)
+            shown += 1
+    bottom.axhline(1.0, color="k", lw=0.8)
+    bottom.set_yscale("log")
+    bottom.set_ylabel("our time / paper's time\n(log; below 1: faster)")
+    if shown:
+        bottom.legend(fontsize=8, loc="upper left", bbox_to_anchor=(1.01, 1.0), frameon=False,
+                      title="time of ... vs the paper's\n(its machine, not this one)", title_fontsize=8)
+    else:
+        bottom.text(0.5, 0.5, "no dataset of the paper among these rows", ha="center", va="center",
+                    transform=bottom.transAxes, color="0.4")
+
+    labels = [r["dataset"] + ("" if paper_row(r["dataset"]) else " *")
+              + (" (uncertified)" if r.get("status") == "uncertified" else "") for r in data]
+    bottom.set_xticks(x, labels, rotation=60, ha="right", fontsize=8)
+    dims = [r.get("dim") for r in data]
+    for ax in (top, bottom):
+        ax.grid(True, which="major", axis="y", alpha=0.3)
+        ax.set_xlim(-0.6, len(data) - 0.4)
+        for k in range(1, len(data)):
+            if dims[k] != dims[k - 1]:
+                ax.axvline(k - 0.5, color="0.5", ls=":", lw=1)
+    groups = [(d, [k for k, v in enumerate(dims) if v == d]) for d in sorted({d for d in dims if d})]
+    if groups:
+        sec = top.secondary_xaxis("top")
+        sec.set_xticks([(ks[0] + ks[-1]) / 2 for _, ks in groups],
+                       [f"{d}D (Table {'I/III' if d == 2 else 'II/IV'})" for d, _ in groups], fontsize=9)
+        sec.tick_params(length=0)
+    footer = "* not in the paper" if any(paper_row(r["dataset"]) is None for r in data) else ""
+    if note:
+        footer = f"{note}   {footer}".strip()
+    if footer:
+        fig.text(0.01, 0.005, footer, fontsize=7, color="0.35", ha="left", va="bottom")
     return _save(fig, path)

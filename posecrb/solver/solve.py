@@ -77,7 +77,8 @@ def solve(graph: PoseGraph, **kwargs) -> SolveResult:
 def _solve(graph: PoseGraph, *, r0: int | None = None, rmax: int = 10, init: str = "chordal",
           anchor: int | None = None, max_iterations: int = 500, certificate_tol: float = 1e-3,
           verbose: bool = False, seed: int = 0, precondition: bool = True,
-          precond_max_cond: float = 1e6, adaptive_precond: float | None = 1e-10, **tuning) -> SolveResult:
+          precond_max_cond: float = 1e6, adaptive_precond: float | None = 1e-10, refactor_hvps: int | None = 30,
+          **tuning) -> SolveResult:
     """Certifiably correct maximum-likelihood estimate of a pose graph.
 
     ``r0`` is the first staircase rank (default d + 1), ``rmax`` the last. ``init`` is
@@ -86,7 +87,9 @@ def _solve(graph: PoseGraph, *, r0: int | None = None, rmax: int = 10, init: str
     identity (default 0). ``certificate_tol``: accept lambda_min(Q - Lambda) >= -tol
     (SE-Sync's 1e-3). ``precond_max_cond`` caps the condition number of the base
     preconditioner (Q + delta I)^{-1}; ``adaptive_precond`` (relative shift s / ||C||) turns
-    on the per-iteration (Q - Lambda + s I)^{-1} preconditioner, None disables it.
+    on the (Q - Lambda + s I)^{-1} preconditioner, None disables it; it is refactored at an
+    iterate only when the last truncated-CG run needed more than ``refactor_hvps`` Hessian-vector
+    products (None: at every accepted iterate).
     ``tuning`` goes to :class:`TROptions` (e.g. decrement_tol, max_inner). Raises
     DisconnectedGraph for a disconnected graph, UsageError for bad ranks/anchor/init.
     """
@@ -124,7 +127,8 @@ def _solve(graph: PoseGraph, *, r0: int | None = None, rmax: int = 10, init: str
         delta = problem.gershgorin_max() / precond_max_cond
         precond = problem.factor_full(None, delta, name="preconditioner M_red(delta)")
     model = RelaxedModel(problem, precond,
-                         None if adaptive_precond is None else adaptive_precond * problem.gershgorin_max())
+                         None if adaptive_precond is None else adaptive_precond * problem.gershgorin_max(),
+                         refactor_hvps=refactor_hvps)
     Z = lift(np.ascontiguousarray(np.swapaxes(rot0, 1, 2)), r0)
     times = {"init": time.perf_counter() - t0, "optimize": 0.0, "verify": 0.0}
 
@@ -159,6 +163,10 @@ def _solve(graph: PoseGraph, *, r0: int | None = None, rmax: int = 10, init: str
             reason = (f"not certified: lambda_min(Q - Lambda) = {cert.lambda_min:.3e} < -{certificate_tol:g} "
                       f"at the maximum rank rmax = {rmax}")
             break
+        # The next level starts near a saddle: rebuild the preconditioner there at once, shifted
+        # past the negative curvature just found (RelaxedModel.prepare).
+        model.lambda_hint = min(cert.lambda_min, 0.0)
+        model.refactor_next = True
         t0 = time.perf_counter()
         state = escape(model, state, cert)
         times["optimize"] += time.perf_counter() - t0

@@ -14,14 +14,69 @@ def sym(a: np.ndarray) -> np.ndarray:
     return 0.5 * (a + np.swapaxes(a, -1, -2))
 
 
+def to_components(a: np.ndarray) -> np.ndarray:
+    """(n, p, q) -> contiguous (p, q, n): the "component-major" layout of the block kernels."""
+    return np.ascontiguousarray(np.moveaxis(a, 0, -1))
+
+
+def from_components(a: np.ndarray) -> np.ndarray:
+    """Inverse of :func:`to_components`."""
+    return np.ascontiguousarray(np.moveaxis(a, -1, 0))
+
+
+# The per-pose block operations below (sym(A_i B_i^T), the tangent projection, the Hessian's
+# block part) act on n tiny d x r blocks (2 x 3, 3 x 4). numpy's batched matmul pays a per-block
+# overhead that made them half of an HVP-heavy solve; instead they transpose once to the
+# component-major layout (d, r, n) and loop over the d^2 block entries, each a contiguous
+# length-n vector operation (measured 3-4x faster at n = 1.5e4 than the batched matmul, equal to
+# a compiled numba kernel without its ~0.3 s import and cache-load cost per process).
+def _sym_products(At: np.ndarray, Bt: np.ndarray) -> np.ndarray:
+    """(d, d, n) entries of sym(A_i B_i^T) from component-major A, B (d, r, n)."""
+    d = At.shape[0]
+    S = np.empty((d, d, At.shape[2]))
+    for a in range(d):
+        for b in range(a, d):
+            v = np.einsum("kn,kn->n", At[a], Bt[b])
+            if a != b:
+                v += np.einsum("kn,kn->n", At[b], Bt[a])
+                v *= 0.5
+                S[b, a] = v
+            S[a, b] = v
+    return S
+
+
+def _subtract_block_product(Wt: np.ndarray, S: np.ndarray, Zt: np.ndarray) -> np.ndarray:
+    """Wt - S Z per block, in place on Wt (component-major: S (d, d, n), Wt/Zt (d, r, n))."""
+    d = Wt.shape[0]
+    for a in range(d):
+        for b in range(d):
+            Wt[a] -= S[a, b] * Zt[b]
+    return Wt
+
+
 def sym_block_diag_product(a: np.ndarray, b: np.ndarray) -> np.ndarray:
     """(n, d, d) blocks sym(A_i B_i^T)."""
-    return sym(a @ np.swapaxes(b, -1, -2))
+    return from_components(_sym_products(to_components(a), to_components(b)))
 
 
-def project(Z: np.ndarray, W: np.ndarray) -> np.ndarray:
-    """Orthogonal projection of W onto the tangent space at Z: W_i - sym(W_i Z_i^T) Z_i."""
-    return W - sym_block_diag_product(W, Z) @ Z
+def project(Z: np.ndarray, W: np.ndarray, Zt: np.ndarray | None = None, scale: float = 1.0) -> np.ndarray:
+    """Orthogonal projection of W onto the tangent space at Z: W_i - sym(W_i Z_i^T) Z_i (times ``scale``).
+
+    ``Zt = to_components(Z)`` when the caller reuses it across vectors at one point.
+    """
+    Zt = to_components(Z) if Zt is None else Zt
+    Wt = to_components(W)
+    if scale != 1.0:
+        Wt *= scale
+    return from_components(_subtract_block_product(Wt, _sym_products(Wt, Zt), Zt))
+
+
+def hessian_blocks(Zt: np.ndarray, lamt: np.ndarray, V: np.ndarray, QV: np.ndarray) -> np.ndarray:
+    """2 Proj_Z(QV - Lambda V) (n, d, r) from component-major Z (d, r, n) and Lambda (d, d, n)."""
+    Wt = to_components(QV)
+    _subtract_block_product(Wt, lamt, to_components(V))
+    Wt *= 2.0
+    return from_components(_subtract_block_product(Wt, _sym_products(Wt, Zt), Zt))
 
 
 def retract(Z: np.ndarray, W: np.ndarray) -> np.ndarray:
@@ -78,3 +133,4 @@ def remove_vertical(Z: np.ndarray, W: np.ndarray, gram: tuple[np.ndarray, np.nda
     Om = np.where(tiny, 0.0, K / np.where(tiny, 1.0, den))
     Omega = U @ Om @ U.T
     return W - (Zf @ Omega).reshape(n, d, r)
+

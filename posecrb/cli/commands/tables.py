@@ -43,15 +43,31 @@ def _progress(total: int):
                     console=Console(stderr=True), transient=True, disable=not sys.stderr.isatty())
 
 
-def _render(rows, tables, fmt, compare, settings: TableSettings) -> str:
+def _shown(rows, tables, compare, settings: TableSettings, explicit: bool):
+    """(table, rows, columns, note) of every table that has rows; each distinct note only once.
+
+    A table without rows (Tables II/IV when every dataset is 2D) is not printed: said on
+    stderr, as a warning when it was asked for with --table."""
+    out, seen = [], set()
+    for t in tables:
+        trs, cols = table_rows(rows, t, compare)
+        if not trs:
+            (log.warning if explicit else log.info)("%s: no %dD dataset, not printed", TITLES[t].split(":")[0],
+                                                     2 if t in (1, 3) else 3)
+            continue
+        note = footnote(t, settings.rotation_model, settings.fim_variant)
+        out.append((t, trs, cols, note if note not in seen else None))
+        seen.add(note)
+    return out
+
+
+def _render(rows, tables, fmt, compare, settings: TableSettings, explicit: bool = False) -> str:
     parts = []
     if fmt == "json":
         return to_json({"rows": rows, "tables": {ROMAN[t]: table_rows(rows, t, compare)[0] for t in tables}})
     if fmt == "csv":
         return to_csv(rows)
-    for t in tables:
-        trs, cols = table_rows(rows, t, compare)
-        note = footnote(t, settings.rotation_model, settings.fim_variant)
+    for t, trs, cols, note in _shown(rows, tables, compare, settings, explicit):
         if fmt == "markdown":
             parts.append(f"### {TITLES[t]}\n\n" + to_markdown(trs, cols, HEADERS) + (f"\n{note}\n" if note else ""))
         elif fmt == "latex":
@@ -81,8 +97,12 @@ def _render(rows, tables, fmt, compare, settings: TableSettings) -> str:
               help="Reproduce the printed Table II: eq. (64) exactly as printed (fim_variant=eq64) with the "
                    "empirical rotation weight table2. Without it the 3D rows are the model's quantities "
                    "(eq. 59, the model's Fisher information). 2D rows are the same either way.")
+@click.option("--plot", "plot_path", type=click.Path(dir_okay=False), default=None,
+              help="Also draw one figure (PNG or SVG, by the extension): FIM log-det and ub relative to lb per "
+                   "dataset, and every time against the paper's printed one.")
 @data_dir_option
-def command(all_, tables, names, repeat, jobs, fmt, out_dir, compare_paper, rotation_model, as_published, data_dir):
+def command(all_, tables, names, repeat, jobs, fmt, out_dir, compare_paper, rotation_model, as_published,
+            plot_path, data_dir):
     """Rebuild the paper's Tables I-IV: FIM log-det at the certified optimum, ub and lb with their
     times (I/II) and the construction time of the whole FIM vs the weighted Laplacians (III/IV).
 
@@ -95,11 +115,16 @@ def command(all_, tables, names, repeat, jobs, fmt, out_dir, compare_paper, rota
     """
     if all_ and names:
         raise click.UsageError("--all and --datasets are exclusive")
+    if plot_path:
+        from ..plots import check_figure_path
+
+        check_figure_path(plot_path)  # before the work: a bad target is a usage error, not a lost run
     requested = [n.strip() for n in names.split(",") if n.strip()] if names else None
     if out_dir:
         from ...io import check_output_dir
 
         check_output_dir(out_dir, requested or [], OUT_FILES, option="--out")
+    explicit = bool(tables)
     tables = sorted(set(tables)) or [1, 2, 3, 4]
     if as_published:
         if rotation_model not in (None, "table2"):
@@ -137,12 +162,10 @@ def command(all_, tables, names, repeat, jobs, fmt, out_dir, compare_paper, rota
         from ...report.render import to_rich_table
 
         console = Console(width=None if sys.stdout.isatty() else 250)
-        for t in tables:
-            trs, cols = table_rows(rows, t, compare_paper)
-            console.print(to_rich_table(trs, cols, TITLES[t], HEADERS,
-                                        caption=footnote(t, settings.rotation_model, settings.fim_variant)))
+        for t, trs, cols, note in _shown(rows, tables, compare_paper, settings, explicit):
+            console.print(to_rich_table(trs, cols, TITLES[t], HEADERS, caption=note))
     else:
-        click.echo(_render(rows, tables, fmt, compare_paper, settings), nl=False)
+        click.echo(_render(rows, tables, fmt, compare_paper, settings, explicit), nl=False)
 
     if out_dir:
         from ...core.files import write_text
@@ -160,6 +183,14 @@ def command(all_, tables, names, repeat, jobs, fmt, out_dir, compare_paper, rota
         write_text(out / "rows.json", to_json(rows))
         write_text(out / "run.json", json.dumps(run_record(settings, rows, sys.argv), indent=2) + "\n")
         log.info("wrote %s", os.fspath(out))
+
+    if plot_path:
+        from ..plots import plot_tables
+
+        try:
+            log.info("wrote %s", plot_tables(rows, plot_path, note=f"3D rotation weight: {settings.rotation_model}, FIM: {settings.fim_variant}"))
+        except ValueError as exc:
+            log.warning("no figure written: %s", exc)
 
     bad = failed(rows, requested)
     if bad:
