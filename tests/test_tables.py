@@ -3,6 +3,8 @@ import csv
 import io
 import json
 
+import pytest
+
 from posecrb.cli import main
 from posecrb.metrics.published import PAPER_NAME, TABLE_II
 from posecrb.metrics.tables import _tex_number, failed, published_settings, table_rows
