@@ -17,7 +17,7 @@ matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 
-from .errors import UsageError  # noqa: E402
+from ..core.errors import UsageError  # noqa: E402
 
 DPI = 100
 FIGURE_FORMATS = (".png", ".svg")
@@ -158,10 +158,10 @@ def plot_tables(rows: Sequence[dict], path, note: str | None = None) -> Path:
     Top: the FIM log-det and ub as their relative distance above lb, ``(x - lb)/lb``
     (log scale; lb itself is the floor, 0). Bottom: each measured time divided by the
     paper's printed time for the same quantity (log scale; 1 = as fast as printed, below
-    = faster), for the datasets the paper has. ``rows`` are ``posecrb.tables`` rows; rows
+    = faster), for the datasets the paper has. ``rows`` are ``posecrb.metrics.tables`` rows; rows
     without lb/ub/FIM (not found, failed) are left out. Raises ValueError when none is left.
     """
-    from .paper_tables import paper_row
+    from ..metrics.published import paper_row
 
     data = _plottable(rows)
     if not data:

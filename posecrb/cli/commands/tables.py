@@ -116,7 +116,7 @@ def command(all_, tables, names, repeat, jobs, fmt, out_dir, compare_paper, rota
     if all_ and names:
         raise click.UsageError("--all and --datasets are exclusive")
     if plot_path:
-        from ..plots import check_figure_path
+        from ...report.plots import check_figure_path
 
         check_figure_path(plot_path)  # before the work: a bad target is a usage error, not a lost run
     requested = [n.strip() for n in names.split(",") if n.strip()] if names else None
@@ -185,7 +185,7 @@ def command(all_, tables, names, repeat, jobs, fmt, out_dir, compare_paper, rota
         log.info("wrote %s", os.fspath(out))
 
     if plot_path:
-        from ..plots import plot_tables
+        from ...report.plots import plot_tables
 
         try:
             log.info("wrote %s", plot_tables(rows, plot_path, note=f"3D rotation weight: {settings.rotation_model}, FIM: {settings.fim_variant}"))
