@@ -279,7 +279,7 @@ def test_preconditioner_after_escape_is_shifted_not_lambda_free():
     s = 1e-10 * p.gershgorin_max()
     base = p.factor_full(None, p.gershgorin_max() / 1e6, name="base")
     model = RelaxedModel(p, base, adaptive_shift=s)
-    winding = np.ascontiguousarray(np.swapaxes(rot2(2 * np.pi * np.arange(n) / n), 1, 2))
+    winding = np.ascontiguousarray(np.swapaxes(so2_exp(2 * np.pi * np.arange(n) / n), 1, 2))
     res = trust_region(model, lift(winding, 2), TROptions())
     state = res.state
     cert = verify(p, state, 1e-6, np.random.default_rng(0))
