@@ -199,7 +199,7 @@ def test_plot_target_is_checked_before_the_work(tmp_path, capfd):
 
 def test_plot_tables_values(tmp_path):
     """The figure's numbers: (x - lb)/lb and our/paper time ratios, read back from the SVG's data."""
-    from posecrb.plots import plot_tables
+    from posecrb.report.plots import plot_tables
 
     rows = [{"dataset": "CSAIL", "dim": 2, "status": "ok", "lb": 100.0, "fim_logdet": 101.0, "ub": 110.0,
              "fim_time": 2.3284e-3, "lb_time": 3.6712e-3 / 2},
