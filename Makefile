@@ -4,7 +4,7 @@ PYTHON ?= python3
 SUDO := $(shell [ "$$(id -u)" = 0 ] || echo sudo)
 PYTEST_ARGS ?=
 
-.PHONY: install run test regress bench clean
+.PHONY: install run lint test test-fast regress bench clean
 
 install:
 	@missing=""; \
@@ -17,15 +17,23 @@ install:
 	    $(SUDO) env DEBIAN_FRONTEND=noninteractive apt-get install -y -q $$missing; \
 	  fi
 	@# (re)install unless this very checkout is the installed posecrb and every dependency imports
-	@$(PYTHON) -I -c "import os, sys, posecrb, sksparse.cholmod, numba, threadpoolctl, pytest, hypothesis, mpmath; \
+	@$(PYTHON) -I -c "import os, sys, posecrb, sksparse.cholmod, numba, threadpoolctl, pytest, hypothesis, mpmath, ruff; \
 	  sys.exit(os.path.dirname(os.path.dirname(os.path.realpath(posecrb.__file__))) != os.path.realpath('.'))" \
 	  2>/dev/null || $(PYTHON) -m pip install -q -e '.[dev]'
 
 run: install
 	$(PYTHON) -m posecrb tables --all
 
-test: install
+# ruff: lint and import order (configuration in pyproject.toml); part of `make test`, so CI runs it.
+lint: install
+	$(PYTHON) -m ruff check .
+
+test: lint
 	$(PYTHON) -m pytest -q $(PYTEST_ARGS)
+
+# the suite without the long real-data and multi-process tests (marked `slow`)
+test-fast: lint
+	$(PYTHON) -m pytest -q -m "not slow" $(PYTEST_ARGS)
 
 regress: install
 	$(PYTHON) -m posecrb regress

@@ -11,7 +11,6 @@ from posecrb.core.graph import PoseGraph
 from posecrb.lie.so import so2_exp, so3_exp
 
 
-
 @pytest.fixture(scope="session")
 def shared_datasets() -> Path:
     """The first directory of $POSECRB_DATA: the real datasets (see README, Setup); skip without it."""
@@ -40,10 +39,12 @@ def make_random_graph(rng: np.random.Generator, n: int = 8, extra: int = 6, dim:
     dst = list(range(1, n))
     for _ in range(extra):
         i, j = rng.choice(n, 2, replace=False)
-        src.append(int(i)); dst.append(int(j))
+        src.append(int(i))
+        dst.append(int(j))
     for _ in range(parallel):
         k = int(rng.integers(0, len(src)))
-        src.append(src[k]); dst.append(dst[k])
+        src.append(src[k])
+        dst.append(dst[k])
     src, dst = np.array(src), np.array(dst)
     m, q = src.size, dim + (1 if dim == 2 else 3)
     info = random_spd(rng, m, q)

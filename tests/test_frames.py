@@ -1,6 +1,7 @@
 """World <-> body frame conversion of the thesis model against a dense finite-difference reference.
 
-The reference never uses posecrb.models.thesis.frames or posecrb.models.thesis.fim: it differentiates the g2o/GTSAM error
+The reference never uses posecrb.models.thesis.frames or posecrb.models.thesis.fim: it differentiates the g2o/GTSAM
+error
 ``e_ij = Log(z^{-1} X_i^{-1} X_j)`` (scipy's expm, posecrb.lie.se's checked Log) under body-frame retractions
 ``X_i expm(hat(xi_i))`` with ``xi`` in GTSAM's order (Pose2 (x, y, theta), Pose3 (rotation,
 translation)) and weights it with the file's information matrix reordered the same way: the

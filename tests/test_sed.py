@@ -375,6 +375,7 @@ def test_thesis_fixture_conventions_and_sampling():
 
 
 # ------------------------------------------------------------------ real data
+@pytest.mark.slow
 @pytest.mark.parametrize("name", ["intel", "smallGrid3D"])
 def test_real_dataset_against_dense(shared_datasets, name):
     g = load(shared_datasets / f"{name}.g2o")

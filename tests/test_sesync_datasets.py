@@ -35,6 +35,8 @@ from posecrb.solver import solve
 
 from .numerics import objective_atol, suboptimality_bound
 
+pytestmark = pytest.mark.slow   # every dataset against SE-Sync's optima: the longest module
+
 REFERENCE = {
     "CSAIL": 31.703715992, "MIT": 61.154116091, "intel": 52.348227593, "kitti_05": 276.51437895,
     "manhattan": 6431.3913895, "kitti_02": 108.35114045, "kitti_00": 125.69351454, "city10000": 638.62462187,

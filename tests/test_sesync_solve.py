@@ -128,6 +128,7 @@ def test_disconnected_graph_raises():
         solve(cut)
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("name", ["CSAIL", "tinyGrid3D", "smallGrid3D"])
 def test_real_datasets_match_reference(shared_datasets, name):
     g = load(shared_datasets / f"{name}.g2o")

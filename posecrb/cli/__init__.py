@@ -105,7 +105,8 @@ def cli(verbose: int, quiet: bool) -> None:
 
     FILE arguments take a path to a g2o or TORO file, or a bare dataset name
     (e.g. `intel`) looked up in --data-dir, $POSECRB_DATA, ./datasets and
-    ~/.cache/posecrb. Results go to stdout, logs and warnings to stderr. Exit codes: 0 ok, 1 data or solver error, 2 usage error.
+    ~/.cache/posecrb. Results go to stdout, logs and warnings to stderr.
+    Exit codes: 0 ok, 1 data or solver error, 2 usage error.
     """
     _configure_logging(verbose, quiet)
 

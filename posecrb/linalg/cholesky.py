@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import numpy as np
 import scipy.sparse as sp
+from scipy.sparse.linalg import LinearOperator, eigsh
 from sksparse.cholmod import CholmodNotPositiveDefiniteError, Factor, analyze
 
 from ..core.errors import NotPositiveDefinite, UsageError
@@ -83,7 +84,6 @@ def lambda_min(a: sp.spmatrix, factor: Factor | None = None, name: str = "matrix
     Reuses ``factor`` (a Cholesky factor of ``a``) as the inverse operator, so no
     extra factorization happens when the caller already has one.
     """
-    from scipy.sparse.linalg import LinearOperator, eigsh
 
     a = _as_csc(a)
     n = a.shape[0]

@@ -19,12 +19,14 @@ from ..core.files import read_regular_file, write_text
 from ..datasets import search as datasets
 from ..io import load
 from ..models.paper.bounds import compute_bounds
+from ..models.paper.crlb import crlb_from_fim
+from ..models.paper.fim import fim_logdet, paper_fim
 from ..solver.estimate import get_estimate
 
 GRAPH_ONLY = ("lb", "ub", "ub_lambda")
 ESTIMATE_DEPENDENT = ("fim_logdet", "objective", "trace_crlb")
 FIM_DERIVED = ("fim_logdet", "trace_crlb")
-TOLERANCES = {**{k: 1e-9 for k in GRAPH_ONLY}, **{k: 1e-6 for k in ESTIMATE_DEPENDENT}}
+TOLERANCES = {**dict.fromkeys(GRAPH_ONLY, 1e-09), **dict.fromkeys(ESTIMATE_DEPENDENT, 1e-06)}
 
 
 def default_expected_path() -> Path:
@@ -57,8 +59,6 @@ def save_expected(data: dict, path: str | os.PathLike | None = None) -> Path:
 
 def compute_metrics(name: str, data_dir: str | None = None, variant: str = "consistent") -> dict:
     """The regressed quantities of one dataset, at its certified optimum (FIM ``variant``)."""
-    from ..models.paper.crlb import crlb_from_fim
-    from ..models.paper.fim import fim_logdet, paper_fim
 
     path = datasets.resolve(name, data_dir)
     graph = load(path)

@@ -10,8 +10,10 @@ from pathlib import Path
 import matplotlib
 
 matplotlib.use("Agg")
-import matplotlib.pyplot as plt  # noqa: E402
-import numpy as np  # noqa: E402
+import matplotlib.pyplot as plt
+import numpy as np
+
+from ..core.files import atomic_write
 
 DPI = 100
 
@@ -19,7 +21,6 @@ DPI = 100
 def _save(fig, path) -> Path:
     """savefig to a temporary in the target directory, renamed into place (atomic_write);
     the format follows the suffix (PNG without one)."""
-    from ..core.files import atomic_write
 
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)

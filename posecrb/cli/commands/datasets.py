@@ -5,11 +5,17 @@ import logging
 from pathlib import Path
 
 import click
+from rich.console import Console
+from rich.progress import BarColumn, DownloadColumn, Progress, TextColumn, TimeRemainingColumn, TransferSpeedColumn
 
 from ...core.errors import PosecrbError
 from ...datasets import search as ds
 from ...datasets import verify as dsv
+from ...datasets.fetch import fetch, fetch_many
+from ...datasets.manifest import load_manifest
+from ...io import check_output_dir, check_output_file, write_g2o
 from ...report.render import print_rows
+from ...sim.generators import generate
 from ..options import FiniteFloat, data_dir_option, format_option
 
 log = logging.getLogger("posecrb")
@@ -48,8 +54,6 @@ def path_cmd(name: str, data_dir: str | None) -> None:
 
 
 def _progress_bar():
-    from rich.console import Console
-    from rich.progress import BarColumn, DownloadColumn, Progress, TextColumn, TimeRemainingColumn, TransferSpeedColumn
 
     return Progress(TextColumn("{task.description}"), BarColumn(), DownloadColumn(), TransferSpeedColumn(),
                     TimeRemainingColumn(), console=Console(stderr=True))
@@ -77,9 +81,6 @@ def fetch_cmd(names: tuple[str, ...], all_: bool, dest: str | None, url: str | N
     interrupted download leaves no file and exits 1. A response larger than the
     manifest's size of the file is aborted as soon as it exceeds it.
     """
-    from ...datasets.fetch import fetch_many
-    from ...datasets.manifest import load_manifest
-    from ...io import check_output_dir
 
     if all_ == bool(names):
         raise click.UsageError("give dataset NAME(s) or --all (not both)")
@@ -102,7 +103,6 @@ def fetch_cmd(names: tuple[str, ...], all_: bool, dest: str | None, url: str | N
         return update
 
     if url:
-        from ...datasets.fetch import fetch
 
         def run():
             return [fetch(entries[0], dest=dest, url=url, manifest=manifest, timeout=timeout,
@@ -137,7 +137,6 @@ def verify_cmd(data_dir: str | None, parse: bool, fmt: str) -> None:
 
     Files the manifest does not know are listed as `unknown` and do not fail.
     """
-    from ...datasets.manifest import load_manifest
 
     checks = dsv.verify_files(data_dir, parse=parse)
     cols = ["name", "file", "status", "algorithm"] + (["poses", "edges"] if parse else []) + ["path"]
@@ -184,8 +183,6 @@ def synth_cmd(kind: str, poses: int | None, sigma: float | None, tau: float | No
     encode (tau, kappa) in SE-Sync's convention. `demo` is the fixed graph `make run`
     falls back on (noisy 10x10 2D grid, fixed seed).
     """
-    from ...io import check_output_file, write_g2o
-    from ...sim.generators import generate
 
     if sigma is not None and (tau is not None or kappa is not None):
         raise click.UsageError("--noise sets tau and kappa; do not combine it with --tau/--kappa")
