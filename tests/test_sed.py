@@ -16,7 +16,7 @@ from posecrb.models.thesis import example as te
 from posecrb.models.thesis.crb import sed_crb
 from posecrb.models.thesis.fim import edge_residuals, kernel_basis, left_information, sed_fim
 
-from .conftest import make_random_graph
+from .helpers import hat_ref, make_random_graph
 from .numerics import (
     EPS,
     MARGIN,
@@ -27,7 +27,6 @@ from .numerics import (
     psd_sum_tolerance,
     trace_inverse_rtol,
 )
-from .test_se_lie import hat_ref
 
 
 # ------------------------------------------------------------------ independent references
