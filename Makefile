@@ -27,7 +27,7 @@ endif
 SHELL := /bin/bash
 .SHELLFLAGS := -euo pipefail -c
 .ONESHELL:
-.PHONY: install run test regress bench clean
+.PHONY: install run lint test test-fast regress bench clean
 
 install:
 	@say() { echo "make: $$*" >&2; }
@@ -69,7 +69,7 @@ ifdef OWN_VENV
 	fi
 endif
 	# (Re)install unless this very checkout is the installed posecrb and every dependency imports.
-	$(PY) -I -c "import os, sys, posecrb, sksparse.cholmod, numba, threadpoolctl, pytest, hypothesis, mpmath; \
+	$(PY) -I -c "import os, sys, posecrb, sksparse.cholmod, numba, threadpoolctl, pytest, hypothesis, mpmath, ruff; \
 	  sys.exit(os.path.dirname(os.path.dirname(os.path.realpath(posecrb.__file__))) != os.path.realpath('.'))" \
 	  2>/dev/null || { say "installing posecrb (editable, dev extras) into $$($(PY) -c 'import sys; print(sys.prefix)')"; \
 	                   $(PY) -m pip install -q -e '.[dev]'; \
@@ -86,9 +86,22 @@ run: install
 	$(PY) -m posecrb -v datasets fetch --all --offline-ok >/dev/null
 	$(PY) -m posecrb tables --all
 
-test: install
+# ruff: lint and import order (configuration in pyproject.toml); part of `make test`, so CI runs it.
+lint: install
+	@$(PY) -m ruff check .
+
+test: lint
 	@$(PY) -m posecrb --version >&2
 	$(PY) -m pytest -q $(PYTEST_ARGS)
+
+# the suite without the long real-data and multi-process tests (marked `slow`)
+test-fast: lint
+	@$(PY) -m posecrb --version >&2
+	$(PY) -m pytest -q -m "not slow" $(PYTEST_ARGS)
+
+# the suite without the long real-data and multi-process tests (marked `slow`)
+test-fast: lint
+	$(PYTHON) -m pytest -q -m "not slow" $(PYTEST_ARGS)
 
 regress: install
 	@$(PY) -m posecrb regress

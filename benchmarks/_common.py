@@ -34,8 +34,8 @@ REPO = Path(__file__).resolve().parents[1]
 if str(REPO) not in sys.path:  # run as `python benchmarks/x.py` from anywhere: measure this checkout
     sys.path.insert(0, str(REPO))
 
-from posecrb.core.timing import timed
-from posecrb.datasets import search as datasets
+from posecrb.core.timing import timed  # noqa: E402 -- after the sys.path line above
+from posecrb.datasets import search as datasets  # noqa: E402
 
 # The 16 g2o files of the SE-Sync benchmark suite, 2D then 3D, each group by size.
 SESYNC_SUITE = ["CSAIL", "MIT", "intel", "kitti_05", "manhattan", "kitti_02", "kitti_00", "city10000",

@@ -5,7 +5,8 @@ MAC is not a dependency: set POSECRB_MAC_PYTHON to a Python interpreter that can
 this script prints why and exits 0. Both sides get the same odometry chain as fixed edges and the
 same loop closures as candidates, weighted by the Langevin concentration kappa (MAC's weights).
 MAC runs its own protocol (``examples/g2o_experiment.py``): the naive top-K start (numpy's
-argpartition order among equal weights), 20 Frank-Wolfe iterations, TRACEMIN-Fiedler with Cholesky, "nearest" rounding. posecrb runs
+argpartition order among equal weights), 20 Frank-Wolfe iterations, TRACEMIN-Fiedler with Cholesky,
+"nearest" rounding. posecrb runs
 ``fiedler-relax`` with the same weights, naive start (ties at random, seeded), step rule and
 iteration count, rounded by top-K and Madow.
 

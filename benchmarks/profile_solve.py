@@ -69,7 +69,7 @@ def stage_times(stats: pstats.Stats) -> list[tuple[str, float, int]]:
     out = []
     for label, path, func in STAGES:
         ct, calls = 0.0, 0
-        for (fname, _, fn), (cc, nc, tt, ctime, callers) in stats.stats.items():  # type: ignore[attr-defined]
+        for (fname, _, fn), (_cc, nc, _tt, ctime, _callers) in stats.stats.items():  # type: ignore[attr-defined]
             if fn == func and fname.replace("\\", "/").endswith(path) if path != "~" else fn == func:
                 ct += ctime
                 calls += nc
@@ -117,7 +117,7 @@ def main(argv: list[str] | None = None) -> int:
                 print(f"   {label:48s} {ct:8.3f} {ct / total:6.1%} {calls:7d}")
         print("   largest own time (tottime):")
         rows = sorted(stats.stats.items(), key=lambda kv: -kv[1][2])[:args.top]  # type: ignore[attr-defined]
-        for (fname, line, fn), (cc, nc, tt, ct, _) in rows:
+        for (fname, line, fn), (_cc, nc, tt, _ct, _) in rows:
             short = "/".join(Path(fname).parts[-2:]) if fname != "~" else ""
             print(f"   {tt:8.3f} s {nc:7d} calls  {fn} {short}:{line}")
         print(flush=True)

@@ -145,7 +145,8 @@ def main(argv: list[str] | None = None) -> int:
         (f"{'one run each' if args.repeat == 1 else f'median of {args.repeat} alternating rounds after a warm-up'}; "
          f"budget {args.budget:g} s per run (kill at {2 * args.budget:g} s), memory cap {args.max_mem:g} GB"),
     ])
-    hdr = f"{'dim':>3s} {'poses':>8s} {'edges':>8s} {'command':16s} {'wall s':>8s} {'peak RSS':>9s} {'status':8s} phases (s)"
+    hdr = (f"{'dim':>3s} {'poses':>8s} {'edges':>8s} {'command':16s} {'wall s':>8s} {'peak RSS':>9s} "
+           f"{'status':8s} phases (s)")
     print(hdr)
     print("-" * 110)
     results: dict[tuple[int, str], list[tuple[int, float, float, float]]] = {}

@@ -20,8 +20,8 @@ read the same either way).
 from __future__ import annotations
 
 import argparse
-import os
 import logging
+import os
 import sys
 import time
 from pathlib import Path

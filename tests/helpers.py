@@ -1,4 +1,6 @@
-"""Small synthetic pose graphs with known ground truth (for tests and benchmarks of the solver).
+"""Builders and dense references shared by the tests (test modules do not import each other).
+
+Small synthetic pose graphs with known ground truth (for tests and benchmarks of the solver).
 
 Edges are an odometry chain plus random loop closures; each measurement is the true
 relative pose ``X_i^{-1} X_j`` perturbed by isotropic noise (rotation: exp of a Gaussian
@@ -7,20 +9,17 @@ tangent vector; translation: Gaussian), with information matrices encoding the g
 """
 from __future__ import annotations
 
+from dataclasses import replace
+
 import numpy as np
+from scipy.linalg import expm
+from scipy.spatial.transform import Rotation
 
 from posecrb.core.graph import PoseGraph
+from posecrb.core.noise import rotation_weight
+from posecrb.lie import se as L
 from posecrb.lie.so import so2_exp, so3_exp
-
-
-def random_rotations(n: int, dim: int, rng: np.random.Generator) -> np.ndarray:
-    if dim == 2:
-        return so2_exp(rng.uniform(-np.pi, np.pi, n))
-    q = rng.standard_normal((n, 4))
-    q /= np.linalg.norm(q, axis=1, keepdims=True)
-    from posecrb.io.rotations import quat_to_rot
-
-    return quat_to_rot(q)
+from posecrb.sim.generators import uniform_rotations
 
 
 def _small_rotations(m: int, dim: int, sigma: float, rng: np.random.Generator) -> np.ndarray:
@@ -33,7 +32,7 @@ def random_pose_graph(n: int, dim: int, rng: np.random.Generator, *, loop_closur
                       rot_noise: float = 0.0, trans_noise: float = 0.0, tau: float = 10.0,
                       kappa: float = 50.0, step: float = 1.0) -> tuple[PoseGraph, np.ndarray, np.ndarray]:
     """(graph, true rotations (n, d, d), true translations (n, d)); vertices hold the truth."""
-    rot = random_rotations(n, dim, rng)
+    rot = uniform_rotations(n, dim, rng)
     trans = np.cumsum(step * rng.standard_normal((n, dim)), axis=0)
     k = n if loop_closures is None else loop_closures
     src = np.arange(n - 1)
@@ -55,3 +54,242 @@ def random_pose_graph(n: int, dim: int, rng: np.random.Generator, *, loop_closur
     graph = PoseGraph(dim=dim, ids=np.arange(n), src=src, dst=dst, rot=rel_rot, trans=rel_t, info=info,
                       vertex_rot=rot, vertex_trans=trans, format="synthetic")
     return graph, rot, trans
+
+
+def random_rotations(rng: np.random.Generator, k: int, dim: int) -> np.ndarray:
+    if dim == 2:
+        return so2_exp(rng.uniform(-np.pi, np.pi, k))
+    return so3_exp(rng.normal(size=(k, 3)))
+
+
+def random_spd(rng: np.random.Generator, k: int, q: int, scale: float = 10.0) -> np.ndarray:
+    a = rng.normal(size=(k, q, q))
+    return scale * (a @ a.transpose(0, 2, 1) / q + 0.5 * np.eye(q))
+
+
+def make_random_graph(rng: np.random.Generator, n: int = 8, extra: int = 6, dim: int = 2,
+                      parallel: int = 2, sparse_ids: bool = True, block_isotropic: bool = False) -> PoseGraph:
+    """A connected random graph: a random spanning tree + random extra edges + parallel copies,
+    anisotropic information (unless block_isotropic), ids with gaps, vertices attached."""
+    src = [int(rng.integers(0, k)) for k in range(1, n)]
+    dst = list(range(1, n))
+    for _ in range(extra):
+        i, j = rng.choice(n, 2, replace=False)
+        src.append(int(i))
+        dst.append(int(j))
+    for _ in range(parallel):
+        k = int(rng.integers(0, len(src)))
+        src.append(src[k])
+        dst.append(dst[k])
+    src, dst = np.array(src), np.array(dst)
+    m, q = src.size, dim + (1 if dim == 2 else 3)
+    info = random_spd(rng, m, q)
+    if block_isotropic:
+        info[:, :dim, dim:] = 0
+        info[:, dim:, :dim] = 0
+    ids = np.sort(rng.choice(10 * n, n, replace=False)) if sparse_ids else np.arange(n)
+    return PoseGraph(
+        dim=dim, ids=ids, src=src, dst=dst, rot=random_rotations(rng, m, dim),
+        trans=rng.normal(size=(m, dim)) * 2.0, info=info,
+        vertex_rot=random_rotations(rng, n, dim), vertex_trans=rng.normal(size=(n, dim)) * 3.0,
+        path=None, format="synthetic",
+    )
+
+
+def _fd_error(jac, weights, r_max, h, f) -> float:
+    """Relative 2-norm error bound of ``J^T W J`` from central differences (``dense_model_fisher``)."""
+    from .numerics import EPS, MARGIN
+
+    d_jac = np.sqrt(jac.size) * EPS * r_max / h
+    return MARGIN * 2 * weights.max() * np.linalg.norm(jac, 2) * d_jac / np.linalg.norm(f, 2)
+
+
+def _body_perturbed(rot: np.ndarray, dim: int, delta: np.ndarray) -> np.ndarray:
+    """R Exp(delta) along R E (2D angle; 3D E_k = G_k / sqrt 2), through scipy only."""
+    if dim == 2:
+        c, s = np.cos(delta[0]), np.sin(delta[0])
+        return rot @ np.array([[c, -s], [s, c]])
+    return rot @ Rotation.from_rotvec(np.asarray(delta) / np.sqrt(2.0)).as_matrix()
+
+
+def _rotation_coords(mat: np.ndarray, dim: int) -> np.ndarray:
+    """Coordinates of Log(mat) in the FIM's basis: the angle (2D), sqrt 2 * rotation vector (3D)."""
+    if dim == 2:
+        return np.array([np.arctan2(mat[1, 0], mat[0, 0])])
+    return np.sqrt(2.0) * Rotation.from_matrix(mat).as_rotvec()
+
+
+def dense_model_fisher(graph, rot, trans, anchor: int, h: float = 1e-6, with_error: bool = False):
+    """Fisher information J^T W J of the model's mean function, from central differences,
+    every pose perturbed in its body frame (x_k + dx, R_k Exp(delta)), order [translations;
+    rotations]. Per edge: translation residual R_i^T (x_j - x_i) - p_ij (weight tau I_d) and
+    rotation residual Log(Rbar_ij^T R_i^T R_j) in the E_k coordinates (weight w I_dr, eq. 39-41 /
+    59), with Rbar_ij = R_i^T R_j at the estimate itself: the noise-free measurement, where the
+    Jacobian of the residual is that of the mean function, as the Fisher information needs.
+
+    ``with_error=True`` also returns a bound on the relative 2-norm error of the result: central
+    differences of residuals of size at most R carry a rounding error ``eps R / h`` per Jacobian
+    entry (the truncation error, h^2 times a third derivative, is far smaller for h = 1e-6), so
+    ``||dF|| <= 2 ||W|| ||J|| ||dJ||_F`` relative to ``||F||``, times ``MARGIN``."""
+    d = graph.dim
+    dr = 1 if d == 2 else 3
+    rbar = [rot[i].T @ rot[j] for i, j in zip(graph.src, graph.dst)]
+
+    def residual(r, t):
+        out = []
+        for e, (i, j) in enumerate(zip(graph.src, graph.dst)):
+            out.append(r[i].T @ (t[j] - t[i]) - graph.trans[e])
+            out.append(_rotation_coords(rbar[e].T @ r[i].T @ r[j], d))
+        return np.concatenate(out)
+
+    cols = []
+    free = [k for k in range(graph.n) if k != anchor]
+    for k in free:
+        for a in range(d):
+            tp, tm = trans.copy(), trans.copy()
+            tp[k, a] += h
+            tm[k, a] -= h
+            cols.append((residual(rot, tp) - residual(rot, tm)) / (2 * h))
+    for k in free:
+        for a in range(dr):
+            delta = np.zeros(dr)
+            delta[a] = h
+            rp, rm = rot.copy(), rot.copy()
+            rp[k] = _body_perturbed(rot[k], d, delta)
+            rm[k] = _body_perturbed(rot[k], d, -delta)
+            cols.append((residual(rp, trans) - residual(rm, trans)) / (2 * h))
+    jac = np.stack(cols, axis=1)
+    w = rotation_weight(graph.kappa, d)
+    weights = np.concatenate([np.concatenate([np.full(d, t), np.full(dr, v)]) for t, v in zip(graph.tau, w)])
+    f = jac.T @ (weights[:, None] * jac)
+    if not with_error:
+        return f
+    r_max = max(np.abs(residual(rot, trans)).max(), np.abs(graph.trans).max(), np.abs(trans).max())
+    return f, _fd_error(jac, weights, r_max, h, f)
+
+
+def hat_ref(xi: np.ndarray) -> np.ndarray:
+    """Generators written out from the thesis' basis (sec. 6.2 for SE(2), 2.5 for SE(3))."""
+    if xi.size == 3:
+        w, x, y = xi
+        return np.array([[0, -w, x], [w, 0, y], [0, 0, 0]], float)
+    w1, w2, w3, v1, v2, v3 = xi
+    return np.array([[0, -w3, w2, v1], [w3, 0, -w1, v2], [-w2, w1, 0, v3], [0, 0, 0, 0]], float)
+
+
+def gtsam_information(graph: PoseGraph) -> np.ndarray:
+    """(m, q, q) file information in GTSAM's order (2D unchanged; 3D rotation block first)."""
+    p = np.arange(3) if graph.dim == 2 else np.r_[3:6, 0:3]
+    return graph.info[:, p][:, :, p]
+
+
+def body_fim_reference(graph: PoseGraph, rot, trans) -> np.ndarray:
+    """Dense ``sum J^T I J`` with J = d e_ij / d(xi_i, xi_j) by central differences.
+
+    The perturbation ``expm(hat(+-H e_a))`` is one 4x4 (3x3) matrix per coordinate; the
+    logarithm of the perturbed relative poses is ``se_lie.se_log`` (closed form, checked
+    against scipy's logm in test_se_lie.py), batched over the edges."""
+    q, n, d = graph.q, graph.n, graph.dim
+    info = gtsam_information(graph)
+    xs = np.stack([homog(rot[i], trans[i]) for i in range(n)])
+    zinv = np.linalg.inv(np.stack([homog(a, b) for a, b in zip(graph.rot, graph.trans)]))
+    xi, xj = xs[graph.src], xs[graph.dst]
+    to_gtsam = np.array([1, 2, 0]) if d == 2 else np.arange(6)
+
+    def err(ei, ej):
+        a = zinv @ np.linalg.inv(xi @ ei) @ xj @ ej
+        return L.se_log(a[:, :d, :d], a[:, :d, d])[:, to_gtsam]
+
+    one = np.eye(d + 1)
+    jac_i = np.empty((graph.m, q, q))
+    jac_j = np.empty((graph.m, q, q))
+    for a in range(q):  # q coordinates, each batched over every edge
+        e = np.zeros(q)
+        e[a] = H
+        ep, em = expm(hat_gtsam(e)), expm(hat_gtsam(-e))
+        jac_i[:, :, a] = (err(ep, one) - err(em, one)) / (2 * H)
+        jac_j[:, :, a] = (err(one, ep) - err(one, em)) / (2 * H)
+    w = 0.5 * (info + np.swapaxes(info, 1, 2))
+    f = np.zeros((n * q, n * q))
+    for k in range(graph.m):
+        jac = np.zeros((q, n * q))
+        i, j = int(graph.src[k]), int(graph.dst[k])
+        jac[:, i * q:(i + 1) * q] += jac_i[k]
+        jac[:, j * q:(j + 1) * q] += jac_j[k]
+        f += jac.T @ w[k] @ jac
+    return f
+
+
+def consistent_graph(dim: int, seed: int, noise: float = 0.1, **kw) -> PoseGraph:
+    """A random graph whose measurements are its vertices' relative poses times Exp(noise):
+    residual angles ~ noise, far from the branch cut of Log where the reference breaks down."""
+    rng = np.random.default_rng(seed)
+    g = make_random_graph(rng, dim=dim, **kw)
+    ri, ti = L.se_inverse(g.vertex_rot[g.src], g.vertex_trans[g.src])
+    rz, tz = L.se_compose(ri, ti, g.vertex_rot[g.dst], g.vertex_trans[g.dst])
+    re, te = L.se_exp(noise * rng.normal(size=(g.m, g.q)))
+    rz, tz = L.se_compose(rz, tz, re, te)
+    return replace(g, rot=rz, trans=tz)
+
+
+def free_dofs(n: int, q: int, anchors) -> np.ndarray:
+    keep = np.setdiff1d(np.arange(n), anchors)
+    return (keep[:, None] * q + np.arange(q)).ravel()
+
+
+# Finite differences: step H, truncation ~H^2 and rounding ~eps/H (the closed-form Log is
+# accurate to a few eps) put each Jacobian entry within ~1e-10 relative; FD_RTOL leaves a
+# margin of 100 for F; an inverse loses at most cond(F) more.
+H = 1e-5
+
+
+# ------------------------------------------------------------------ independent reference
+def hat_gtsam(xi: np.ndarray) -> np.ndarray:
+    """hat() of a tangent vector in GTSAM's order."""
+    if xi.size == 3:
+        x, y, th = xi
+        return np.array([[0, -th, x], [th, 0, y], [0, 0, 0]], float)
+    w1, w2, w3, v1, v2, v3 = xi
+    return np.array([[0, -w3, w2, v1], [w3, 0, -w1, v2], [-w2, w1, 0, v3], [0, 0, 0, 0]], float)
+
+
+def vee_gtsam(x: np.ndarray) -> np.ndarray:
+    if x.shape[0] == 3:
+        return np.array([x[0, 2], x[1, 2], x[1, 0]])
+    return np.array([x[2, 1], x[0, 2], x[1, 0], x[0, 3], x[1, 3], x[2, 3]])
+
+
+def homog(r, t):
+    d = r.shape[-1]
+    out = np.eye(d + 1)
+    out[:d, :d], out[:d, d] = r, t
+    return out
+
+
+# SE-Sync stops its trust region at a 1e-6 relative decrease: a reference more than that above
+# our certified value must be shown not to be the minimum (a feasible estimate below it).
+SESYNC_STOP = 1e-6
+
+
+def print_rounding(value: float) -> float:
+    """Half a unit of the last digit of a value as typed in (REFERENCE literals: SE-Sync's printout)."""
+    from decimal import Decimal
+
+    return 0.5 * 10.0 ** Decimal(repr(value)).as_tuple().exponent
+
+
+def _bridge_graph(dim: int, weak: float):
+    """Two 4-pose clusters (tau 100, kappa 1000) joined by one edge of precision ``weak``."""
+    from posecrb.core.graph import PoseGraph
+    from posecrb.core.noise import isotropic_information
+    from posecrb.sim.generators import relative_poses, uniform_rotations
+
+    rng = np.random.default_rng(2)
+    src, dst = np.array([0, 1, 2, 0, 4, 5, 6, 4, 3]), np.array([1, 2, 3, 2, 5, 6, 7, 6, 4])
+    rot, trans = uniform_rotations(8, dim, rng), 3 * rng.standard_normal((8, dim))
+    mr, mt = relative_poses(rot, trans, src, dst)
+    tau, kappa = np.full(9, 100.0), np.full(9, 1000.0)
+    tau[-1] = kappa[-1] = weak
+    return PoseGraph(dim=dim, ids=np.arange(8), src=src, dst=dst, rot=mr, trans=mt,
+                     info=isotropic_information(tau, kappa, dim), vertex_rot=rot, vertex_trans=trans,
+                     format="synthetic")

@@ -7,7 +7,7 @@ from posecrb import load
 from posecrb.core.errors import DisconnectedGraph
 from posecrb.models.paper.bounds import compute_bounds
 
-from .conftest import make_random_graph
+from .helpers import make_random_graph
 from .numerics import EPS, MARGIN, logdet_atol, spd_condition, sum_atol
 
 

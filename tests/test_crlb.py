@@ -13,9 +13,8 @@ from posecrb.core.errors import DisconnectedGraph, UsageError
 from posecrb.models.paper.crlb import CURVATURE_WARN, curvature_status, inverse_accuracy, paper_crlb
 from posecrb.models.paper.fim import FIM_VARIANTS, paper_fim
 
-from .conftest import make_random_graph
+from .helpers import _bridge_graph, dense_model_fisher, make_random_graph
 from .numerics import EPS, MARGIN, assert_within, inverse_entry_atol, spd_condition, trace_inverse_rtol
-from .test_fim import dense_model_fisher
 
 
 def dense_eq68(f: np.ndarray, npf: int) -> np.ndarray:
@@ -193,23 +192,6 @@ def test_inverse_accuracy_against_dense_references():
     assert acc.error_bound == pytest.approx(acc.condition_estimate * EPS)
     assert acc.status.ok and acc.columns == 4
     assert sp.issparse(f)
-
-
-def _bridge_graph(dim: int, weak: float):
-    """Two 4-pose clusters (tau 100, kappa 1000) joined by one edge of precision ``weak``."""
-    from posecrb.core.graph import PoseGraph
-    from posecrb.core.noise import isotropic_information
-    from posecrb.sim.generators import relative_poses, uniform_rotations
-
-    rng = np.random.default_rng(2)
-    src, dst = np.array([0, 1, 2, 0, 4, 5, 6, 4, 3]), np.array([1, 2, 3, 2, 5, 6, 7, 6, 4])
-    rot, trans = uniform_rotations(8, dim, rng), 3 * rng.standard_normal((8, dim))
-    mr, mt = relative_poses(rot, trans, src, dst)
-    tau, kappa = np.full(9, 100.0), np.full(9, 1000.0)
-    tau[-1] = kappa[-1] = weak
-    return PoseGraph(dim=dim, ids=np.arange(8), src=src, dst=dst, rot=mr, trans=mt,
-                     info=isotropic_information(tau, kappa, dim), vertex_rot=rot, vertex_trans=trans,
-                     format="synthetic")
 
 
 @pytest.mark.parametrize("weak,state", [(1e-6, "warning"), (1e-13, "unavailable")])

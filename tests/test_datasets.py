@@ -88,6 +88,7 @@ def test_git_blob_ids_match_git_hash_object(shared_datasets, tmp_path):
     assert git_blob_file(odd) == ref
 
 
+@pytest.mark.slow
 def test_counts_match_the_parsed_files_and_sources_md(shared_datasets):
     man = load_manifest()
     for f in shared_files(shared_datasets):

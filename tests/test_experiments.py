@@ -121,6 +121,7 @@ def test_crlb_sweep_reaches_the_bound_on_a_small_grid(dim):
         assert eq64.levels[0].mse_bound == lv.mse_bound      # one matrix in 2D
 
 
+@pytest.mark.slow
 def test_crlb_sweep_bit_identical_across_executors():
     g = synth.grid(2, 3, tau=100.0, kappa=200.0)
     truth = (g.vertex_rot, g.vertex_trans)
@@ -172,6 +173,7 @@ def test_thesis_gradient_matches_finite_differences():
     assert np.allclose(hess, hess.T)
 
 
+@pytest.mark.slow
 def test_thesis_quick_experiment_converges_with_m():
     from posecrb.experiments.thesis import horizontal_errors, thesis_experiment
 
@@ -262,6 +264,7 @@ def test_cli_crlb(tmp_path):
 
 
 # ---------------------------------------------------------------- quick modes (what CI runs)
+@pytest.mark.slow
 @pytest.mark.parametrize("args", [["crlb", "CSAIL"], ["crlb", "tinyGrid3D"], ["thesis"], ["octagon"]])
 def test_quick_mode_of_each_experiment(shared_datasets, args):
     r = _run(["experiment", *args, "--quick", "--format", "json"])

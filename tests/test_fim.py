@@ -8,7 +8,6 @@ from dataclasses import replace
 
 import numpy as np
 import pytest
-from scipy.spatial.transform import Rotation
 
 from posecrb.core.errors import DisconnectedGraph, NotPositiveDefinite
 from posecrb.core.noise import rotation_weight
@@ -16,7 +15,7 @@ from posecrb.lie.so import so2_exp, so3_exp
 from posecrb.models.paper.bounds import t_optimality
 from posecrb.models.paper.fim import FIM_VARIANTS, fim_logdet, fim_symbolic, paper_fim, trace_fim
 
-from .conftest import make_random_graph
+from .helpers import _bridge_graph, _fd_error, dense_model_fisher, make_random_graph
 from .numerics import assert_within, logdet_atol, psd_sum_tolerance, sum_atol
 
 
@@ -80,78 +79,6 @@ def dense_reference(graph, rot, trans, anchor: int, h: float = 1e-6, with_error:
                 f[ri, rj] -= w[e]
                 f[rj, ri] -= w[e]
     return (f, rel * np.linalg.norm(jac.T @ (wdiag[:, None] * jac), 2) / np.linalg.norm(f, 2)) if with_error else f
-
-
-def _fd_error(jac, weights, r_max, h, f) -> float:
-    """Relative 2-norm error bound of ``J^T W J`` from central differences (``dense_model_fisher``)."""
-    from .numerics import EPS, MARGIN
-
-    d_jac = np.sqrt(jac.size) * EPS * r_max / h
-    return MARGIN * 2 * weights.max() * np.linalg.norm(jac, 2) * d_jac / np.linalg.norm(f, 2)
-
-
-def _body_perturbed(rot: np.ndarray, dim: int, delta: np.ndarray) -> np.ndarray:
-    """R Exp(delta) along R E (2D angle; 3D E_k = G_k / sqrt 2), through scipy only."""
-    if dim == 2:
-        c, s = np.cos(delta[0]), np.sin(delta[0])
-        return rot @ np.array([[c, -s], [s, c]])
-    return rot @ Rotation.from_rotvec(np.asarray(delta) / np.sqrt(2.0)).as_matrix()
-
-
-def _rotation_coords(mat: np.ndarray, dim: int) -> np.ndarray:
-    """Coordinates of Log(mat) in the FIM's basis: the angle (2D), sqrt 2 * rotation vector (3D)."""
-    if dim == 2:
-        return np.array([np.arctan2(mat[1, 0], mat[0, 0])])
-    return np.sqrt(2.0) * Rotation.from_matrix(mat).as_rotvec()
-
-
-def dense_model_fisher(graph, rot, trans, anchor: int, h: float = 1e-6, with_error: bool = False):
-    """Fisher information J^T W J of the model's mean function, from central differences,
-    every pose perturbed in its body frame (x_k + dx, R_k Exp(delta)), order [translations;
-    rotations]. Per edge: translation residual R_i^T (x_j - x_i) - p_ij (weight tau I_d) and
-    rotation residual Log(Rbar_ij^T R_i^T R_j) in the E_k coordinates (weight w I_dr, eq. 39-41 /
-    59), with Rbar_ij = R_i^T R_j at the estimate itself: the noise-free measurement, where the
-    Jacobian of the residual is that of the mean function, as the Fisher information needs.
-
-    ``with_error=True`` also returns a bound on the relative 2-norm error of the result: central
-    differences of residuals of size at most R carry a rounding error ``eps R / h`` per Jacobian
-    entry (the truncation error, h^2 times a third derivative, is far smaller for h = 1e-6), so
-    ``||dF|| <= 2 ||W|| ||J|| ||dJ||_F`` relative to ``||F||``, times ``MARGIN``."""
-    d = graph.dim
-    dr = 1 if d == 2 else 3
-    rbar = [rot[i].T @ rot[j] for i, j in zip(graph.src, graph.dst)]
-
-    def residual(r, t):
-        out = []
-        for e, (i, j) in enumerate(zip(graph.src, graph.dst)):
-            out.append(r[i].T @ (t[j] - t[i]) - graph.trans[e])
-            out.append(_rotation_coords(rbar[e].T @ r[i].T @ r[j], d))
-        return np.concatenate(out)
-
-    cols = []
-    free = [k for k in range(graph.n) if k != anchor]
-    for k in free:
-        for a in range(d):
-            tp, tm = trans.copy(), trans.copy()
-            tp[k, a] += h
-            tm[k, a] -= h
-            cols.append((residual(rot, tp) - residual(rot, tm)) / (2 * h))
-    for k in free:
-        for a in range(dr):
-            delta = np.zeros(dr)
-            delta[a] = h
-            rp, rm = rot.copy(), rot.copy()
-            rp[k] = _body_perturbed(rot[k], d, delta)
-            rm[k] = _body_perturbed(rot[k], d, -delta)
-            cols.append((residual(rp, trans) - residual(rm, trans)) / (2 * h))
-    jac = np.stack(cols, axis=1)
-    w = rotation_weight(graph.kappa, d)
-    weights = np.concatenate([np.concatenate([np.full(d, t), np.full(dr, v)]) for t, v in zip(graph.tau, w)])
-    f = jac.T @ (weights[:, None] * jac)
-    if not with_error:
-        return f
-    r_max = max(np.abs(residual(rot, trans)).max(), np.abs(graph.trans).max(), np.abs(trans).max())
-    return f, _fd_error(jac, weights, r_max, h, f)
 
 
 @pytest.mark.parametrize("dim", [2, 3])
@@ -403,8 +330,6 @@ def test_cli_fim_sed_near_singular_bridge_is_a_status(dim, tmp_path, capsys):
 
     from posecrb.io import load, write_g2o
     from posecrb.models.thesis.fim import sed_fim
-
-    from .test_crlb import _bridge_graph
 
     path = tmp_path / "bridge.g2o"
     write_g2o(_bridge_graph(dim, 1e-14), path)

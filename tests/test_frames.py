@@ -1,6 +1,7 @@
 """World <-> body frame conversion of the thesis model against a dense finite-difference reference.
 
-The reference never uses posecrb.models.thesis.frames or posecrb.models.thesis.fim: it differentiates the g2o/GTSAM error
+The reference never uses posecrb.models.thesis.frames or posecrb.models.thesis.fim: it differentiates the g2o/GTSAM
+error
 ``e_ij = Log(z^{-1} X_i^{-1} X_j)`` (scipy's expm, posecrb.lie.se's checked Log) under body-frame retractions
 ``X_i expm(hat(xi_i))`` with ``xi`` in GTSAM's order (Pose2 (x, y, theta), Pose3 (rotation,
 translation)) and weights it with the file's information matrix reordered the same way: the
@@ -9,15 +10,11 @@ Hessian GTSAM builds, in dense numpy.
 from __future__ import annotations
 
 import json
-from dataclasses import replace
 
 import numpy as np
 import pytest
 import scipy.sparse as sp
-from scipy.linalg import expm
 
-from posecrb.core.graph import PoseGraph
-from posecrb.lie import se as L
 from posecrb.models.thesis.crb import sed_crb
 from posecrb.models.thesis.fim import kernel_basis, sed_fim
 from posecrb.models.thesis.frames import (
@@ -30,96 +27,13 @@ from posecrb.models.thesis.frames import (
     world_map,
 )
 
-from .conftest import make_random_graph
+from .helpers import (
+    body_fim_reference,
+    consistent_graph,
+    free_dofs,
+)
 
-# Finite differences: step H, truncation ~H^2 and rounding ~eps/H (the closed-form Log is
-# accurate to a few eps) put each Jacobian entry within ~1e-10 relative; FD_RTOL leaves a
-# margin of 100 for F; an inverse loses at most cond(F) more.
-H = 1e-5
 FD_RTOL = 1e-8
-
-
-# ------------------------------------------------------------------ independent reference
-def hat_gtsam(xi: np.ndarray) -> np.ndarray:
-    """hat() of a tangent vector in GTSAM's order."""
-    if xi.size == 3:
-        x, y, th = xi
-        return np.array([[0, -th, x], [th, 0, y], [0, 0, 0]], float)
-    w1, w2, w3, v1, v2, v3 = xi
-    return np.array([[0, -w3, w2, v1], [w3, 0, -w1, v2], [-w2, w1, 0, v3], [0, 0, 0, 0]], float)
-
-
-def vee_gtsam(x: np.ndarray) -> np.ndarray:
-    if x.shape[0] == 3:
-        return np.array([x[0, 2], x[1, 2], x[1, 0]])
-    return np.array([x[2, 1], x[0, 2], x[1, 0], x[0, 3], x[1, 3], x[2, 3]])
-
-
-def homog(r, t):
-    d = r.shape[-1]
-    out = np.eye(d + 1)
-    out[:d, :d], out[:d, d] = r, t
-    return out
-
-
-def gtsam_information(graph: PoseGraph) -> np.ndarray:
-    """(m, q, q) file information in GTSAM's order (2D unchanged; 3D rotation block first)."""
-    p = np.arange(3) if graph.dim == 2 else np.r_[3:6, 0:3]
-    return graph.info[:, p][:, :, p]
-
-
-def body_fim_reference(graph: PoseGraph, rot, trans) -> np.ndarray:
-    """Dense ``sum J^T I J`` with J = d e_ij / d(xi_i, xi_j) by central differences.
-
-    The perturbation ``expm(hat(+-H e_a))`` is one 4x4 (3x3) matrix per coordinate; the
-    logarithm of the perturbed relative poses is ``se_lie.se_log`` (closed form, checked
-    against scipy's logm in test_se_lie.py), batched over the edges."""
-    q, n, d = graph.q, graph.n, graph.dim
-    info = gtsam_information(graph)
-    xs = np.stack([homog(rot[i], trans[i]) for i in range(n)])
-    zinv = np.linalg.inv(np.stack([homog(a, b) for a, b in zip(graph.rot, graph.trans)]))
-    xi, xj = xs[graph.src], xs[graph.dst]
-    to_gtsam = np.array([1, 2, 0]) if d == 2 else np.arange(6)
-
-    def err(ei, ej):
-        a = zinv @ np.linalg.inv(xi @ ei) @ xj @ ej
-        return L.se_log(a[:, :d, :d], a[:, :d, d])[:, to_gtsam]
-
-    one = np.eye(d + 1)
-    jac_i = np.empty((graph.m, q, q))
-    jac_j = np.empty((graph.m, q, q))
-    for a in range(q):  # q coordinates, each batched over every edge
-        e = np.zeros(q)
-        e[a] = H
-        ep, em = expm(hat_gtsam(e)), expm(hat_gtsam(-e))
-        jac_i[:, :, a] = (err(ep, one) - err(em, one)) / (2 * H)
-        jac_j[:, :, a] = (err(one, ep) - err(one, em)) / (2 * H)
-    w = 0.5 * (info + np.swapaxes(info, 1, 2))
-    f = np.zeros((n * q, n * q))
-    for k in range(graph.m):
-        jac = np.zeros((q, n * q))
-        i, j = int(graph.src[k]), int(graph.dst[k])
-        jac[:, i * q:(i + 1) * q] += jac_i[k]
-        jac[:, j * q:(j + 1) * q] += jac_j[k]
-        f += jac.T @ w[k] @ jac
-    return f
-
-
-def consistent_graph(dim: int, seed: int, noise: float = 0.1, **kw) -> PoseGraph:
-    """A random graph whose measurements are its vertices' relative poses times Exp(noise):
-    residual angles ~ noise, far from the branch cut of Log where the reference breaks down."""
-    rng = np.random.default_rng(seed)
-    g = make_random_graph(rng, dim=dim, **kw)
-    ri, ti = L.se_inverse(g.vertex_rot[g.src], g.vertex_trans[g.src])
-    rz, tz = L.se_compose(ri, ti, g.vertex_rot[g.dst], g.vertex_trans[g.dst])
-    re, te = L.se_exp(noise * rng.normal(size=(g.m, g.q)))
-    rz, tz = L.se_compose(rz, tz, re, te)
-    return replace(g, rot=rz, trans=tz)
-
-
-def free_dofs(n: int, q: int, anchors) -> np.ndarray:
-    keep = np.setdiff1d(np.arange(n), anchors)
-    return (keep[:, None] * q + np.arange(q)).ravel()
 
 
 # ------------------------------------------------------------------ tests

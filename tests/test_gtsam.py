@@ -25,7 +25,7 @@ from posecrb.io import load  # noqa: E402
 from posecrb.models.thesis.frames import sed_crb_in_frame  # noqa: E402
 from posecrb.solver.estimate import get_estimate  # noqa: E402
 
-from .test_frames import body_fim_reference, consistent_graph, free_dofs, gtsam_information  # noqa: E402
+from .helpers import body_fim_reference, consistent_graph, free_dofs, gtsam_information  # noqa: E402
 
 
 # ------------------------------------------------------------------ GTSAM graphs

@@ -24,7 +24,7 @@ def _stack(results):
 def test_trial_seeds_are_prefix_stable_and_distinct():
     a = trial_seeds(7, 10, (20_000_000,))
     b = trial_seeds(7, 4, (20_000_000,))
-    draws = lambda ss: [np.random.default_rng(s).random() for s in ss]  # noqa: E731
+    draws = lambda ss: [np.random.default_rng(s).random() for s in ss]
     assert draws(a[:4]) == draws(b)                      # more trials do not change the first ones
     assert len(set(draws(a))) == 10
     assert draws(trial_seeds(8, 4, (20_000_000,))) != draws(b)   # the seed matters
@@ -53,6 +53,7 @@ def test_serial_results_in_task_order_with_progress():
     assert [int(r[2]) for r in res] == [t.group * 1000 + t.trial for t in tasks]
 
 
+@pytest.mark.slow
 def test_local_pool_bit_identical_to_serial():
     tasks = make_tasks(5, 9, [(1,), (2,), (3,)])
     contexts = [{"size": 30}] * 3
@@ -64,6 +65,7 @@ def test_local_pool_bit_identical_to_serial():
     assert np.array_equal(serial, pooled)        # bit-identical, not merely close
 
 
+@pytest.mark.slow
 def test_dask_local_cluster_bit_identical_to_serial():
     distributed = pytest.importorskip("dask.distributed")
     tasks = make_tasks(5, 8, [(1,), (2,)])

@@ -5,7 +5,7 @@ import pytest
 
 from posecrb.core.noise import isotropic_precisions, omega, rotation_weight
 
-from .conftest import random_spd
+from .helpers import random_spd
 from .numerics import EPS, MARGIN, spd_condition
 
 

@@ -10,16 +10,8 @@ from posecrb.lie import _series
 from posecrb.lie import se as L
 from posecrb.lie.so import so3_exp
 
+from .helpers import hat_ref
 from .numerics import EPS, MARGIN
-
-
-def hat_ref(xi: np.ndarray) -> np.ndarray:
-    """Generators written out from the thesis' basis (sec. 6.2 for SE(2), 2.5 for SE(3))."""
-    if xi.size == 3:
-        w, x, y = xi
-        return np.array([[0, -w, x], [w, 0, y], [0, 0, 0]], float)
-    w1, w2, w3, v1, v2, v3 = xi
-    return np.array([[0, -w3, w2, v1], [w3, 0, -w1, v2], [-w2, w1, 0, v3], [0, 0, 0, 0]], float)
 
 
 def vee_ref(x: np.ndarray) -> np.ndarray:

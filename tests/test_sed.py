@@ -16,7 +16,7 @@ from posecrb.models.thesis import example as te
 from posecrb.models.thesis.crb import sed_crb
 from posecrb.models.thesis.fim import edge_residuals, kernel_basis, left_information, sed_fim
 
-from .conftest import make_random_graph
+from .helpers import hat_ref, make_random_graph
 from .numerics import (
     EPS,
     MARGIN,
@@ -27,7 +27,6 @@ from .numerics import (
     psd_sum_tolerance,
     trace_inverse_rtol,
 )
-from .test_se_lie import hat_ref
 
 
 # ------------------------------------------------------------------ independent references
@@ -375,6 +374,7 @@ def test_thesis_fixture_conventions_and_sampling():
 
 
 # ------------------------------------------------------------------ real data
+@pytest.mark.slow
 @pytest.mark.parametrize("name", ["intel", "smallGrid3D"])
 def test_real_dataset_against_dense(shared_datasets, name):
     g = load(shared_datasets / f"{name}.g2o")

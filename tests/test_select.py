@@ -31,8 +31,7 @@ from posecrb.selection.select import (
 )
 from posecrb.solver.estimate import from_vertices
 
-from .conftest import random_rotations, random_spd
-from .test_fim import dense_model_fisher
+from .helpers import dense_model_fisher, random_rotations, random_spd
 
 
 # ----------------------------------------------------------------------------- small graphs

@@ -86,6 +86,7 @@ def test_shape_must_be_a_multiple_of_the_block():
         inverse_block_diagonal(sp.identity(10, format="csc"), 3)
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("name,stride", [("intel.g2o", 97), ("parking-garage.g2o", 83)])
 def test_real_fim_blocks_match_sparse_lu_solves(shared_datasets, name, stride):
     """Per-pose blocks of a real FIM's inverse against columns from an independent sparse LU."""

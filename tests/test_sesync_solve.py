@@ -11,13 +11,14 @@ from posecrb.core.errors import DisconnectedGraph
 from posecrb.core.graph import PoseGraph
 from posecrb.io import load
 from posecrb.lie.so import so2_exp, so_project
+from posecrb.sim.generators import uniform_rotations
 from posecrb.solver import solve
 from posecrb.solver.problem import Problem
 from posecrb.solver.staircase import RelaxedModel, verify
 from posecrb.solver.stiefel import lift, random_point
 from posecrb.solver.trust_region import TROptions, trust_region
 
-from .helpers import random_pose_graph, random_rotations
+from .helpers import SESYNC_STOP, print_rounding, random_pose_graph
 from .numerics import EPS, MARGIN, objective_atol, suboptimality_bound
 
 # SE-Sync C++ reference optima.
@@ -61,7 +62,7 @@ def test_random_local_solves_never_beat_certified(dim):
     model = RelaxedModel(p)
     for seed in range(12):
         # local optimisation on SO(d)^n-sized Stiefel (r = d), from random rotations
-        R0 = random_rotations(g.n, dim, np.random.default_rng(seed))
+        R0 = uniform_rotations(g.n, dim, np.random.default_rng(seed))
         res = trust_region(model, np.ascontiguousarray(np.swapaxes(R0, 1, 2)), TROptions(max_iterations=200))
         Rl = np.swapaxes(res.state.Z, 1, 2)
         Rl = so_project(Rl) if dim == 3 else Rl
@@ -128,6 +129,7 @@ def test_disconnected_graph_raises():
         solve(cut)
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("name", ["CSAIL", "tinyGrid3D", "smallGrid3D"])
 def test_real_datasets_match_reference(shared_datasets, name):
     g = load(shared_datasets / f"{name}.g2o")
@@ -139,7 +141,6 @@ def test_real_datasets_match_reference(shared_datasets, name):
     # brackets the normalised reading's move): compare that reading. The reference is a feasible
     # objective value, so ours can exceed it only by our certified suboptimality (plus rounding
     # and its printed digits); SE-Sync stops at a 1e-6 relative decrease, so it is at most that above.
-    from .test_sesync_datasets import SESYNC_STOP, print_rounding
 
     gr = load(shared_datasets / f"{name}.g2o", quaternions="raw")
     raw = solve(gr)

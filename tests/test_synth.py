@@ -183,7 +183,8 @@ def test_isotropic_noise_has_the_model_variances(dim):
     from scipy.special import ive
     x = 2 * kappa
     # E[cos t]: 2D I1/I0; 3D density prop. exp(2k cos t)(1 - cos t): (I1 - (I0 + I2)/2) / (I0 - I1).
-    expected = ive(1, x) / ive(0, x) if dim == 2 else (ive(1, x) - (ive(0, x) + ive(2, x)) / 2) / (ive(0, x) - ive(1, x))
+    i0, i1, i2 = ive(0, x), ive(1, x), ive(2, x)
+    expected = i1 / i0 if dim == 2 else (i1 - (i0 + i2) / 2) / (i0 - i1)
     mean = cos_t.mean()
     se = cos_t.std() / math.sqrt(m)
     assert abs(mean - expected) < 6 * se

@@ -148,7 +148,7 @@ def test_tables_without_rows_are_not_printed_and_the_note_once(shared_datasets, 
     assert [b.splitlines()[0] for b in out.split("### ") if b.strip()] == [
         "Table I: metric results, 2D datasets", "Table II: metric results, 3D datasets",
         "Table III: matrix construction time, 2D datasets", "Table IV: matrix construction time, 3D datasets"]
-    assert out.count("differ from the printed Table II by design") == 1                        # Table II's note, not repeated under IV
+    assert out.count("differ from the printed Table II by design") == 1   # Table II's note, not under IV
     rc, out, _ = _run(capfd)                                        # the terminal table
     assert " ".join(out.split()).count("differ from the printed Table II by design") == 1 and "Table IV" in out
     rc = main(["tables", "--datasets", "CSAIL", "--repeat", "1", "--format", "markdown"])

@@ -96,9 +96,13 @@ def _short_help(name: str, limit: int) -> str:
 _EXPLICIT_SHORT_HELP = {"select"}   # commands declared with short_help= (shown whole, wrapped)
 
 
+# Named by `posecrb --version`, so a user (and `make`) can tell which checkout or install runs.
+_PACKAGE_DIR = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+
+
 @click.group(cls=LazyGroup, context_settings={"help_option_names": ["-h", "--help"], "max_content_width": 100})
 @click.version_option(__version__, prog_name="posecrb",
-                      message=f"%(prog)s %(version)s from {os.path.dirname(os.path.dirname(os.path.abspath(__file__)))} "
+                      message=f"%(prog)s %(version)s from {_PACKAGE_DIR} "
                               f"(Python {sys.version.split()[0]}, {sys.executable})")
 @click.option("-v", "--verbose", count=True, help="More log output on stderr (-vv for debug).")
 @click.option("-q", "--quiet", is_flag=True, help="Only errors on stderr.")
@@ -107,7 +111,8 @@ def cli(verbose: int, quiet: bool) -> None:
 
     FILE arguments take a path to a g2o or TORO file, or a bare dataset name
     (e.g. `intel`) looked up in --data-dir, $POSECRB_DATA, ./datasets and
-    ~/.cache/posecrb. Results go to stdout, logs and warnings to stderr. Exit codes: 0 ok, 1 data or solver error, 2 usage error.
+    ~/.cache/posecrb. Results go to stdout, logs and warnings to stderr.
+    Exit codes: 0 ok, 1 data or solver error, 2 usage error.
     """
     _configure_logging(verbose, quiet)
 

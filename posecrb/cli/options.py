@@ -1,16 +1,24 @@
 """Options, option types and helpers shared by subcommands."""
 from __future__ import annotations
 
+import logging
 import math
 import re
+from pathlib import Path
 
 import click
 
+from ..core.errors import UsageError
 from ..core.graph import PoseGraph
+from ..core.noise import ROTATION_WEIGHT_MODELS
 from ..core.timing import timed
 from ..datasets import search as datasets
 from ..io import load
+from ..models.paper.fim import FIM_VARIANTS
 from ..report.render import FORMATS
+from ..solver.estimate import get_estimate
+
+log = logging.getLogger("posecrb")
 
 _PLAIN_NUMBER = re.compile(r"[+-]?(?:[0-9]+\.?[0-9]*|\.[0-9]+)(?:[eE][+-]?[0-9]+)?")
 INT64_MAX = 2 ** 63 - 1
@@ -87,3 +95,84 @@ def load_dataset(name_or_path: str, data_dir: str | None = None, repeat: int = 1
     """Resolve a path or bare name and parse it; returns the graph and the median parse time."""
     path = datasets.resolve(name_or_path, data_dir)
     return timed(lambda: load(path), repeat=repeat)
+
+
+def executor_settings(executor: str, jobs: int, scheduler: str | None) -> dict:
+    if scheduler and executor != "dask":
+        raise UsageError("--scheduler needs --executor dask")
+    kind = "dask" if executor == "dask" else ("local" if jobs > 1 else "serial")
+    return {"executor": kind, "jobs": jobs, "scheduler": scheduler}
+
+
+def plot_target(plot_path: str | None, out_dir: str | None, name: str) -> str | None:
+    if plot_path:
+        return plot_path
+    return str(Path(out_dir) / f"{name}.png") if out_dir else None
+
+
+MODELS = ("paper", "sed")
+
+
+model_option = click.option(
+    "--model", type=click.Choice(MODELS), default="paper", show_default=True,
+    help="paper: Chen et al. on (R^d x SO(d))^n, isotropic noise, anchored (eq. 42/64); "
+         "sed: Bertini's right-invariant model on SE(d)^n with full information matrices.")
+
+
+estimate_option = click.option(
+    "--estimate", "estimate_source", default="solve", show_default=True, metavar="solve|vertices|FILE",
+    help="Where the poses come from: the certified solver (global optimum), the file's own "
+         "VERTEX lines, or another g2o/TORO FILE with the same ids.")
+
+
+rotation_weight_option = click.option(
+    "--rotation-weight", "rotation_model", type=click.Choice(ROTATION_WEIGHT_MODELS), default="eq59",
+    show_default=True, help="Paper model, 3D rotation weight: eq. (59), or the empirical Table II fit.")
+
+
+fim_variant_option = click.option(
+    "--fim-variant", "fim_variant", type=click.Choice(FIM_VARIANTS), default=None,
+    help="Paper model, 3D: consistent is the Fisher information of the model the data follow "
+         "(rotation coupling -w R_i^T R_j; the bound the Monte Carlo MSE reaches); eq64 is eq. (64) "
+         "exactly as printed (coupling -w I), labelled fim_variant=eq64 in every output. Same matrix "
+         "in 2D.  [default: consistent]")
+
+
+frame_option = click.option(
+    "--frame", type=click.Choice(("world", "body")), default=None,
+    help="sed model: coordinates of the FIM and of every per-pose number. world: the thesis' X_i -> Exp(-delta) X_i, "
+         "about the world origin, rotation first (omega, v). body: GTSAM's and g2o's X_i -> X_i Exp(xi), "
+         "in GTSAM's order (Pose2 x, y, theta; Pose3 rotation, translation), comparable with "
+         "gtsam.Marginals / a GTSAM Hessian. Not for --model paper (its own coordinates, JSON "
+         "coordinates_description).  [default: world]")
+
+
+def resolve_frame(model: str, frame: str | None) -> str:
+    """The frame of the numbers: ``--frame`` for sed (default world), "mixed" for the paper model."""
+    if model != "sed":
+        if frame is not None:
+            raise UsageError("--frame applies to --model sed (the paper model's coordinates are translation "
+                             "in the world frame, rotation in the body frame)")
+        return "mixed"
+    return frame or "world"
+
+
+def resolve_fim_variant(model: str, fim_variant: str | None) -> str:
+    """The paper FIM variant to use; ``--fim-variant`` with ``--model sed`` is a usage error."""
+    if fim_variant is not None and model != "paper":
+        raise UsageError("--fim-variant applies to --model paper")
+    return fim_variant or "consistent"
+
+
+def load_with_estimate(file: str, data_dir: str | None, source: str):
+    """Graph, estimate and a JSON-ready description of the estimate plus parse/solve times."""
+
+    graph, t_parse = load_dataset(file, data_dir)
+    est = get_estimate(graph, source)
+    if est.certified is False:
+        log.warning("%s: the solver's estimate is NOT certified globally optimal (%s)", graph.name, est.status)
+    info = {"source": est.source, "certified": est.certified, "objective": est.objective}
+    times = {"parse": t_parse}
+    if est.solve_time is not None:
+        times["solve"] = est.solve_time
+    return graph, est, info, times

@@ -75,7 +75,8 @@ class DisconnectedGraph(PosecrbError):
     def __init__(self, path: str | None, components: list[ComponentSummary]):
         self.path, self.components = path, components
         parts = "; ".join(
-            f"#{k}: {c.size} poses (ids {', '.join(map(str, c.sample_ids))}{', ...' if c.size > len(c.sample_ids) else ''})"
+            f"#{k}: {c.size} poses (ids {', '.join(map(str, c.sample_ids))}"
+            f"{', ...' if c.size > len(c.sample_ids) else ''})"
             for k, c in enumerate(components[:6])
         )
         more = f"; ... {len(components) - 6} more" if len(components) > 6 else ""

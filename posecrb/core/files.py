@@ -22,8 +22,10 @@ import os
 import signal
 import stat
 import tempfile
+import threading
+from collections.abc import Callable, Iterator, Sequence
 from pathlib import Path
-from typing import IO, Callable, Iterator, Sequence
+from typing import IO
 
 from .errors import ParseError, UsageError
 
@@ -261,7 +263,6 @@ def handle_sigterm() -> Iterator[None]:
     """While active (main thread only), SIGTERM raises ``Terminated`` instead of killing the
     process outright, so temporaries are removed and partial downloads discarded."""
     global _MAIN_PID
-    import threading
 
     if threading.current_thread() is not threading.main_thread():
         yield

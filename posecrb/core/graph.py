@@ -7,7 +7,8 @@ information matrix in g2o order (translation block first, then rotation).
 """
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+import os
+from dataclasses import dataclass, field, replace
 from functools import cached_property
 
 import numpy as np
@@ -63,7 +64,6 @@ class PoseGraph:
     def name(self) -> str:
         if self.path is None:
             return "synthetic"
-        import os
 
         base = os.path.basename(self.path)
         return base.rsplit(".", 1)[0] if "." in base else base
@@ -140,8 +140,7 @@ class PoseGraph:
         """Internal index of the anchor; default the smallest id (docs/design.md#anchor)."""
         return 0 if anchor_id is None else self.index_of(anchor_id)
 
-    def with_vertices(self, rot: np.ndarray, trans: np.ndarray) -> "PoseGraph":
+    def with_vertices(self, rot: np.ndarray, trans: np.ndarray) -> PoseGraph:
         """The same measurements with another estimate attached."""
-        from dataclasses import replace
 
         return replace(self, vertex_rot=np.asarray(rot, float), vertex_trans=np.asarray(trans, float))

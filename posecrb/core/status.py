@@ -37,11 +37,11 @@ class Status:
             raise InternalError("a warning or an unavailable status needs a reason")
 
     @classmethod
-    def warning(cls, reason: str, hint: str | None = None) -> "Status":
+    def warning(cls, reason: str, hint: str | None = None) -> Status:
         return cls("warning", reason, hint)
 
     @classmethod
-    def unavailable(cls, reason: str, hint: str | None = None) -> "Status":
+    def unavailable(cls, reason: str, hint: str | None = None) -> Status:
         return cls("unavailable", reason, hint)
 
     @property

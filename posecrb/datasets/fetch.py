@@ -21,9 +21,9 @@ import time
 import urllib.error
 import urllib.parse
 import urllib.request
+from collections.abc import Callable, Iterable
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Callable, Iterable
 
 from .. import __version__
 from ..core.errors import PosecrbError
@@ -69,7 +69,8 @@ def target_path(entry: DatasetEntry, dest: str | os.PathLike | None = None) -> P
 def _check_url(url: str, allow_http: bool) -> None:
     scheme = urllib.parse.urlsplit(url).scheme
     if scheme != "https" and not (allow_http and scheme == "http"):
-        raise FetchError(f"refusing to download from {url!r}: only https:// URLs (http:// only as an explicit override)")
+        raise FetchError(f"refusing to download from {url!r}: only https:// URLs "
+                         "(http:// only as an explicit override)")
 
 
 def size_cap(entry: DatasetEntry) -> int:
@@ -240,7 +241,8 @@ class _AlreadyPresent(Exception):
 
 
 def fetch_many(names: Iterable[str | DatasetEntry], *, dest: str | os.PathLike | None = None,
-               manifest: Manifest | None = None, progress_factory: Callable[[DatasetEntry], Progress | None] | None = None,
+               manifest: Manifest | None = None,
+               progress_factory: Callable[[DatasetEntry], Progress | None] | None = None,
                timeout: float = 60.0, data_dir: str | os.PathLike | None = None,
                deadline: float | None = DEFAULT_DEADLINE, probe_timeout: float | None = None) -> list[FetchResult]:
     """``fetch`` each dataset; a failure is recorded (status ``failed``) and the others continue.

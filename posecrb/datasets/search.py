@@ -15,7 +15,8 @@ from __future__ import annotations
 import os
 from pathlib import Path
 
-from ..core.errors import DatasetNotFound
+from ..core.errors import DatasetNotFound, ParseError
+from ..core.files import path_kind
 from .manifest import DatasetEntry, Manifest, load_manifest
 
 EXTENSIONS = (".g2o", ".graph", ".toro")
@@ -50,7 +51,6 @@ def _resolve_on_path(name_or_path: str | os.PathLike, data_dir: str | os.PathLik
         return p
     name = str(name_or_path)
     if os.sep in name or (os.altsep and os.altsep in name):
-        from ..core.errors import ParseError
 
         _not_regular(name)
         raise ParseError(name, None, "no such file")
@@ -78,8 +78,6 @@ def _not_regular(name: str | os.PathLike) -> None:
         st = os.stat(name)
     except OSError:
         return
-    from ..core.errors import ParseError
-    from ..core.files import path_kind
 
     raise ParseError(str(name), None, f"is {path_kind(st)}, not a regular file")
 

@@ -7,6 +7,7 @@ import os
 from dataclasses import dataclass
 from pathlib import Path
 
+from ..io import load
 from .manifest import DatasetEntry, Manifest, Verification, load_manifest, verify_file
 from .search import dataset_files, locate
 
@@ -107,7 +108,6 @@ def verify_files(data_dir: str | os.PathLike | None = None, parse: bool = False,
         status = "ok" if v.ok else STATUS_MISMATCH
         poses = edges = None
         if parse:
-            from ..io import load
 
             g = load(f)
             poses, edges = g.n, g.m

@@ -30,14 +30,19 @@ from __future__ import annotations
 import math
 import re
 import time
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
-from typing import Callable, Sequence
 
 import numpy as np
 
 from ..core.errors import UsageError
 from ..core.graph import PoseGraph
+from ..lie.so import so2_log, so3_log
+from ..models.paper.crlb import paper_crlb
+from ..models.paper.fim import FIM_VARIANTS
 from ..sim.montecarlo import Task, level_key, make_tasks, mean_and_stderr, run_tasks
+from ..sim.sampling import NOISE_SCALES, noise_model_graph, perturb_measurements
+from ..solver import solve
 
 MAX_LEVELS = 1000
 
@@ -98,10 +103,8 @@ def rotation_errors(rot_true: np.ndarray, rot_est: np.ndarray) -> np.ndarray:
     """
     rel = np.swapaxes(rot_true, -1, -2) @ rot_est
     if rot_true.shape[-1] == 2:
-        from ..lie.so import so2_log
 
         return so2_log(rel)[:, None]
-    from ..lie.so import so3_log
 
     return np.sqrt(2.0) * so3_log(rel)
 
@@ -173,8 +176,6 @@ class CrlbSweepResult:
 
 # ---------------------------------------------------------------- the trial
 def _crlb_trial(context: dict, task: Task) -> dict:
-    from ..sim.sampling import perturb_measurements
-    from ..solver import solve
 
     rng = task.rng()
     graph = context["graph"]
@@ -191,8 +192,6 @@ def _bounds(graph: PoseGraph, rot, trans, anchor: int, kc: float, scale: str, ta
     """Bounds per pose of the scaled noise model at the truth (``posecrb.models.paper.crlb.paper_crlb``:
     eq. 67, 3D eq. 68) from the FIM ``variant``: the simulated model's Fisher information
     (``"consistent"``) or eq. (64) as printed (``"eq64"``); the same matrix in 2D."""
-    from ..models.paper.crlb import paper_crlb
-    from ..sim.sampling import noise_model_graph
 
     model = noise_model_graph(graph, kc, scale, tau, kappa)
     n_p = graph.n - 1
@@ -220,9 +219,6 @@ def crlb_sweep(graph: PoseGraph, kcs: Sequence[float], trials: int = 100, seed: 
     numbers do not depend on the other levels requested nor on the executor.
     ``fim_variant``: the FIM the bound inverts (``posecrb.models.paper.fim.FIM_VARIANTS``).
     """
-    from ..models.paper.fim import FIM_VARIANTS
-    from ..sim.sampling import NOISE_SCALES
-    from ..solver import solve
 
     t0 = time.perf_counter()
     if scale not in NOISE_SCALES:
@@ -240,7 +236,7 @@ def crlb_sweep(graph: PoseGraph, kcs: Sequence[float], trials: int = 100, seed: 
         truth = (res.rot, res.trans)
         truth_certified, truth_objective = bool(res.certified), float(res.objective)
     rot, trans = anchor_poses(np.asarray(truth[0], float), np.asarray(truth[1], float), anchor)
-    kcs = sorted(set(float(k) for k in kcs))
+    kcs = sorted({float(k) for k in kcs})
     tasks = make_tasks(seed, trials, [(level_key(k),) for k in kcs])
     contexts = [{"graph": graph, "rot": rot, "trans": trans, "anchor": anchor, "kc": k, "scale": scale,
                  "tau": tau, "kappa": kappa, "solver_options": solver_options} for k in kcs]

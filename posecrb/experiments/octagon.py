@@ -20,12 +20,15 @@ from __future__ import annotations
 
 import itertools
 import math
+from collections.abc import Callable
 from dataclasses import dataclass, field
-from typing import Callable
 
 import numpy as np
 
 from ..core.errors import UsageError
+from ..models.paper.bounds import compute_bounds
+from ..models.paper.fim import fim_logdet, paper_fim, trace_fim
+from ..sim.generators import octagon, octagon_candidate_edges
 from ..sim.montecarlo import Task, make_tasks, run_tasks
 
 DEFAULT_RADIUS = 0.1   # the paper gives no size; small enough that sum tau ||p||^2 is small (sec. IX-A)
@@ -97,9 +100,6 @@ def _subsets(k: int, trials: int, rng: np.random.Generator, n_cand: int) -> list
 
 def _octagon_level(context: dict, task: Task) -> list[OctagonGraph]:
     """All graphs with ``context['k']`` extra edges (one Monte Carlo task per k)."""
-    from ..models.paper.bounds import compute_bounds
-    from ..models.paper.fim import fim_logdet, paper_fim, trace_fim
-    from ..sim.generators import octagon, octagon_candidate_edges
 
     cand = octagon_candidate_edges()
     out = []
@@ -120,7 +120,6 @@ def octagon_experiment(trials: int = 50, seed: int = 0, *, radius: float = DEFAU
                        scheduler: str | None = None, progress: Callable[[int], None] | None = None
                        ) -> OctagonResult:
     """Fig. 4/5: T- and D-optimality of octagon graphs with 0..21 extra edges."""
-    from ..sim.generators import octagon_candidate_edges
 
     if trials < 1:
         raise UsageError("trials must be >= 1")

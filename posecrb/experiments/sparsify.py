@@ -21,15 +21,32 @@ objective explicitly. Selections run as independent tasks on the Monte Carlo eng
 """
 from __future__ import annotations
 
+import os
 import re
+import time
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 
 import numpy as np
 
-from ..core.errors import UsageError
+from ..core.errors import SolverError, UsageError
 from ..core.graph import PoseGraph
+from ..linalg.cholesky import SymbolicCholesky
+from ..linalg.selinv import trace_inverse
+from ..models.paper.fim import paper_fim
+from ..selection.select import (
+    METHODS,
+    OBJECTIVES,
+    FiedlerObjective,
+    parse_budget,
+    pruned_graph,
+    select_edges,
+    split_edges,
+    tree_objective,
+)
 from ..sim.montecarlo import Task, make_tasks, run_tasks
+from ..solver import solve
+from ..solver.estimate import Estimate
 
 DEFAULT_BUDGETS = tuple(f"{p}%" for p in range(10, 101, 10))
 QUICK_BUDGETS = ("20%", "50%")
@@ -54,7 +71,6 @@ def parse_budgets(spec: str | Sequence[str]) -> list[str]:
 
 def parse_methods(spec: str | Sequence[str], objective: str = "tree") -> list[tuple[str, str, str]]:
     """``[objective-]method`` labels -> (label, objective, method)."""
-    from ..selection.select import METHODS, OBJECTIVES
 
     parts = spec.split(",") if isinstance(spec, str) else list(spec)
     out = []
@@ -151,10 +167,6 @@ class SparsifyRow:
 
 def _evaluate(context: dict, keep_mask: np.ndarray) -> dict:
     """Objective-independent measures of the kept edges (weights over all edges)."""
-    from ..linalg.cholesky import SymbolicCholesky
-    from ..linalg.selinv import trace_inverse
-    from ..models.paper.fim import paper_fim
-    from ..selection.select import FiedlerObjective, pruned_graph, tree_objective
 
     graph: PoseGraph = context["graph"]
     ref = context["reference"]
@@ -170,10 +182,7 @@ def _evaluate(context: dict, keep_mask: np.ndarray) -> dict:
 
 
 def _sparsify_task(context: dict, task: Task) -> dict:
-    import time
 
-    from ..selection.select import select_edges
-    from ..solver import solve
 
     budget, label, objective, method = context["jobs"][task.trial]
     graph = context["graph"]
@@ -234,10 +243,6 @@ def sparsify_experiment(graph: PoseGraph, budgets: Sequence[str] = DEFAULT_BUDGE
 
     The full graph is solved first (the reference for ATE/RPE and the point of every FIM);
     raises SolverError when it cannot be certified."""
-    from ..core.errors import SolverError
-    from ..selection.select import parse_budget, split_edges
-    from ..solver import solve
-    from ..solver.estimate import Estimate
 
     budgets = parse_budgets(budgets)
     triples = parse_methods(methods, objective)
@@ -274,12 +279,11 @@ def sparsify_experiment(graph: PoseGraph, budgets: Sequence[str] = DEFAULT_BUDGE
 def plot_sparsify(result: SparsifyResult, path) -> str:
     """Share of the full graph's gain in the objective (``(f(S) - f(F)) / (f(all) - f(F))``),
     lambda_2 and ATE against the budget, one line per method; written atomically."""
-    import os
 
-    import matplotlib
+    import matplotlib  # noqa: PLC0415 -- optional heavy dependency (matplotlib), only for --plot
 
     matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
+    import matplotlib.pyplot as plt  # noqa: PLC0415 -- optional heavy dependency (matplotlib), only for --plot
 
     fig, axes = plt.subplots(1, 3, figsize=(13.0, 3.8))
     names = {"tree": "tree bound (eq. 75)", "fim": "logdet FIM", "fiedler": "$\\lambda_2$"}

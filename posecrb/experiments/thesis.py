@@ -32,12 +32,15 @@ Dense linear algebra is used throughout: the problem has 15 unknowns by construc
 """
 from __future__ import annotations
 
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
-from typing import Callable, Sequence
 
 import numpy as np
 
 from ..core.errors import UsageError
+from ..lie.se import se_compose, se_exp, se_inverse, se_jr_inv, se_log
+from ..models.thesis.example import ANCHORS, left_information, sample_graph, thesis_graph, true_estimate, true_poses
+from ..models.thesis.fim import edge_kinematics, kernel_basis, sed_fim
 from ..sim.montecarlo import Task, make_tasks, run_tasks
 
 DEFAULT_M = (1, 2, 5, 10, 20, 50, 100, 150)
@@ -48,20 +51,17 @@ N_POSES = 5
 
 # ---------------------------------------------------------------- SE(2) helpers on (R, t) pairs
 def _poses_T() -> tuple[np.ndarray, np.ndarray]:
-    from ..models.thesis.example import true_poses
 
     return true_poses()
 
 
 def _to_x(rot: np.ndarray, trans: np.ndarray):
-    from ..lie.se import se_inverse
 
     return se_inverse(rot, trans)
 
 
 def intrinsic_errors(rot_true, trans_true, rot_est, trans_est) -> np.ndarray:
     """(n, q) ``Log(T_true^{-1} T_est)``: coordinates of the right perturbation T_true Exp(delta)."""
-    from ..lie.se import se_compose, se_inverse, se_log
 
     ri, ti = se_inverse(rot_true, trans_true)
     return se_log(*se_compose(ri, ti, rot_est, trans_est))
@@ -69,7 +69,6 @@ def intrinsic_errors(rot_true, trans_true, rot_est, trans_est) -> np.ndarray:
 
 def _retract(rot, trans, delta):
     """T_k <- T_k Exp(delta_k)."""
-    from ..lie.se import se_compose, se_exp
 
     er, et = se_exp(delta)
     return se_compose(rot, trans, er, et)
@@ -87,7 +86,6 @@ class MleResult:
 
 def _cost_grad_hess(graph, omega, rot, trans, free_dofs):
     """0.5 sum r^T Omega r, its gradient and Gauss-Newton Hessian over the free dofs (4.5-4.7)."""
-    from ..models.thesis.fim import edge_kinematics
 
     xr, xt = _to_x(rot, trans)
     res, a = edge_kinematics(graph, xr, xt)          # r_ij, A = Jr^{-1}(r) Ad_{T_i}
@@ -110,7 +108,6 @@ def _cost_grad_hess(graph, omega, rot, trans, free_dofs):
 
 def _initial_poses(graph, anchors: Sequence[int], rot_anchor, trans_anchor):
     """Compose the measurements outward from the anchors (one pass over a BFS tree of the arcs)."""
-    from ..lie.se import se_compose, se_inverse
 
     n = graph.n
     rot = np.repeat(np.eye(2)[None], n, 0)
@@ -158,7 +155,7 @@ def anchored_mle(graph, omega: np.ndarray, anchors: Sequence[int], rot_anchor: n
     lam = 1e-4
     converged = False
     it = 0
-    for it in range(1, max_iterations + 1):
+    for it in range(1, max_iterations + 1):  # noqa: B007 -- the count is returned after the loop
         damp = h + lam * np.diag(np.diag(h))
         step = -np.linalg.solve(damp, g)
         delta = np.zeros((n, Q))
@@ -187,7 +184,6 @@ def horizontal_errors(rot_true, trans_true, rot_est, trans_est, labels: np.ndarr
     Newton on ``sum_{k in c} Log(T_true_k^{-1} T_est_k G_c Exp(eps)) = 0`` with
     ``d Log(Exp(delta) Exp(eps)) = Jr^{-1}(delta) eps``.
     """
-    from ..lie.se import se_jr_inv
 
     rot, trans = np.array(rot_est, float), np.array(trans_est, float)
     n_comp = int(labels.max()) + 1
@@ -206,7 +202,6 @@ def horizontal_errors(rot_true, trans_true, rot_est, trans_est, labels: np.ndarr
 
 # ---------------------------------------------------------------- Monte Carlo
 def _thesis_trial(context: dict, task: Task) -> dict:
-    from ..models.thesis.example import ANCHORS, left_information, sample_graph
 
     m = context["m"]
     graph = sample_graph(task.rng(), m)
@@ -221,8 +216,6 @@ def _thesis_trial(context: dict, task: Task) -> dict:
 
 def thesis_bounds(m: int) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     """``(F_m, (Pi F_m Pi)^+, F_m^+, N)``: dense 15 x 15 bounds of the case study at the truth."""
-    from ..models.thesis.example import ANCHORS, left_information, thesis_graph, true_estimate
-    from ..models.thesis.fim import kernel_basis, sed_fim
 
     g = thesis_graph()
     f1 = sed_fim(g, *true_estimate(), information=left_information()).matrix.toarray()
@@ -272,7 +265,7 @@ def thesis_experiment(ms: Sequence[int] = DEFAULT_M, trials: int = 200, seed: in
                       executor: str = "serial", jobs: int = 1, scheduler: str | None = None,
                       progress: Callable[[int], None] | None = None) -> ThesisResult:
     """Graphs 6.8 / 6.9 of the thesis, with the scale-free companion metrics."""
-    ms = sorted(set(int(m) for m in ms))
+    ms = sorted({int(m) for m in ms})
     if not ms or ms[0] < 1:
         raise UsageError("m values must be >= 1")
     if trials < 2:

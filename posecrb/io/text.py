@@ -331,7 +331,8 @@ def parse_text(text: str, path: str = "<string>", sha256: str | None = None,
     e_idx = np.asarray(groups[erec.tag])
     e_lines = e_idx + 1
     eids, evals = _numeric_block(path, [rows[k] for k in e_idx], e_lines, erec)
-    ei, ej, erot, etrans, einfo, precisions = _decode_edges(path, erec, eids, evals, e_lines, quaternions == "normalize")
+    normalize = quaternions == "normalize"
+    ei, ej, erot, etrans, einfo, precisions = _decode_edges(path, erec, eids, evals, e_lines, normalize)
 
     vertex_rot = vertex_trans = None
     if vrec is not None:

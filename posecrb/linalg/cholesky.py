@@ -12,6 +12,7 @@ import logging
 
 import numpy as np
 import scipy.sparse as sp
+from scipy.sparse.linalg import LinearOperator, eigsh
 from sksparse.cholmod import CholmodNotPositiveDefiniteError, Factor, analyze
 
 from ..core.errors import NotPositiveDefinite, UsageError
@@ -35,7 +36,7 @@ def _disable_gc_clear(tp: type) -> bool:
     The slot's address is checked against ``PyType_GetSlot`` before anything is written; on an
     interpreter whose type layout differs nothing is changed. Returns whether the slot is empty.
     """
-    import ctypes
+    import ctypes  # noqa: PLC0415 -- only for the one-time scikit-sparse repair at import
 
     get_slot = ctypes.pythonapi.PyType_GetSlot
     get_slot.restype, get_slot.argtypes = ctypes.c_void_p, [ctypes.py_object, ctypes.c_int]
@@ -133,7 +134,6 @@ def lambda_min(a: sp.spmatrix, factor: Factor | None = None, name: str = "matrix
     Reuses ``factor`` (a Cholesky factor of ``a``) as the inverse operator, so no
     extra factorization happens when the caller already has one.
     """
-    from scipy.sparse.linalg import LinearOperator, eigsh
 
     a = _as_csc(a)
     n = a.shape[0]

@@ -29,6 +29,7 @@ import logging
 
 import numpy as np
 import scipy.sparse as sp
+from threadpoolctl import threadpool_limits
 
 from ..core.errors import NumericalError, UsageError
 from .cholesky import SymbolicCholesky
@@ -175,12 +176,6 @@ def _lookup(indptr, indices, zval, rows, cols):  # pragma: no cover - compiled
 
 
 def _one_blas_thread():
-    try:
-        from threadpoolctl import threadpool_limits
-    except ImportError:  # pragma: no cover
-        import contextlib
-
-        return contextlib.nullcontext()
     return threadpool_limits(limits=1, user_api="blas")
 
 

@@ -5,7 +5,8 @@ For each dataset the file stores the input's sha256 and ``lb, ub, ub_lambda``
 (at the certified optimum: relative tolerance 1e-6, since they depend on the
 solver's stopping point; for ``trace_crlb`` at least ten times the estimated relative error of
 the inverse, ``condition x eps`` of the CRLB's accuracy estimate, so that an ill-conditioned FIM
-such as w10000's, cond ~1e10, is held to what double precision can deliver), with ``fim_variant``, the FIM they were computed from (the model's
+such as w10000's, cond ~1e10, is held to what double precision can deliver), with
+``fim_variant``, the FIM they were computed from (the model's
 Fisher information, ``"consistent"``, the default of ``posecrb.models.paper.fim.paper_fim``; the same matrix
 as eq. 64 in 2D). A changed input file or FIM variant is reported, not compared.
 """
@@ -21,13 +22,15 @@ from ..core.files import read_regular_file, write_text
 from ..datasets import search as datasets
 from ..io import load
 from ..models.paper.bounds import compute_bounds
+from ..models.paper.crlb import crlb_from_fim
+from ..models.paper.fim import fim_logdet, paper_fim
 from ..solver.estimate import get_estimate
 
 GRAPH_ONLY = ("lb", "ub", "ub_lambda")
 ESTIMATE_DEPENDENT = ("fim_logdet", "objective", "trace_crlb")
 FIM_DERIVED = ("fim_logdet", "trace_crlb")
 INVERSE_MARGIN = 10.0   # trace_crlb: tolerance >= this x the inverse's estimated relative error
-TOLERANCES = {**{k: 1e-9 for k in GRAPH_ONLY}, **{k: 1e-6 for k in ESTIMATE_DEPENDENT}}
+TOLERANCES = {**dict.fromkeys(GRAPH_ONLY, 1e-09), **dict.fromkeys(ESTIMATE_DEPENDENT, 1e-06)}
 
 
 def default_expected_path() -> Path:
@@ -60,8 +63,6 @@ def save_expected(data: dict, path: str | os.PathLike | None = None) -> Path:
 
 def compute_metrics(name: str, data_dir: str | None = None, variant: str = "consistent") -> dict:
     """The regressed quantities of one dataset, at its certified optimum (FIM ``variant``)."""
-    from ..models.paper.crlb import crlb_from_fim
-    from ..models.paper.fim import fim_logdet, paper_fim
 
     path = datasets.resolve(name, data_dir)
     graph = load(path)

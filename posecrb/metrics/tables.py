@@ -16,16 +16,19 @@ from __future__ import annotations
 import logging
 import math
 import os
+from collections.abc import Callable, Iterable, Sequence
+from concurrent.futures import ProcessPoolExecutor, as_completed
 from dataclasses import asdict, dataclass, field
-from typing import Callable, Iterable, Sequence
 
 from ..core.errors import DatasetNotFound, PosecrbError, status_of
 from ..core.provenance import machine, versions
 from ..core.status import put
 from ..core.timing import timed
 from ..datasets import search as datasets
+from ..datasets.manifest import load_manifest
 from ..io import load
 from ..models.paper.bounds import compute_bounds
+from ..models.paper.fim import fim_logdet, paper_fim
 from ..solver.estimate import get_estimate
 from .published import TABLE_II_FIT_FOOTNOTE, TABLE_II_FOOTNOTE, TABLE_II_PUBLISHED_FOOTNOTE, paper_row
 
@@ -62,7 +65,6 @@ def dataset_names(names: Sequence[str] | None = None, data_dir: str | None = Non
     manifest entry, then any other dataset file found on the search path."""
     if names:
         return list(names)
-    from ..datasets.manifest import load_manifest
 
     man = load_manifest()
     order = [e.name for e in man.paper()] + [e.name for e in man if e.table is None]
@@ -103,7 +105,6 @@ def dataset_row(name: str, settings: TableSettings,
         est = get_estimate(graph, "solve", **settings.solver)
         row.update(objective=est.objective, certified=est.certified, solve_time=est.solve_time)
         step("fim")
-        from ..models.paper.fim import fim_logdet, paper_fim
 
         fim, t_build = timed(lambda: paper_fim(graph, est.rot, est.trans, 0, settings.rotation_model,
                                                variant=settings.fim_variant), settings.repeat)
@@ -137,12 +138,10 @@ def build_rows(names: Sequence[str], settings: TableSettings, jobs: int = 1,
             if on_done:
                 on_done(n, rows[-1])
         return rows
-    from concurrent.futures import ProcessPoolExecutor
 
     out: dict[str, dict] = {}
     with ProcessPoolExecutor(max_workers=jobs) as pool:
         futures = {pool.submit(_run_one, (n, settings)): n for n in names}
-        from concurrent.futures import as_completed
 
         for fut in as_completed(futures):
             n = futures[fut]
@@ -205,10 +204,9 @@ def table_rows(rows: Iterable[dict], table: int, compare_paper: bool = False) ->
 
 def _belongs_missing(name: str, dim: int) -> bool:
     try:
-        from ..datasets.manifest import load_manifest
 
         entry = load_manifest().find(name)
-    except Exception:  # noqa: BLE001 - no manifest: show the row in both tables
+    except Exception:
         return True
     return entry is None or entry.dim == dim
 

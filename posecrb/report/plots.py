@@ -7,17 +7,18 @@ Graphs 6.8-6.9; ``plot_tables`` summarises Tables I-IV in one figure.
 from __future__ import annotations
 
 import os
-import tempfile
+from collections.abc import Iterable, Sequence
 from pathlib import Path
-from typing import Iterable, Sequence
 
 import matplotlib
 
 matplotlib.use("Agg")
-import matplotlib.pyplot as plt  # noqa: E402
-import numpy as np  # noqa: E402
+import matplotlib.pyplot as plt
+import numpy as np
 
-from ..core.errors import UsageError  # noqa: E402
+from ..core.errors import UsageError
+from ..core.files import atomic_write
+from ..metrics.published import paper_row
 
 DPI = 100
 FIGURE_FORMATS = (".png", ".svg")
@@ -46,7 +47,6 @@ def check_figure_path(path: str | os.PathLike) -> Path:
 def _save(fig, path) -> Path:
     """savefig to a temporary in the target directory, renamed into place (atomic_write);
     the format follows the suffix (PNG without one)."""
-    from ..core.files import atomic_write
 
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
@@ -161,7 +161,6 @@ def plot_tables(rows: Sequence[dict], path, note: str | None = None) -> Path:
     = faster), for the datasets the paper has. ``rows`` are ``posecrb.metrics.tables`` rows; rows
     without lb/ub/FIM (not found, failed) are left out. Raises ValueError when none is left.
     """
-    from ..metrics.published import paper_row
 
     data = _plottable(rows)
     if not data:

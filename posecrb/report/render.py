@@ -13,9 +13,14 @@ import csv
 import io
 import json
 import math
-from typing import Any, Iterable, Sequence
+import sys
+from collections.abc import Iterable, Sequence
+from typing import Any
 
+import click
 import numpy as np
+from rich.console import Console
+from rich.table import Table
 
 from ..core.errors import UsageError
 
@@ -125,7 +130,6 @@ def to_markdown(rows: Sequence[dict[str, Any]], columns: Sequence[str] | None = 
 def to_rich_table(rows: Sequence[dict[str, Any]], columns: Sequence[str] | None = None,
                   title: str | None = None, headers: dict[str, str] | None = None,
                   caption: str | None = None):
-    from rich.table import Table
 
     flat = [flatten(render_statuses(_plain(r))) for r in rows]
     cols = _columns(flat, columns)
@@ -143,7 +147,6 @@ def print_rows(rows: list[dict[str, Any]], fmt: str, columns: Sequence[str] | No
                title: str | None = None, headers: dict[str, str] | None = None,
                single_json: bool = True, caption: str | None = None) -> None:
     """Write rows to stdout in ``fmt``; a single row is one JSON object, several a list."""
-    import click
 
     if fmt == "json":
         click.echo(to_json(rows, single=single_json))
@@ -152,9 +155,7 @@ def print_rows(rows: list[dict[str, Any]], fmt: str, columns: Sequence[str] | No
     elif fmt == "markdown":
         click.echo(to_markdown(rows, columns, headers), nl=False)
     elif fmt == "table":
-        import sys
 
-        from rich.console import Console
 
         # Piped output: no terminal width to respect, so never squeeze columns.
         width = None if sys.stdout.isatty() else 250

@@ -57,11 +57,18 @@ from typing import Any
 import numpy as np
 import scipy.sparse as sp
 from scipy.sparse.csgraph import connected_components, minimum_spanning_tree
+from scipy.sparse.linalg import LinearOperator, eigsh
 
 from ..core.errors import InternalError, ParseError, PosecrbError, UsageError
 from ..core.graph import PoseGraph
+from ..core.noise import isotropic_precisions, rotation_weight
+from ..io import write_g2o
 from ..linalg.cholesky import SymbolicCholesky
 from ..linalg.laplacian import laplacian, reduced_index
+from ..linalg.pathchol import PathFactor, logdet_eye_plus, scalar_greedy_steps, woodbury_downdate, woodbury_downdate1
+from ..linalg.selinv import SelectedInverse
+from ..models.paper.fim import rotation_jacobians
+from ..solver.estimate import get_estimate
 
 log = logging.getLogger("posecrb")
 
@@ -258,7 +265,7 @@ class _Block:
         method = "metis" if self.size >= _METIS_FROM else "default"
         try:
             self.symbolic = SymbolicCholesky(pattern, mode="auto", ordering_method=method)
-        except Exception:  # noqa: BLE001  # pragma: no cover - CHOLMOD without METIS
+        except Exception:  # pragma: no cover - CHOLMOD without METIS
             self.symbolic = SymbolicCholesky(pattern)
 
     def _csc(self, data: np.ndarray) -> sp.csc_matrix:
@@ -274,7 +281,6 @@ class _Block:
 
     def h_selected(self, factor, edges: np.ndarray) -> np.ndarray:
         """``H_e = U_e^T M^{-1} U_e`` for many edges from one selected inversion."""
-        from ..linalg.selinv import SelectedInverse
 
         sel = SelectedInverse(factor, self.name)
         rows, U, valid = self.rows[edges], self.U[edges], self.valid[edges]
@@ -387,7 +393,6 @@ def tree_objective(graph: PoseGraph, anchor: int = 0, rotation_model: str = "eq5
 
     When ``w = c tau`` on every edge (uniform noise, e.g. city10000) ``L_w = c L_tau`` and the
     objective is ``(d + d_r) logdet L_tau + d_r (n - 1) log c``: one factor instead of two."""
-    from ..core.noise import isotropic_precisions, rotation_weight
 
     tau, kappa = isotropic_precisions(graph.info, graph.dim)
     w = rotation_weight(kappa, graph.dim, rotation_model)
@@ -424,8 +429,6 @@ def edge_information_factors(graph: PoseGraph, rot: np.ndarray, trans: np.ndarra
     diagonal blocks ``w I`` and the coupling ``-w R_i^T R_j`` of the frame-consistent FIM
     (``-w I`` for ``variant="eq64"``, eq. 61-62 as printed). Returns (rows (m, 2q), valid, U (m, 2q, q)).
     """
-    from ..core.noise import rotation_weight
-    from ..models.paper.fim import rotation_jacobians
 
     d, dr, q = graph.dim, graph.rot_dim, graph.q
     tau = graph.tau
@@ -495,7 +498,6 @@ class FiedlerObjective:
             _, vecs = np.linalg.eigh(lap)
             val, v = self._rayleigh(x, vecs[:, 1])
             return _State(np.array(x, float), val, v)
-        from scipy.sparse.linalg import LinearOperator, eigsh
 
         factor, _ = self._block.factor(x)
         free, n = self._free, self.n
@@ -547,7 +549,6 @@ class _Engine:
     def __init__(self, obj: LogDetObjective, factors: list, kind: str):
         self.obj, self.kind = obj, kind
         if kind == "path":
-            from ..linalg.pathchol import PathFactor
 
             self.factors = [PathFactor(f) for f in factors]
         else:
@@ -588,7 +589,6 @@ def _incremental_greedy(obj: LogDetObjective, x: np.ndarray, cand: np.ndarray, k
     pass over the candidates replace re-evaluations: the argmax is the exact greedy choice (ties:
     the first edge in the file). Every ``refresh_every`` steps the factor is recomputed and every
     H re-derived by selected inversion, so rounding in the updates cannot accumulate."""
-    from ..linalg.pathchol import logdet_eye_plus, woodbury_downdate, woodbury_downdate1
 
     refresh_every = refresh_every or REFRESH_EVERY
     if engine == "path" and len(obj.blocks) == 1 and obj.blocks[0].U.shape[2] == 1:
@@ -663,7 +663,6 @@ def _incremental_greedy_scalar(obj: LogDetObjective, x: np.ndarray, cand: np.nda
     """``_incremental_greedy`` for one Laplacian block with the path engine, every step of a
     stretch fused into one compiled call (posecrb.linalg.pathchol.scalar_greedy_steps); Python only
     between stretches: Minoux's bound on ~64 prefixes and a refresh every ``refresh_every`` steps."""
-    from ..linalg.pathchol import PathFactor, scalar_greedy_steps
 
     b = obj.blocks[0]
     uc = np.ascontiguousarray(b.U[cand][:, :, 0])
@@ -1003,7 +1002,6 @@ def make_objective(graph: PoseGraph, objective: str, anchor: int = 0, estimate=N
         return fim_objective(graph, estimate.rot, estimate.trans, anchor)
     if objective == "fiedler":
         if fiedler_weight == "w":
-            from ..core.noise import rotation_weight
 
             weights = rotation_weight(graph.kappa, graph.dim, rotation_model)
         elif fiedler_weight == "kappa":
@@ -1025,7 +1023,8 @@ def select_edges(graph: PoseGraph, budget: str | int, *, objective: str = "tree"
     GreedyEig for fiedler), ``relax`` (Frank-Wolfe on the relaxation, rounded by top-K and by
     MADOW_DRAWS seeded Madow draws, the best kept), ``random`` (seeded), ``naive`` (the K
     heaviest by rotation weight, MAC's baseline; ties at random). ``certify``: also run the
-    relaxation for a bound (greedy, random, naive; relax always has one). Log-det objectives always report the submodular bound.
+    relaxation for a bound (greedy, random, naive; relax always has one). Log-det objectives always
+    report the submodular bound.
     ``estimate`` (fim only): "solve" (certified optimum of the full graph), "vertices" or a
     file; ``reference`` an already computed ``posecrb.solver.estimate.Estimate``. ``strategy`` (log-det
     greedy): "incremental" (every gain exact at every step), "lazy" (priority queue) or "auto"
@@ -1054,7 +1053,6 @@ def select_edges(graph: PoseGraph, budget: str | int, *, objective: str = "tree"
     est = reference
     if objective == "fim":
         if est is None:
-            from ..solver.estimate import get_estimate
 
             t1 = time.perf_counter()
             est = get_estimate(graph, estimate, anchor=anchor) if estimate == "solve" else get_estimate(graph, estimate)
@@ -1189,7 +1187,6 @@ def pruned_graph(graph: PoseGraph, keep: np.ndarray) -> PoseGraph:
 
 def write_pruned(graph: PoseGraph, result: SelectionResult, path: str) -> PoseGraph:
     """Write fixed + selected edges (and every vertex) as g2o, atomically (posecrb.io.write_g2o)."""
-    from ..io import write_g2o
 
     pruned = pruned_graph(graph, result.kept_edges)
     write_g2o(pruned, path)

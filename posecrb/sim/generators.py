@@ -25,13 +25,17 @@ no dataset is found).
 from __future__ import annotations
 
 import math
-from typing import Iterable, Sequence
+from collections.abc import Iterable, Sequence
+from dataclasses import replace
 
 import numpy as np
 
 from ..core.errors import UsageError
 from ..core.graph import PoseGraph, rotation_dimension
+from ..core.noise import isotropic_information
+from ..io.rotations import quat_to_rot
 from ..lie.so import so2_exp, so3_exp
+from .sampling import sample_isotropic_gaussian, sample_langevin
 
 KINDS = ("grid2d", "grid3d", "sphere", "torus", "octagon", "demo")
 
@@ -63,7 +67,6 @@ def _rng(rng: np.random.Generator | int | None, needed: bool) -> np.random.Gener
 def _isotropic_noise(rot: np.ndarray, trans: np.ndarray, tau: np.ndarray, kappa: np.ndarray,
                      dim: int, rng: np.random.Generator) -> tuple[np.ndarray, np.ndarray]:
     """Eq. (80): right-multiplied Langevin rotation noise, additive isotropic Gaussian translation noise."""
-    from .sampling import sample_isotropic_gaussian, sample_langevin
 
     m = rot.shape[0]
     z = sample_langevin(kappa, m, dim, rng)
@@ -75,7 +78,6 @@ def _assemble(dim: int, rot: np.ndarray, trans: np.ndarray, src: np.ndarray, dst
               tau, kappa, noise: bool, rng: np.random.Generator | None,
               ids: np.ndarray | None = None, info: np.ndarray | None = None) -> PoseGraph:
     """Measurements from the truth (optionally noisy), isotropic information, truth as vertices."""
-    from ..core.noise import isotropic_information
 
     src = np.asarray(src, dtype=np.int64)
     dst = np.asarray(dst, dtype=np.int64)
@@ -111,7 +113,6 @@ def uniform_rotations(n: int, dim: int, rng: np.random.Generator) -> np.ndarray:
     """(n, d, d) Haar-uniform rotations (uniform angle in 2D, normalised Gaussian quaternions in 3D)."""
     if dim == 2:
         return so2_exp(rng.uniform(-np.pi, np.pi, n))
-    from ..io.rotations import quat_to_rot
 
     q = rng.standard_normal((n, 4))
     return quat_to_rot(q / np.linalg.norm(q, axis=1, keepdims=True))
@@ -328,7 +329,6 @@ def random_information(rng: np.random.Generator, m: int, dim: int, kind: str = "
     r = rotation_dimension(dim)
     q = dim + r
     if kind == "isotropic":
-        from ..core.noise import isotropic_information
 
         tau = np.exp(rng.uniform(*np.log(tau_range), m))
         kappa = np.exp(rng.uniform(*np.log(kappa_range), m))
@@ -401,7 +401,6 @@ def random_graph(rng: np.random.Generator, n: int, m: int, dim: int, *, info: st
     graph = _assemble(dim, rot, trans, src, dst, 1.0, 1.0, False, None, ids=ids, info=inf)
     if noise == "none":
         return graph
-    from dataclasses import replace
 
     if noise == "isotropic":
         mrot, mtrans = _isotropic_noise(graph.rot, graph.trans, graph.tau, graph.kappa, dim, rng)
@@ -455,7 +454,7 @@ def generate(kind: str, poses: int | None = None, *, tau: float | None = None, k
                        kappa=OCTAGON_KAPPA if kappa is None else kappa, noise=noise, rng=seed)
     tau = DEFAULT_TAU if tau is None else tau
     kappa = DEFAULT_KAPPA if kappa is None else kappa
-    common = dict(tau=tau, kappa=kappa, noise=noise, rng=seed)
+    common = {"tau": tau, "kappa": kappa, "noise": noise, "rng": seed}
     if kind in ("grid2d", "grid3d"):
         d = 2 if kind == "grid2d" else 3
         n = poses or (100 if d == 2 else 125)

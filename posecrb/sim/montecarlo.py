@@ -28,11 +28,13 @@ from __future__ import annotations
 import contextlib
 import math
 import multiprocessing
+from collections.abc import Callable, Sequence
 from concurrent.futures import ProcessPoolExecutor, as_completed
 from dataclasses import dataclass
-from typing import Any, Callable, Sequence
+from typing import Any
 
 import numpy as np
+from threadpoolctl import threadpool_limits
 
 from ..core.errors import UsageError
 
@@ -84,11 +86,6 @@ def seed_record(task: Task) -> dict:
 @contextlib.contextmanager
 def _single_threaded():
     """Limit BLAS/OpenMP pools to one thread (identical arithmetic in every executor)."""
-    try:
-        from threadpoolctl import threadpool_limits
-    except ImportError:  # pragma: no cover - threadpoolctl ships with dask/scikit-learn
-        yield
-        return
     with threadpool_limits(limits=1):
         yield
 
@@ -168,8 +165,8 @@ def run_tasks(fn: Callable[[Any, Task], Any], contexts: Sequence[Any], tasks: Se
 
 def _run_dask(fn, contexts, chunks, jobs, scheduler, client, collect, out):
     try:
-        from dask.distributed import Client, LocalCluster
-        from dask.distributed import as_completed as dask_as_completed
+        from dask.distributed import Client, LocalCluster  # noqa: PLC0415 -- optional dependency (dask extra)
+        from dask.distributed import as_completed as dask_as_completed  # noqa: PLC0415 -- optional (dask extra)
     except ImportError as exc:
         raise UsageError('--executor dask needs the optional extra: pip install "posecrb[dask]"') from exc
     with contextlib.ExitStack() as stack:

@@ -2,10 +2,16 @@
 regeneration by eq. (80) and the thesis's left se(d) noise (4.3)."""
 from __future__ import annotations
 
+from dataclasses import replace
+
 import numpy as np
+from scipy.special import gamma as gamma_fn
+from scipy.special import gammainc, gammaincinv
 
 from ..core.errors import InternalError, UsageError
 from ..core.noise import isotropic_information
+from ..lie.se import se_compose, se_exp
+from ..lie.so import so2_exp, so3_exp
 
 _SMALL_C = 1e-3        # below this concentration the piece-1 proposal drops e^{-cu}
 _MAX_ROUNDS = 10_000   # acceptance is >= ~0.3 for every c, so this is never reached
@@ -33,8 +39,6 @@ def _sample_versine(a: float, c: np.ndarray, rng: np.random.Generator) -> tuple[
     pieces are picked with probability proportional to them, and no term overflows:
     ``e^(-c)`` underflows to 0 for huge c exactly where piece 2 is unreachable.
     """
-    from scipy.special import gamma as gamma_fn
-    from scipy.special import gammainc, gammaincinv
 
     n = c.shape[0]
     u = np.empty(n)
@@ -93,7 +97,6 @@ def sample_langevin_angle_so2(kappa, size: int, rng: np.random.Generator) -> np.
 
 def sample_langevin_so2(kappa, size: int, rng: np.random.Generator) -> np.ndarray:
     """(size, 2, 2) draws of Z ~ Lang(I, kappa) on SO(2) (paper eq. 5)."""
-    from ..lie.so import so2_exp
 
     return so2_exp(sample_langevin_angle_so2(kappa, size, rng))
 
@@ -115,7 +118,6 @@ def sample_langevin_so3(kappa, size: int, rng: np.random.Generator) -> np.ndarra
     Class function: the angle comes from ``sample_langevin_angle_so3`` and the
     axis is uniform on the sphere, independent of the angle.
     """
-    from ..lie.so import so3_exp
 
     t = sample_langevin_angle_so3(kappa, size, rng)
     axis = rng.standard_normal((size, 3))
@@ -143,7 +145,8 @@ def sample_isotropic_gaussian(tau, size: int, dim: int, rng: np.random.Generator
 NOISE_SCALES = ("both", "rotation")
 
 
-def scaled_precisions(graph, kc: float = 1.0, scale: str = "both", tau=None, kappa=None) -> tuple[np.ndarray, np.ndarray]:
+def scaled_precisions(graph, kc: float = 1.0, scale: str = "both", tau=None,
+                      kappa=None) -> tuple[np.ndarray, np.ndarray]:
     """(tau, kappa) per edge of the Monte Carlo noise model of eq. (80).
 
     ``tau`` / ``kappa`` (scalar or (m,)) replace the graph's own precisions (the
@@ -167,7 +170,6 @@ def noise_model_graph(graph, kc: float = 1.0, scale: str = "both", tau=None, kap
 
     Same measurements; use it to evaluate the FIM/CRLB of the Monte Carlo model.
     """
-    from dataclasses import replace
 
     t, k = scaled_precisions(graph, kc, scale, tau, kappa)
     return replace(graph, info=isotropic_information(t, k, graph.dim))
@@ -182,13 +184,13 @@ def perturb_measurements(graph, rot_true: np.ndarray, trans_true: np.ndarray, rn
     ``"consistent"`` variant of ``posecrb.models.paper.fim``. The paper's eq. (4), ``H_ij = Z_ij R_j R_i^T``,
     is a different law in general: conjugation invariance of Lang(I, kappa) only moves the noise
     to the other side of the same matrix (``Z R_j R_i^T = R_j R_i^T Z'``, ``Z' ~ Lang(I, kappa)``),
-    and ``R_j R_i^T != R_i^T R_j`` unless the rotations commute (2D). Translation: ``t~_ij = R_i^T (x_j - x_i) + y_ij``, ``y_ij ~ N(0, I / tau'_ij)``
+    and ``R_j R_i^T != R_i^T R_j`` unless the rotations commute (2D). Translation:
+    ``t~_ij = R_i^T (x_j - x_i) + y_ij``, ``y_ij ~ N(0, I / tau'_ij)``
     with ``tau' = k_c tau`` (``scale="both"``) or ``tau`` (``scale="rotation"``).
     The information matrices encode (tau', k_c kappa) under SE-Sync's convention
     (``isotropic_information``), so solving the returned graph gives the MLE.
     Vertices are dropped (a solver must not start at the truth).
     """
-    from dataclasses import replace
 
     t, k = scaled_precisions(graph, kc, scale, tau, kappa)
     rot_true = np.asarray(rot_true, dtype=float)
@@ -217,7 +219,6 @@ def perturb_left(rot: np.ndarray, trans: np.ndarray, xi: np.ndarray) -> tuple[np
     ``(rot, trans)``: (m, d, d), (m, d) noise-free ``T_i T_j^{-1}``; ``xi``: (m, q),
     rotation first (thesis sec. 6.2). Returns ``H`` as (rot, trans).
     """
-    from ..lie.se import se_compose, se_exp
 
     er, et = se_exp(np.asarray(xi, dtype=float))
     return se_compose(er, et, np.asarray(rot, dtype=float), np.asarray(trans, dtype=float))

@@ -14,6 +14,8 @@ import numpy as np
 
 from ..core.errors import ParseError, PosecrbError, UsageError
 from ..core.graph import PoseGraph
+from ..io import load
+from . import solve
 
 
 @dataclass(frozen=True)
@@ -34,7 +36,6 @@ def from_vertices(graph: PoseGraph) -> Estimate:
 
 
 def from_file(graph: PoseGraph, path: str) -> Estimate:
-    from ..io import load
 
     other = load(path)
     if not other.has_vertices:
@@ -50,7 +51,6 @@ def from_file(graph: PoseGraph, path: str) -> Estimate:
 
 
 def from_solver(graph: PoseGraph, **options) -> Estimate:
-    from . import solve
 
     t0 = time.perf_counter()
     res = solve(graph, **options)

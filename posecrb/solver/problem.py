@@ -114,7 +114,7 @@ class Problem:
 
     # ---- construction ------------------------------------------------------
     @classmethod
-    def from_graph(cls, graph: PoseGraph) -> "Problem":
+    def from_graph(cls, graph: PoseGraph) -> Problem:
         n, d = graph.n, graph.dim
         src, dst = np.asarray(graph.src, np.int64), np.asarray(graph.dst, np.int64)
         tau = np.asarray(graph.tau, float)

@@ -13,6 +13,7 @@ import time
 from dataclasses import dataclass, field
 
 import numpy as np
+from threadpoolctl import ThreadpoolController
 
 from ..core.errors import NotPositiveDefinite, PosecrbError, UsageError
 from ..core.graph import PoseGraph
@@ -52,12 +53,7 @@ def _blas_controller():
     which was a tenth of a small problem's solve when done on every call."""
     global _BLAS_CONTROLLER
     if _BLAS_CONTROLLER is None:
-        try:
-            from threadpoolctl import ThreadpoolController
-        except ImportError:  # pragma: no cover - optional
-            _BLAS_CONTROLLER = False
-        else:
-            _BLAS_CONTROLLER = ThreadpoolController()
+        _BLAS_CONTROLLER = ThreadpoolController()
     return _BLAS_CONTROLLER
 
 

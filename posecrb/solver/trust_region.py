@@ -23,11 +23,11 @@ log = logging.getLogger("posecrb")
 class Model(Protocol):
     """What the trust region needs from a problem on St(d, r)^n."""
 
-    def evaluate(self, Z: np.ndarray) -> "State": ...
+    def evaluate(self, Z: np.ndarray) -> State: ...
 
-    def hvp(self, state: "State", V: np.ndarray) -> np.ndarray: ...
+    def hvp(self, state: State, V: np.ndarray) -> np.ndarray: ...
 
-    def precondition(self, state: "State", R: np.ndarray) -> np.ndarray: ...
+    def precondition(self, state: State, R: np.ndarray) -> np.ndarray: ...
 
 
 @dataclass
@@ -82,7 +82,7 @@ def _tcg(model: Model, state: State, delta: float, opt: TROptions):
     hvps = 0
     proj = getattr(model, "project", None)
     stop = norm_r0 * min(opt.kappa, norm_r0 ** opt.theta)
-    for j in range(opt.max_inner):
+    for _j in range(opt.max_inner):
         Hd = model.hvp(state, delta_dir)
         hvps += 1
         d_Hd = inner(delta_dir, Hd)

@@ -98,7 +98,8 @@ def cases() -> list[Case]:
     # -- ids: integers, never through float64
     # 2^53 and 2^53 + 1 are the same float64 (a false self-loop when read through floats)
     out.append(Case("ids_beyond_2p53", text(graph2(BIG_IDS)), clean=clean2))   # same order of ids
-    out.append(Case("id_overflows_int64", text(_with_line(g2, 5, g2[5].replace("EDGE_SE2 0 1", f"EDGE_SE2 {2 ** 63} 1"))),
+    overflow = _with_line(g2, 5, g2[5].replace("EDGE_SE2 0 1", f"EDGE_SE2 {2 ** 63} 1"))
+    out.append(Case("id_overflows_int64", text(overflow),
                     line=6, reason="is not a non-negative integer id"))
     for name, tok in (("id_negative", "-1"), ("id_fractional", "1.0"), ("id_exponent", "1e0"),
                       ("id_underscore", "1_0"), ("id_plus", "+1")):

@@ -11,8 +11,16 @@ from pathlib import Path
 import click
 
 from ...core.provenance import machine, versions
+from ...experiments.sparsify import (
+    DEFAULT_BUDGETS,
+    DEFAULT_METHODS,
+    QUICK_BUDGETS,
+    plot_sparsify,
+    sparsify_experiment,
+)
 from ...report.render import print_rows, to_csv, to_json
-from ..options import anchor_option, data_dir_option, format_option, load_dataset
+from ..options import anchor_option, data_dir_option, executor_settings, format_option, load_dataset, plot_target
+from ..progress import progress
 
 log = logging.getLogger("posecrb")
 
@@ -74,22 +82,14 @@ def sparsify_cmd(file, budgets, methods, objective, fixed, certify, max_iter, se
     """Per budget and method: the selection's objective value, upper bound and certified ratio,
     its tree bound, lambda_2, FIM log-det and CRLB trace (at the full graph's optimum), and the
     pruned graph's certified optimum (ATE/RPE against the full graph's optimum, aligned)."""
-    from ...experiments.sparsify import (
-        DEFAULT_BUDGETS,
-        DEFAULT_METHODS,
-        QUICK_BUDGETS,
-        plot_sparsify,
-        sparsify_experiment,
-    )
-    from .experiment import _executor, _plot_target, _progress
 
-    ex = _executor(executor, jobs, scheduler)
+    ex = executor_settings(executor, jobs, scheduler)
     graph, _ = load_dataset(file, data_dir)
     budgets = budgets or ",".join(QUICK_BUDGETS if quick else DEFAULT_BUDGETS)
     methods = methods or ",".join(DEFAULT_METHODS)
     t0 = time.perf_counter()
     n_tasks = len([b for b in budgets.split(",") if b.strip()]) * len([m for m in methods.split(",") if m.strip()])
-    with _progress(n_tasks, f"{graph.name}: selections") as cb:
+    with progress(n_tasks, f"{graph.name}: selections") as cb:
         res = sparsify_experiment(graph, budgets.split(","), methods, objective=objective, fixed=fixed, seed=seed,
                                   certify=certify, max_iter=max_iter, anchor=graph.anchor_index(anchor),
                                   progress=cb, **ex)
@@ -103,7 +103,7 @@ def sparsify_cmd(file, budgets, methods, objective, fixed, certify, max_iter, se
                title=f"{res.dataset}: {res.candidates} loop closures, {res.fixed} fixed edges, objective "
                      f"{res.objective}; full graph: tree {ref['tree']:.6g}, λ2 {ref['fiedler']:.4g}, "
                      f"FIM logdet {ref['fim_logdet']:.6g}, tr CRLB {ref['crlb_trace']:.4g} ({elapsed:.1f} s)")
-    target = _plot_target(plot_path, out_dir, "sparsify")
+    target = plot_target(plot_path, out_dir, "sparsify")
     if target:
         plot_sparsify(res, target)
     if out_dir:

@@ -10,10 +10,10 @@ from ...core.noise import ROTATION_WEIGHT_MODELS
 from ...core.status import log_status, put
 from ...core.timing import timed
 from ...models.paper.bounds import compute_bounds
+from ...models.paper.fim import fim_logdet, paper_fim, trace_fim
 from ...report.render import print_rows
 from ...solver.estimate import get_estimate
-from ..options import anchor_option, data_dir_option, format_option, load_dataset, repeat_option
-from .fim import fim_variant_option
+from ..options import anchor_option, data_dir_option, fim_variant_option, format_option, load_dataset, repeat_option
 
 log = logging.getLogger("posecrb")
 
@@ -46,7 +46,6 @@ def bounds_row(name_or_path: str, data_dir: str | None, anchor_id: int | None, r
     row.update({"t_opt_graph": b.t_opt_graph, "t_opt_approx": b.t_opt_approx, "total_degree": b.total_degree,
                 "times": {"parse": t_parse, **b.times}})
     if estimate != "none":
-        from ...models.paper.fim import fim_logdet, paper_fim, trace_fim
 
         variant = fim_variant or "consistent"
         est = get_estimate(graph, estimate, anchor=anchor) if estimate == "solve" else get_estimate(graph, estimate)

@@ -9,11 +9,16 @@ import numpy as np
 
 from ...core.errors import UsageError
 from ...core.status import Status, log_status, put
-from ...report.render import print_rows
-from ..options import INT64_MAX, POSE_ID, data_dir_option, format_option
-from .fim import (
+from ...models.paper.crlb import paper_crlb
+from ...models.thesis.frames import coordinate_names, coordinates_description, sed_crb_in_frame
+from ...report.render import key_value_rows, print_rows
+from ..options import (
+    INT64_MAX,
+    POSE_ID,
+    data_dir_option,
     estimate_option,
     fim_variant_option,
+    format_option,
     frame_option,
     load_with_estimate,
     model_option,
@@ -61,7 +66,6 @@ def crlb_result(file: str, data_dir: str | None, model: str, source: str, anchor
     row: dict = {"dataset": graph.name, "model": model, "dim": graph.dim, "poses": graph.n,
                  "edges": graph.m, "components": graph.n_components}
     if model == "paper":
-        from ...models.paper.crlb import paper_crlb
 
         if quotient:
             raise UsageError("--quotient applies to --model sed (the paper model is anchored)")
@@ -87,7 +91,6 @@ def crlb_result(file: str, data_dir: str | None, model: str, source: str, anchor
         if not acc.available:
             blocks = curv = None
     else:
-        from ...models.thesis.frames import coordinate_names, sed_crb_in_frame
 
         anchors = None if not anchor_ids else [graph.index_of(a) for a in anchor_ids]
         if poses is True:
@@ -108,7 +111,6 @@ def crlb_result(file: str, data_dir: str | None, model: str, source: str, anchor
         curv = None
         if not acc.available:
             blocks = None
-    from ...models.thesis.frames import coordinates_description
 
     row["frame"] = frame
     row["coordinates_description"] = coordinates_description(graph.dim, frame)
@@ -181,7 +183,6 @@ def command(file, model, quotient, anchors, poses, estimate_source, rotation_mod
     summary = {k: (",".join(map(str, v)) if isinstance(v, list) else v)
                for k, v in row.items() if k not in ("per_pose", "per_pose_curvature")}
     if fmt == "table":
-        from ...report.render import key_value_rows
 
         kv = key_value_rows(summary)
         print_rows(kv, "table", title=f"CRLB ({model}) of {row['dataset']}")

@@ -2,14 +2,21 @@
 from __future__ import annotations
 
 import logging
+import sys
 from pathlib import Path
 
 import click
+from rich.console import Console
+from rich.progress import BarColumn, DownloadColumn, Progress, TextColumn, TimeRemainingColumn, TransferSpeedColumn
 
 from ...core.errors import PosecrbError
 from ...datasets import search as ds
 from ...datasets import verify as dsv
+from ...datasets.fetch import PROBE_TIMEOUT, fetch, fetch_many
+from ...datasets.manifest import load_manifest
+from ...io import check_output_dir, check_output_file, write_g2o
 from ...report.render import print_rows
+from ...sim.generators import generate
 from ..options import FiniteFloat, data_dir_option, format_option
 
 log = logging.getLogger("posecrb")
@@ -49,10 +56,6 @@ def path_cmd(name: str, data_dir: str | None) -> None:
 
 def _progress_bar():
     """Download bars on a terminal; elsewhere (logs, CI) none: each download is logged instead (-v)."""
-    import sys
-
-    from rich.console import Console
-    from rich.progress import BarColumn, DownloadColumn, Progress, TextColumn, TimeRemainingColumn, TransferSpeedColumn
 
     return Progress(TextColumn("{task.description}"), BarColumn(), DownloadColumn(), TransferSpeedColumn(),
                     TimeRemainingColumn(), console=Console(stderr=True), disable=not sys.stderr.isatty())
@@ -84,9 +87,6 @@ def fetch_cmd(names: tuple[str, ...], all_: bool, dest: str | None, url: str | N
     server is probed for a few seconds; when it does not answer, the datasets are rows `offline`
     and nothing is attempted (exit 1, or 0 with --offline-ok).
     """
-    from ...datasets.fetch import PROBE_TIMEOUT, fetch_many
-    from ...datasets.manifest import load_manifest
-    from ...io import check_output_dir
 
     if all_ == bool(names):
         raise click.UsageError("give dataset NAME(s) or --all (not both)")
@@ -109,7 +109,6 @@ def fetch_cmd(names: tuple[str, ...], all_: bool, dest: str | None, url: str | N
         return update
 
     if url:
-        from ...datasets.fetch import fetch
 
         def run():
             return [fetch(entries[0], dest=dest, url=url, manifest=manifest, timeout=timeout,
@@ -155,7 +154,6 @@ def verify_cmd(data_dir: str | None, parse: bool, fmt: str) -> None:
 
     Files the manifest does not know are listed as `unknown` and do not fail.
     """
-    from ...datasets.manifest import load_manifest
 
     checks = dsv.verify_files(data_dir, parse=parse)
     cols = ["name", "file", "status", "algorithm"] + (["poses", "edges"] if parse else []) + ["path"]
@@ -202,8 +200,6 @@ def synth_cmd(kind: str, poses: int | None, sigma: float | None, tau: float | No
     encode (tau, kappa) in SE-Sync's convention. `demo` is the fixed graph `make run`
     falls back on (noisy 10x10 2D grid, fixed seed).
     """
-    from ...io import check_output_file, write_g2o
-    from ...sim.generators import generate
 
     if sigma is not None and (tau is not None or kappa is not None):
         raise click.UsageError("--noise sets tau and kappa; do not combine it with --tau/--kappa")

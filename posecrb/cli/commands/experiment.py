@@ -7,7 +7,6 @@ cluster (``--executor dask [--scheduler ADDRESS]``); results are bit-identical f
 """
 from __future__ import annotations
 
-import contextlib
 import json
 import logging
 import sys
@@ -17,10 +16,25 @@ from pathlib import Path
 import click
 
 from ...core.errors import UsageError
+from ...core.files import write_text
 from ...core.provenance import machine, versions
+from ...experiments.crlb_sweep import crlb_sweep, parse_levels
+from ...experiments.octagon import octagon_experiment
+from ...experiments.thesis import DEFAULT_M, QUICK_M, thesis_experiment
+from ...io import check_output_dir, check_output_file
 from ...report.render import print_rows, to_csv, to_json
-from ..options import FiniteFloat, anchor_option, data_dir_option, format_option, load_dataset
-from .fim import fim_variant_option
+from ..options import (
+    FiniteFloat,
+    anchor_option,
+    data_dir_option,
+    executor_settings,
+    fim_variant_option,
+    format_option,
+    load_dataset,
+    plot_target,
+)
+from ..progress import progress
+from ._sparsify import sparsify_cmd
 
 log = logging.getLogger("posecrb")
 
@@ -54,32 +68,10 @@ def _run_options(default_trials: str):
     return deco
 
 
-def _executor(executor: str, jobs: int, scheduler: str | None) -> dict:
-    if scheduler and executor != "dask":
-        raise UsageError("--scheduler needs --executor dask")
-    kind = "dask" if executor == "dask" else ("local" if jobs > 1 else "serial")
-    return {"executor": kind, "jobs": jobs, "scheduler": scheduler}
-
-
-@contextlib.contextmanager
-def _progress(total: int, label: str):
-    """A rich progress bar on stderr (only on a terminal); yields the engine's callback."""
-    from rich.console import Console
-    from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeRemainingColumn
-
-    console = Console(stderr=True)
-    prog = Progress(TextColumn("{task.description}"), BarColumn(), MofNCompleteColumn(), TimeRemainingColumn(),
-                    console=console, transient=True, disable=not console.is_terminal)
-    with prog:
-        task = prog.add_task(label, total=total)
-        yield lambda k: prog.advance(task, k)
-
-
 def _write_out(out_dir: str | None, experiment: str, settings: dict, rows: list[dict], seeds: list[dict],
                elapsed: float, extra: dict[str, list[dict]] | None = None) -> None:
     if not out_dir:
         return
-    from ...core.files import write_text
 
     d = Path(out_dir)
     d.mkdir(parents=True, exist_ok=True)
@@ -94,16 +86,9 @@ def _write_out(out_dir: str | None, experiment: str, settings: dict, rows: list[
     log.info("wrote %s/{rows.csv,rows.json,run.json}", d)
 
 
-def _plot_target(plot_path: str | None, out_dir: str | None, name: str) -> str | None:
-    if plot_path:
-        return plot_path
-    return str(Path(out_dir) / f"{name}.png") if out_dir else None
-
-
 def _check_outputs(plot_path: str | None, out_dir: str | None, name: str, extra: tuple[str, ...] = (),
                    inputs: tuple[str, ...] = ()) -> None:
     """Validate --plot and --out before the trials run (exit 2), not after."""
-    from ...io import check_output_dir, check_output_file
 
     if out_dir:
         check_output_dir(out_dir, inputs, ["rows.csv", "rows.json", "run.json", f"{name}.png",
@@ -112,7 +97,7 @@ def _check_outputs(plot_path: str | None, out_dir: str | None, name: str, extra:
         check_output_file(plot_path, inputs, option="--plot", create_parents=True)
         fmt = Path(plot_path).suffix[1:].lower()
         if fmt:
-            from matplotlib.backend_bases import FigureCanvasBase
+            from matplotlib.backend_bases import FigureCanvasBase  # noqa: PLC0415 -- optional heavy dependency (matplotlib), only for --plot
 
             if fmt not in FigureCanvasBase.get_supported_filetypes():
                 raise UsageError(f"--plot {plot_path}: matplotlib cannot write .{fmt} files (use .png, .pdf, "
@@ -159,16 +144,15 @@ def crlb_cmd(file, kc_spec, scale, kappa, tau, anchor, fim_variant, data_dir, tr
     simulated model's Fisher information (fim_variant=consistent), or of eq. (64) as printed
     with --fim-variant eq64; ratio_curvature with the curvature term (3D).
     """
-    from ...experiments.crlb_sweep import crlb_sweep, parse_levels
 
     kcs = parse_levels(kc_spec or ("1,20" if quick else "1:20"))
     trials = trials or (20 if quick else 100)
-    ex = _executor(executor, jobs, scheduler)
+    ex = executor_settings(executor, jobs, scheduler)
     graph, _ = load_dataset(file, data_dir)
     _check_outputs(plot_path, out_dir, "crlb", ("trials",), (graph.path,))
     anchor_idx = graph.anchor_index(anchor)
     t0 = time.perf_counter()
-    with _progress(len(kcs) * trials, f"{graph.name}: trials") as cb:
+    with progress(len(kcs) * trials, f"{graph.name}: trials") as cb:
         res = crlb_sweep(graph, kcs, trials, seed, scale=scale, tau=tau, kappa=kappa, anchor=anchor_idx,
                          progress=cb, fim_variant=fim_variant or "consistent", **ex)
     elapsed = time.perf_counter() - t0
@@ -191,9 +175,9 @@ def crlb_cmd(file, kc_spec, scale, kappa, tau, anchor, fim_variant, data_dir, tr
     print_rows(rows, fmt, cols if fmt == "table" else None,
                title=f"{graph.name}: MSE per pose vs CRLB ({res.trials} trials/level, scale={scale}, "
                      f"seed {seed}, {elapsed:.1f} s)", headers=CRLB_HEADERS)
-    target = _plot_target(plot_path, out_dir, "crlb")
+    target = plot_target(plot_path, out_dir, "crlb")
     if target:
-        from ...report.plots import plot_crlb_sweep
+        from ...report.plots import plot_crlb_sweep  # noqa: PLC0415 -- matplotlib, only for --plot
 
         plot_crlb_sweep(res, target)
     trial_rows = [{"kc": kc, "trial": t, "sq_trans": float(d["sq_trans"][t]), "sq_rot": float(d["sq_rot"][t]),
@@ -219,7 +203,6 @@ THESIS_HEADERS = {"frob": "‖Cov−CRB‖_F", "frob_rel": "relative", "frob_rel
 def thesis_cmd(m_spec, trials, seed, jobs, executor, scheduler, plot_path, out_dir, quick, fmt):
     """Thesis ch. 6: empirical covariance of the intrinsic MLE vs the anchored (Pi F Pi)^+ and
     quotient F^+ bounds with F_m = m F_1, on the built-in 5-pose SE(2) case (nullity 6)."""
-    from ...experiments.thesis import DEFAULT_M, QUICK_M, thesis_experiment
 
     if m_spec:
         try:
@@ -231,18 +214,18 @@ def thesis_cmd(m_spec, trials, seed, jobs, executor, scheduler, plot_path, out_d
     else:
         ms = list(QUICK_M if quick else DEFAULT_M)
     trials = trials or (100 if quick else 200)
-    ex = _executor(executor, jobs, scheduler)
+    ex = executor_settings(executor, jobs, scheduler)
     _check_outputs(plot_path, out_dir, "thesis", ("eigenvalues",))
     t0 = time.perf_counter()
-    with _progress(len(ms) * trials, "thesis: trials") as cb:
+    with progress(len(ms) * trials, "thesis: trials") as cb:
         res = thesis_experiment(ms, trials, seed, progress=cb, **ex)
     elapsed = time.perf_counter() - t0
     rows = res.rows()
     print_rows(rows, fmt, None, title=f"thesis ch. 6: ‖Cov − CRB‖ vs m ({trials} trials per m, seed {seed}, "
                                       f"{elapsed:.1f} s)", headers=THESIS_HEADERS)
-    target = _plot_target(plot_path, out_dir, "thesis")
+    target = plot_target(plot_path, out_dir, "thesis")
     if target:
-        from ...report.plots import plot_thesis
+        from ...report.plots import plot_thesis  # noqa: PLC0415 -- matplotlib, only for --plot
 
         plot_thesis(res, target)
     eig_rows = [{"m": m, "formulation": f, **{f"eig{k}": float(v) for k, v in enumerate(res.eigenvalues[f][m])}}
@@ -258,18 +241,18 @@ OCTAGON_HEADERS = {"extra_edges": "extra", "m": "edges", "total_degree": "degree
 
 @command.command("octagon", short_help="T- vs D-optimality vs node degree (paper Fig. 4/5).")
 @click.option("--radius", type=FiniteFloat(min=1e-6, max=1e6), default=0.1, show_default=True,
-              help="Circumradius of the octagon. The paper gives no size; 0.1 keeps sum tau||p||^2 small, as it states.")
+              help="Circumradius of the octagon. The paper gives no size; 0.1 keeps sum tau||p||^2 small, "
+                   "as it states.")
 @_run_options("random graphs per number of extra edges; default 50; --quick: 5")
 def octagon_cmd(radius, trials, seed, jobs, executor, scheduler, plot_path, out_dir, quick, fmt):
     """Fig. 4/5: T-optimality (trace F) and D-optimality (log det F) vs total node degree on the
     8-pose octagon with 0..21 extra edges; flags graphs worse than one with fewer edges."""
-    from ...experiments.octagon import octagon_experiment
 
     trials = trials or (5 if quick else 50)
-    ex = _executor(executor, jobs, scheduler)
+    ex = executor_settings(executor, jobs, scheduler)
     _check_outputs(plot_path, out_dir, "octagon", ("graphs",))
     t0 = time.perf_counter()
-    with _progress(22, "octagon: levels") as cb:
+    with progress(22, "octagon: levels") as cb:
         res = octagon_experiment(trials, seed, radius=radius, progress=cb, **ex)
     elapsed = time.perf_counter() - t0
     rows = res.rows()
@@ -277,9 +260,9 @@ def octagon_cmd(radius, trials, seed, jobs, executor, scheduler, plot_path, out_
                title=f"octagon: {len(res.graphs)} graphs; corr(trace, degree) = {res.corr_trace_degree:.5f}, "
                      f"corr(logdet, degree) = {res.corr_logdet_degree:.5f}; {res.flagged} graphs have more "
                      f"edges but a smaller log det")
-    target = _plot_target(plot_path, out_dir, "octagon")
+    target = plot_target(plot_path, out_dir, "octagon")
     if target:
-        from ...report.plots import plot_octagon
+        from ...report.plots import plot_octagon  # noqa: PLC0415 -- matplotlib, only for --plot
 
         plot_octagon(res, target)
     settings = {"trials": trials, "seed": seed, "radius": radius, "tau": res.tau, "kappa": res.kappa,
@@ -289,6 +272,4 @@ def octagon_cmd(radius, trials, seed, jobs, executor, scheduler, plot_path, out_
 
 
 # ---------------------------------------------------------------- sparsify (posecrb.cli.commands._sparsify)
-from ._sparsify import sparsify_cmd  # noqa: E402
-
 command.add_command(sparsify_cmd)

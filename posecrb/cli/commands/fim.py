@@ -8,83 +8,35 @@ import click
 import numpy as np
 
 from ...core.errors import UsageError
-from ...core.noise import ROTATION_WEIGHT_MODELS
 from ...core.status import OK, log_status, put
-from ...models.paper.fim import FIM_VARIANTS
-from ...report.render import print_rows
-from ..options import POSE_ID, data_dir_option, estimate_inputs, format_option, load_dataset
+from ...datasets import search as datasets
+from ...io import atomic_write, check_output_file
+from ...linalg.cholesky import logdet
+from ...models.paper.bounds import t_optimality
+from ...models.paper.fim import fim_logdet, paper_fim, trace_fim
+from ...models.thesis.fim import sed_fim
+from ...models.thesis.frames import convert_information, coordinate_names, coordinates_description
+from ...report.render import key_value_rows, print_rows
+from ..options import (
+    POSE_ID,
+    data_dir_option,
+    estimate_inputs,
+    estimate_option,
+    fim_variant_option,
+    format_option,
+    frame_option,
+    load_with_estimate,
+    model_option,
+    resolve_fim_variant,
+    resolve_frame,
+    rotation_weight_option,
+)
 
 log = logging.getLogger("posecrb")
-
-MODELS = ("paper", "sed")
-
-model_option = click.option(
-    "--model", type=click.Choice(MODELS), default="paper", show_default=True,
-    help="paper: Chen et al. on (R^d x SO(d))^n, isotropic noise, anchored (eq. 42/64); "
-         "sed: Bertini's right-invariant model on SE(d)^n with full information matrices.")
-
-estimate_option = click.option(
-    "--estimate", "estimate_source", default="solve", show_default=True, metavar="solve|vertices|FILE",
-    help="Where the poses come from: the certified solver (global optimum), the file's own "
-         "VERTEX lines, or another g2o/TORO FILE with the same ids.")
-
-rotation_weight_option = click.option(
-    "--rotation-weight", "rotation_model", type=click.Choice(ROTATION_WEIGHT_MODELS), default="eq59",
-    show_default=True, help="Paper model, 3D rotation weight: eq. (59), or the empirical Table II fit.")
-
-
-fim_variant_option = click.option(
-    "--fim-variant", "fim_variant", type=click.Choice(FIM_VARIANTS), default=None,
-    help="Paper model, 3D: consistent is the Fisher information of the model the data follow "
-         "(rotation coupling -w R_i^T R_j; the bound the Monte Carlo MSE reaches); eq64 is eq. (64) "
-         "exactly as printed (coupling -w I), labelled fim_variant=eq64 in every output. Same matrix "
-         "in 2D.  [default: consistent]")
-
-
-frame_option = click.option(
-    "--frame", type=click.Choice(("world", "body")), default=None,
-    help="sed model: coordinates of the FIM and of every per-pose number. world: the thesis' X_i -> Exp(-delta) X_i, "
-         "about the world origin, rotation first (omega, v). body: GTSAM's and g2o's X_i -> X_i Exp(xi), "
-         "in GTSAM's order (Pose2 x, y, theta; Pose3 rotation, translation), comparable with "
-         "gtsam.Marginals / a GTSAM Hessian. Not for --model paper (its own coordinates, JSON "
-         "coordinates_description).  [default: world]")
-
-
-def resolve_frame(model: str, frame: str | None) -> str:
-    """The frame of the numbers: ``--frame`` for sed (default world), "mixed" for the paper model."""
-    if model != "sed":
-        if frame is not None:
-            raise UsageError("--frame applies to --model sed (the paper model's coordinates are translation "
-                             "in the world frame, rotation in the body frame)")
-        return "mixed"
-    return frame or "world"
-
-
-def resolve_fim_variant(model: str, fim_variant: str | None) -> str:
-    """The paper FIM variant to use; ``--fim-variant`` with ``--model sed`` is a usage error."""
-    if fim_variant is not None and model != "paper":
-        raise UsageError("--fim-variant applies to --model paper")
-    return fim_variant or "consistent"
-
-
-def load_with_estimate(file: str, data_dir: str | None, source: str):
-    """Graph, estimate and a JSON-ready description of the estimate plus parse/solve times."""
-    from ...solver.estimate import get_estimate
-
-    graph, t_parse = load_dataset(file, data_dir)
-    est = get_estimate(graph, source)
-    if est.certified is False:
-        log.warning("%s: the solver's estimate is NOT certified globally optimal (%s)", graph.name, est.status)
-    info = {"source": est.source, "certified": est.certified, "objective": est.objective}
-    times = {"parse": t_parse}
-    if est.solve_time is not None:
-        times["solve"] = est.solve_time
-    return graph, est, info, times
 
 
 def anchored_logdet(matrix, q: int, anchors: list[int], name: str) -> float:
     """log det of a pose-major (q per pose) FIM with the anchored poses' rows/columns removed."""
-    from ...linalg.cholesky import logdet
 
     n = matrix.shape[0] // q
     keep = np.ones(n, bool)
@@ -104,7 +56,6 @@ def save_npz(path: str, matrix, row_ids: np.ndarray, row_coord: np.ndarray, name
     ``row_pose_id[k]`` and ``row_coordinate[k]`` (into ``coordinate_names``) for row k, and
     ``frame`` (world/body for sed, mixed for the paper model).
     Written atomically to ``npz_path(path)``, which is returned."""
-    from ...io import atomic_write
 
     m = matrix.tocsc()
     target = npz_path(path)
@@ -122,8 +73,6 @@ def fim_row(file: str, data_dir: str | None, model: str, source: str, anchor_id:
     variant = resolve_fim_variant(model, fim_variant)
     frame = resolve_frame(model, frame)
     if save:
-        from ...datasets import search as datasets
-        from ...io import check_output_file
 
         save = npz_path(save)   # the file really written (and reported as `saved`)
         check_output_file(save, [datasets.resolve(file, data_dir), *estimate_inputs(source)], option="--save")
@@ -131,8 +80,6 @@ def fim_row(file: str, data_dir: str | None, model: str, source: str, anchor_id:
     row: dict = {"dataset": graph.name, "model": model, "dim": graph.dim, "poses": graph.n,
                  "edges": graph.m, "components": graph.n_components}
     if model == "paper":
-        from ...models.paper.bounds import t_optimality
-        from ...models.paper.fim import fim_logdet, paper_fim, trace_fim
 
         anchor = graph.anchor_index(anchor_id)
         fim = paper_fim(graph, est.rot, est.trans, anchor=anchor, rotation_model=rotation_model, variant=variant)
@@ -141,15 +88,14 @@ def fim_row(file: str, data_dir: str | None, model: str, source: str, anchor_id:
         ld = fim_logdet(fim)
         times["fim_logdet"] = time.perf_counter() - t0
         row.update({"anchors": [fim.anchor_id], "layout": fim.layout, "size": fim.size, "nnz": fim.nnz,
-                    "logdet": ld, "trace": trace_fim(fim), "t_opt_approx": t_optimality(graph, anchor, rotation_model)[1],
+                    "logdet": ld, "trace": trace_fim(fim),
+                    "t_opt_approx": t_optimality(graph, anchor, rotation_model)[1],
                     "rank": fim.size, "nullity": 0, "rotation_weight": rotation_model,
                     "fim_variant": fim.variant})
         if save:
             ids, coord = fim.index_map()
             save_npz(save, fim.matrix, ids, coord, fim.coordinate_names(), "paper", [fim.anchor_id])
     else:
-        from ...models.thesis.fim import sed_fim
-        from ...models.thesis.frames import convert_information, coordinate_names
 
         fim = sed_fim(graph, est.rot, est.trans)
         times.update(fim.times)
@@ -177,7 +123,6 @@ def fim_row(file: str, data_dir: str | None, model: str, source: str, anchor_id:
         if save:
             save_npz(save, matrix, np.repeat(graph.ids, fim.q), np.tile(np.arange(fim.q), graph.n),
                      names, "sed", row["anchors"], frame=frame)
-    from ...models.thesis.frames import coordinates_description
 
     row["frame"] = frame
     row["coordinates_description"] = coordinates_description(graph.dim, frame)
@@ -221,7 +166,6 @@ def command(file, model, estimate_source, anchor, rotation_model, fim_variant, f
     if fmt != "json":
         row = {k: (",".join(map(str, v)) if isinstance(v, list) else v) for k, v in row.items()}
     if fmt == "table":
-        from ...report.render import key_value_rows
 
         kv = key_value_rows(row)
         print_rows(kv, "table", title=f"FIM ({model}) of {row['dataset']}")

@@ -7,7 +7,8 @@ from dataclasses import asdict
 import click
 
 from ...core.errors import DatasetNotFound, PosecrbError
-from ...metrics.regress import compare, compute_metrics, load_expected, save_expected
+from ...io import check_output_file
+from ...metrics.regress import compare, compute_metrics, default_expected_path, load_expected, save_expected
 from ...report.render import print_rows
 from ..options import data_dir_option, format_option
 
@@ -30,8 +31,6 @@ def command(names, update, expected_path, all_rows, data_dir, fmt):
     FIM variant or changed input checksum. A dataset not found is skipped with a warning unless it
     was named with --datasets."""
     if update:   # the file is rewritten at the end (atomically): check that it can be, first
-        from ...io import check_output_file
-        from ...metrics.regress import default_expected_path
 
         check_output_file(expected_path or default_expected_path().resolve(), option="--expected")
     data = load_expected(expected_path)

@@ -7,6 +7,7 @@ import click
 
 from ...core.errors import UsageError
 from ...report.render import print_rows
+from ...selection.select import select_edges, write_pruned
 from ..options import FiniteFloat, anchor_option, data_dir_option, format_option, load_dataset
 
 log = logging.getLogger("posecrb")
@@ -17,12 +18,13 @@ HEADERS = {"quantity": "quantity", "value": "value"}
 def _summary(d: dict) -> list[dict]:
     """The result as (quantity, value) rows for the terminal table."""
     b = d["bounds"]
+    added = d["fixed"]["added_for_connectivity"]
     rows = [
         ("dataset", f"{d['dataset']} ({d['dim']}D, {d['poses']} poses, {d['edges']} edges)"),
-        ("objective / method", f"{d['objective']} / {d['method']}" + (f" ({d['rounding']} rounding)" if d["rounding"] else "")),
+        ("objective / method",
+         f"{d['objective']} / {d['method']}" + (f" ({d['rounding']} rounding)" if d["rounding"] else "")),
         ("fixed edges", f"{d['fixed']['edges']} ({d['fixed']['rule']}"
-                        + (f", {len(d['fixed']['added_for_connectivity'])} added for connectivity" if d['fixed']['added_for_connectivity'] else "")
-                        + ")"),
+                        + (f", {len(added)} added for connectivity" if added else "") + ")"),
         ("candidates", d["candidates"]),
         ("budget", f"{d['budget']} ({d['budget_spec']})"),
         ("value", d["value"]),
@@ -34,7 +36,8 @@ def _summary(d: dict) -> list[dict]:
         ("certified ratio", d["certified_ratio"]),
     ]
     if b["iterations"]:
-        rows.append(("Frank-Wolfe iterations", f"{b['iterations']} ({'converged' if b['converged'] else 'stopped at --max-iter'})"))
+        stop = "converged" if b["converged"] else "stopped at --max-iter"
+        rows.append(("Frank-Wolfe iterations", f"{b['iterations']} ({stop})"))
     if d["estimate"]:
         e = d["estimate"]
         rows.append(("estimate", f"{e['source']}" + ("" if e["certified"] is None else
@@ -88,7 +91,6 @@ def command(file, budget, objective, method, fixed, certify, max_iter, tol, lazy
     The JSON output lists the selected edges as [id_i, id_j, position of the edge in the file
     (0-based, edges only)]; the table shows the summary.
     """
-    from ...selection.select import select_edges, write_pruned
 
     if jl and exact:
         raise UsageError("--jl and --exact exclude each other")

@@ -9,9 +9,13 @@ import tempfile
 from pathlib import Path
 
 import click
+from rich.console import Console
+from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn
 
 from ...core.errors import PosecrbError
+from ...core.files import write_text
 from ...core.noise import ROTATION_WEIGHT_MODELS
+from ...io import check_output_dir, write_g2o
 from ...metrics.tables import (
     HEADERS,
     TITLES,
@@ -26,7 +30,8 @@ from ...metrics.tables import (
     table_rows,
     to_latex,
 )
-from ...report.render import to_csv, to_json, to_markdown
+from ...report.render import to_csv, to_json, to_markdown, to_rich_table
+from ...sim.generators import builtin_demo
 from ..options import data_dir_option
 
 log = logging.getLogger("posecrb")
@@ -36,8 +41,6 @@ OUT_FILES = [f"table{t}.{ext}" for t in ROMAN for ext in ("md", "csv", "json", "
 
 
 def _progress(total: int):
-    from rich.console import Console
-    from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn
 
     return Progress(TextColumn("{task.description}"), BarColumn(), MofNCompleteColumn(), TimeElapsedColumn(),
                     console=Console(stderr=True), transient=True, disable=not sys.stderr.isatty())
@@ -109,19 +112,19 @@ def command(all_, tables, names, repeat, jobs, fmt, out_dir, compare_paper, rota
     Beyond the paper: ub_lambda, the relative gaps (ub-lb)/lb and (FIM-lb)/lb, the certified
     objective and the solve time. The 3D rows are the model's quantities (eq. 59 rotation weight,
     the model's Fisher information) and differ from the printed Table II by design;
-    --as-published reproduces its FIM and lb columns (eq. 64 as printed, weight 0.5515*kappa^2). A dataset that is not found is a row with status `not found`
-    (fetch it with `posecrb datasets fetch NAME`); a failed factorization or an uncertified solve
-    is a row with that status and makes the command exit 1 after printing everything.
+    --as-published reproduces its FIM and lb columns (eq. 64 as printed, weight 0.5515*kappa^2).
+    A dataset that is not found is a row with status `not found` (fetch it with
+    `posecrb datasets fetch NAME`); a failed factorization or an uncertified solve is a row
+    with that status and makes the command exit 1 after printing everything.
     """
     if all_ and names:
         raise click.UsageError("--all and --datasets are exclusive")
     if plot_path:
-        from ...report.plots import check_figure_path
+        from ...report.plots import check_figure_path  # noqa: PLC0415 -- matplotlib, only for --plot
 
         check_figure_path(plot_path)  # before the work: a bad target is a usage error, not a lost run
     requested = [n.strip() for n in names.split(",") if n.strip()] if names else None
     if out_dir:
-        from ...io import check_output_dir
 
         check_output_dir(out_dir, requested or [], OUT_FILES, option="--out")
     explicit = bool(tables)
@@ -146,8 +149,6 @@ def command(all_, tables, names, repeat, jobs, fmt, out_dir, compare_paper, rota
         rows = build_rows(todo, settings, jobs, on_done=on_done, on_step=on_step)
 
     if not requested and all(r["status"] == "not found" for r in rows):
-        from ...io import write_g2o
-        from ...sim.generators import builtin_demo
 
         demo = builtin_demo()
         tmp = Path(tempfile.mkdtemp(prefix="posecrb-")) / "builtin_demo.g2o"
@@ -157,9 +158,7 @@ def command(all_, tables, names, repeat, jobs, fmt, out_dir, compare_paper, rota
         rows = [dataset_row(str(tmp), settings)]
 
     if fmt == "table":
-        from rich.console import Console
 
-        from ...report.render import to_rich_table
 
         console = Console(width=None if sys.stdout.isatty() else 250)
         for t, trs, cols, note in _shown(rows, tables, compare_paper, settings, explicit):
@@ -168,7 +167,6 @@ def command(all_, tables, names, repeat, jobs, fmt, out_dir, compare_paper, rota
         click.echo(_render(rows, tables, fmt, compare_paper, settings, explicit), nl=False)
 
     if out_dir:
-        from ...core.files import write_text
 
         out = Path(out_dir)
         out.mkdir(parents=True, exist_ok=True)
@@ -185,13 +183,15 @@ def command(all_, tables, names, repeat, jobs, fmt, out_dir, compare_paper, rota
         log.info("wrote %s", os.fspath(out))
 
     if plot_path:
-        from ...report.plots import plot_tables
+        from ...report.plots import plot_tables  # noqa: PLC0415 -- matplotlib, only for --plot
 
         try:
-            log.info("wrote %s", plot_tables(rows, plot_path, note=f"3D rotation weight: {settings.rotation_model}, FIM: {settings.fim_variant}"))
+            note = f"3D rotation weight: {settings.rotation_model}, FIM: {settings.fim_variant}"
+            log.info("wrote %s", plot_tables(rows, plot_path, note=note))
         except ValueError as exc:
             log.warning("no figure written: %s", exc)
 
     bad = failed(rows, requested)
     if bad:
-        raise PosecrbError(f"{len(bad)} dataset(s) failed: " + ", ".join(f"{r['dataset']} ({r['status']})" for r in bad))
+        raise PosecrbError(f"{len(bad)} dataset(s) failed: "
+                           + ", ".join(f"{r['dataset']} ({r['status']})" for r in bad))

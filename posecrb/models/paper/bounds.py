@@ -24,6 +24,8 @@ from dataclasses import dataclass, field
 
 import numpy as np
 import scipy.sparse as sp
+from scipy.sparse.csgraph import minimum_spanning_tree, shortest_path
+from scipy.sparse.linalg import ArpackError, ArpackNoConvergence, LinearOperator, eigsh
 
 from ...core.errors import NotPositiveDefinite
 from ...core.graph import PoseGraph
@@ -118,7 +120,6 @@ def tree_lambda_min_bound(n: int, src: np.ndarray, dst: np.ndarray, w: np.ndarra
     positive numbers: no cancellation, valid at any conditioning. 0.0 when a weight is not
     positive and finite.
     """
-    from scipy.sparse.csgraph import minimum_spanning_tree, shortest_path
 
     w = np.asarray(w, dtype=float)
     if not (np.all(np.isfinite(w)) and np.all(w > 0)):
@@ -135,7 +136,7 @@ def tree_lambda_min_bound(n: int, src: np.ndarray, dst: np.ndarray, w: np.ndarra
     return 1.0 / total if np.isfinite(total) and total > 0 else 0.0
 
 
-def rotation_lambda_min(lap: "WeightedLaplacians", graph: PoseGraph, symbolic: SymbolicCholesky,
+def rotation_lambda_min(lap: WeightedLaplacians, graph: PoseGraph, symbolic: SymbolicCholesky,
                         factor=None, name: str = "reduced rotation Laplacian L_w") -> EigenEstimate:
     """Smallest eigenvalue of the reduced L_w with a certified interval, or a status.
 
@@ -149,7 +150,6 @@ def rotation_lambda_min(lap: "WeightedLaplacians", graph: PoseGraph, symbolic: S
        ``lower = s - delta`` is a lower bound of lambda_min. When ``lower <= 0`` the eigenvalue is
        below what double precision resolves for this matrix: unavailable, with the reason.
     """
-    from scipy.sparse.linalg import ArpackError, ArpackNoConvergence, LinearOperator, eigsh
 
     a = sp.csc_matrix(lap.l_w)
     n = a.shape[0]

@@ -36,13 +36,15 @@ Statuses (``posecrb.core.status``), never a silent number:
 from __future__ import annotations
 
 import time
+from collections.abc import Sequence
 from dataclasses import dataclass, field
-from typing import Sequence
 
 import numpy as np
+import scipy.sparse as sp
 
 from ...core.graph import PoseGraph
 from ...core.status import OK, Status
+from ...linalg.selinv import _block_pattern_padded, _factor, inverse_block_diagonal
 from .fim import PaperFim, coordinate_names, paper_fim
 
 # eq. (68): warn when the curvature correction exceeds this fraction of the first-order term
@@ -114,7 +116,6 @@ def _onenorm_inverse(solve, n: int) -> float:
 def inverse_accuracy(a, factor, name: str = "matrix", columns: int = ACCURACY_COLUMNS,
                      seed: int = ACCURACY_SEED) -> InverseAccuracy:
     """Accuracy estimate of ``a^{-1}`` computed from ``factor`` (a CHOLMOD factor of ``a``)."""
-    import scipy.sparse as sp
 
     a = sp.csc_matrix(a)
     n = a.shape[0]
@@ -230,7 +231,6 @@ def _requested_ids(graph: PoseGraph, per_pose: bool | Sequence[int]) -> np.ndarr
 def crlb_from_fim(fim: PaperFim, graph: PoseGraph, per_pose: bool | Sequence[int] = False) -> CrlbResult:
     """CRLB (eq. 67 / 68) from an already built paper FIM of ``graph``, with its accuracy
     estimate and the validity of the curvature term (module docstring)."""
-    from ...linalg.selinv import _block_pattern_padded, _factor, inverse_block_diagonal
 
     times: dict[str, float] = {}
     d, dr, q = fim.dim, fim.rot_dim, fim.q

@@ -52,7 +52,8 @@ Everything is assembled vectorised from the edge arrays (COO), anchor removed.
 """
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+import time
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 import scipy.sparse as sp
@@ -124,14 +125,13 @@ class PaperFim:
         coord = np.concatenate([np.tile(np.arange(d), npf), d + np.tile(np.arange(dr), npf)])
         return ids, coord
 
-    def to_layout(self, layout: str) -> "PaperFim":
+    def to_layout(self, layout: str) -> PaperFim:
         """The same FIM with rows and columns permuted to ``layout``."""
         if layout == self.layout:
             return self
         perm = _layout_permutation(self.n_free, self.dim, self.rot_dim, layout)
         mat = self.matrix[perm][:, perm].tocsc()
         mat.sort_indices()
-        from dataclasses import replace
 
         return replace(self, matrix=mat, layout=layout)
 
@@ -204,7 +204,6 @@ def paper_fim(graph: PoseGraph, rot: np.ndarray, trans: np.ndarray, anchor: int 
     in 2D. The cross block follows eq. (52)'s sign (eq. 54 as printed has the opposite one).
     Raises DisconnectedGraph when the graph is not connected (the anchored FIM is singular).
     """
-    import time
 
     t0 = time.perf_counter()
     if variant not in FIM_VARIANTS:

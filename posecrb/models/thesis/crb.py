@@ -4,8 +4,9 @@ Fisher information of posecrb.models.thesis.fim (docs/design.md#anchored-crb, #q
 from __future__ import annotations
 
 import time
+from collections.abc import Sequence
 from dataclasses import dataclass
-from typing import Any, Sequence
+from typing import Any
 
 import numpy as np
 
@@ -13,6 +14,7 @@ from ...core.errors import NotPositiveDefinite, UsageError
 from ...core.graph import PoseGraph
 from ...linalg import selinv
 from ...linalg.cholesky import cholesky
+from ..paper.crlb import inverse_accuracy
 from .fim import SedFim, _free_matrix, _resolve_anchors, sed_fim
 
 
@@ -104,7 +106,6 @@ def sed_crb(graph: PoseGraph, rot: np.ndarray, trans: np.ndarray, anchors: Seque
         trace_g = float(selinv.trace_inverse(ff, name, factor=fac))
     times["crb_selinv"] = time.perf_counter() - t0
     t0 = time.perf_counter()
-    from ..paper.crlb import inverse_accuracy
 
     accuracy = inverse_accuracy(ff, fac, "SE(d) FIM on the free poses") if fac is not None else None
     times["accuracy"] = time.perf_counter() - t0

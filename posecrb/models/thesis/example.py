@@ -19,6 +19,7 @@ from ...core.errors import UsageError
 from ...core.graph import PoseGraph
 from ...lie.se import se_compose, se_exp, se_inverse
 from ...lie.so import so2_exp
+from .fim import right_information_from_left
 
 IDS = (1, 2, 3, 4, 5)
 # (theta, t_x, t_y) of the true poses T_i (sec. 6.2; the matrices printed there are these,
@@ -83,7 +84,6 @@ def true_relative() -> tuple[np.ndarray, np.ndarray]:
 
 def _graph(src: np.ndarray, dst: np.ndarray, rot: np.ndarray, trans: np.ndarray,
            omega_left: np.ndarray) -> PoseGraph:
-    from .fim import right_information_from_left
 
     xr, xt = true_estimate()
     return PoseGraph(

@@ -33,8 +33,8 @@ coordinates; it is a generalised inverse of ``F_body`` but not its Moore-Penrose
 """
 from __future__ import annotations
 
+from collections.abc import Sequence
 from dataclasses import replace
-from typing import Sequence
 
 import numpy as np
 import scipy.sparse as sp
@@ -42,6 +42,7 @@ import scipy.sparse as sp
 from ...core.errors import InternalError, UsageError
 from ...core.graph import PoseGraph
 from ...lie.se import se_adjoint, se_inverse
+from .crb import sed_crb
 
 FRAMES = ("world", "body")
 
@@ -146,7 +147,6 @@ def sed_crb_in_frame(graph: PoseGraph, rot: np.ndarray, trans: np.ndarray, frame
     converted blocks' traces, so all blocks are computed whatever ``per_pose`` asks for.
     ``sed_options`` go to ``sed_crb`` (``fim``, ``indefinite``, ``information``).
     """
-    from .crb import sed_crb
 
     if check_frame(frame) == "world":
         return sed_crb(graph, rot, trans, anchors=anchors, quotient=quotient, per_pose=per_pose, **sed_options)
