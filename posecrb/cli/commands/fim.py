@@ -10,8 +10,9 @@ import numpy as np
 from ...core.errors import UsageError
 from ...core.status import OK, log_status, put
 from ...datasets import search as datasets
-from ...io import atomic_write, check_output_file
-from ...linalg.cholesky import logdet
+from ...io import check_output_file
+from ...io.npz import npz_path, save_npz
+from ...linalg.cholesky import anchored_logdet
 from ...models.paper.bounds import t_optimality
 from ...models.paper.fim import fim_logdet, paper_fim, trace_fim
 from ...models.thesis.fim import sed_fim
@@ -33,38 +34,6 @@ from ..options import (
 )
 
 log = logging.getLogger("posecrb")
-
-
-def anchored_logdet(matrix, q: int, anchors: list[int], name: str) -> float:
-    """log det of a pose-major (q per pose) FIM with the anchored poses' rows/columns removed."""
-
-    n = matrix.shape[0] // q
-    keep = np.ones(n, bool)
-    keep[anchors] = False
-    dofs = (np.flatnonzero(keep)[:, None] * q + np.arange(q)).ravel()
-    return logdet(matrix[dofs][:, dofs].tocsc(), name=name)
-
-
-def npz_path(path: str) -> str:
-    """The file ``--save PATH`` writes: numpy's rule, ``.npz`` appended unless present."""
-    return path if path.endswith(".npz") else path + ".npz"
-
-
-def save_npz(path: str, matrix, row_ids: np.ndarray, row_coord: np.ndarray, names: list[str],
-             model: str, anchors: list[int], frame: str = "mixed") -> str:
-    """A scipy sparse .npz (``scipy.sparse.load_npz`` reads it) plus the index map:
-    ``row_pose_id[k]`` and ``row_coordinate[k]`` (into ``coordinate_names``) for row k, and
-    ``frame`` (world/body for sed, mixed for the paper model).
-    Written atomically to ``npz_path(path)``, which is returned."""
-
-    m = matrix.tocsc()
-    target = npz_path(path)
-    with atomic_write(target, "wb") as fh:
-        np.savez(fh, data=m.data, indices=m.indices, indptr=m.indptr, format=np.array("csc"),
-             shape=np.array(m.shape), row_pose_id=np.asarray(row_ids, np.int64),
-             row_coordinate=np.asarray(row_coord, np.int64), coordinate_names=np.array(names),
-                 model=np.array(model), anchor_ids=np.asarray(anchors, np.int64), frame=np.array(frame))
-    return target
 
 
 def fim_row(file: str, data_dir: str | None, model: str, source: str, anchor_id: int | None,
