@@ -56,7 +56,7 @@ def dataset_args(description: str, repeat: int) -> tuple[argparse.Namespace, lis
     ap.add_argument("names", nargs="*")
     ap.add_argument("--repeat", type=int, default=repeat)
     args = ap.parse_args()
-    files = [datasets.resolve(n) for n in args.names] if args.names else datasets.discover()
+    files = [datasets.resolve(n) for n in args.names] if args.names else datasets.dataset_files(first_per_name=True)
     return args, files
 
 

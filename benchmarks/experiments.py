@@ -15,10 +15,11 @@ import numpy as np
 def main() -> None:
     from posecrb.core.errors import DatasetNotFound
     from posecrb.datasets import search as datasets
-    from posecrb.experiments.crlb_sweep import _crlb_trial, anchor_poses, crlb_sweep, parse_levels
+    from posecrb.experiments.crlb_sweep import _crlb_trial, crlb_sweep, parse_levels
     from posecrb.io import load
     from posecrb.sim.montecarlo import make_tasks
     from posecrb.solver import solve
+    from posecrb.solver.rounding import anchor_estimate
 
     ap = argparse.ArgumentParser()
     ap.add_argument("--dataset", default="CSAIL")
@@ -34,7 +35,7 @@ def main() -> None:
         return
     kcs = parse_levels(args.levels)
     res = solve(graph)
-    rot, trans = anchor_poses(res.rot, res.trans, 0)
+    rot, trans = anchor_estimate(res.rot, res.trans, 0)
     ctx = {"graph": graph, "rot": rot, "trans": trans, "anchor": 0, "kc": 20.0, "scale": "both",
            "tau": None, "kappa": None, "solver_options": {}}
     times = []

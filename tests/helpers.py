@@ -282,7 +282,8 @@ def _bridge_graph(dim: int, weak: float):
     """Two 4-pose clusters (tau 100, kappa 1000) joined by one edge of precision ``weak``."""
     from posecrb.core.graph import PoseGraph
     from posecrb.core.noise import isotropic_information
-    from posecrb.sim.generators import relative_poses, uniform_rotations
+    from posecrb.lie.se import relative_poses
+    from posecrb.sim.generators import uniform_rotations
 
     rng = np.random.default_rng(2)
     src, dst = np.array([0, 1, 2, 0, 4, 5, 6, 4, 3]), np.array([1, 2, 3, 2, 5, 6, 7, 6, 4])

@@ -12,10 +12,11 @@ import pytest
 from click.testing import CliRunner
 
 from posecrb.core.errors import UsageError
-from posecrb.experiments.crlb_sweep import anchor_poses, crlb_sweep, parse_levels, pose_errors, rotation_errors
+from posecrb.experiments.crlb_sweep import crlb_sweep, parse_levels, pose_errors, rotation_errors
 from posecrb.lie.so import so2_exp, so3_exp, so3_hat
 from posecrb.models.paper.fim import paper_fim
 from posecrb.sim import generators as synth
+from posecrb.solver.rounding import anchor_estimate
 
 
 # ---------------------------------------------------------------- crlb sweep
@@ -47,7 +48,7 @@ def test_error_coordinates_match_the_fim_perturbation():
     e1 = pose_errors(r3, tt, r3 @ so3_exp(phi), te, 1)
     e2 = pose_errors(r3, tt, g_r @ r3 @ so3_exp(phi), te @ g_r.T + g_t, 1)
     assert np.allclose(e1[0], e2[0]) and np.allclose(e1[1], e2[1])
-    ar, at = anchor_poses(r3, tt, 2)
+    ar, at = anchor_estimate(r3, tt, 2)
     assert np.allclose(ar[2], np.eye(3)) and np.allclose(at[2], 0)
 
 
@@ -94,7 +95,7 @@ def test_sweep_bounds_come_from_the_chosen_variant(variant):
     from posecrb.sim.sampling import noise_model_graph
 
     g = synth.grid(3, 2, tau=100.0, kappa=200.0, orientation="random", rng=3)
-    rot, trans = anchor_poses(g.vertex_rot, g.vertex_trans, 0)
+    rot, trans = anchor_estimate(g.vertex_rot, g.vertex_trans, 0)
     b = _bounds(g, rot, trans, 0, 5.0, "both", None, None, variant)
     model = noise_model_graph(g, 5.0, "both", None, None)
     res = paper_crlb(model, rot, trans, anchor=0, variant=variant)
@@ -218,7 +219,7 @@ def test_octagon_truth_is_the_solver_estimate():
     g = synth.octagon([(1, 4), (2, 7), (3, 5)], radius=0.1)
     res = solve(g)
     f_solve = paper_fim(g, res.rot, res.trans).matrix.toarray()
-    f_truth = paper_fim(g, *anchor_poses(g.vertex_rot, g.vertex_trans, 0)).matrix.toarray()
+    f_truth = paper_fim(g, *anchor_estimate(g.vertex_rot, g.vertex_trans, 0)).matrix.toarray()
     assert np.allclose(f_solve, f_truth, rtol=1e-6, atol=1e-6 * np.abs(f_truth).max())
 
 
@@ -294,10 +295,9 @@ def test_tinygrid3d_mse_reaches_the_default_bound_not_eq64(shared_datasets):
     se = lv.mse_stderr / lv.mse_bound
     assert abs(lv.ratio - 1) < 3 * se + 0.05
     # the same truth as the sweep's (its certified solution, anchored), for the eq. (64) bound
-    from posecrb.experiments.crlb_sweep import anchor_poses
     from posecrb.solver import solve
 
     sol = solve(g, anchor=0)
-    rot, trans = anchor_poses(sol.rot, sol.trans, 0)
+    rot, trans = anchor_estimate(sol.rot, sol.trans, 0)
     eq64 = _bounds(g, rot, trans, 0, 20.0, "both", None, None, "eq64")["mse_bound"]
     assert lv.mse / eq64 > 1 + 6 * lv.mse_stderr / eq64

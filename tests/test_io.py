@@ -365,7 +365,7 @@ def test_failed_write_keeps_the_previous_file_and_no_temporary(tmp_path, exc_typ
 def test_fim_npz_write_failure_keeps_the_previous_file(tmp_path, monkeypatch):
     import scipy.sparse as sp
 
-    from posecrb.cli.commands import fim as fim_cmd
+    from posecrb.io import npz
 
     target = tmp_path / "f.npz"
     target.write_bytes(b"previous")
@@ -377,9 +377,9 @@ def test_fim_npz_write_failure_keeps_the_previous_file(tmp_path, monkeypatch):
         file.flush()
         raise OSError(28, "No space left on device")
 
-    monkeypatch.setattr(fim_cmd.np, "savez", broken_savez)
+    monkeypatch.setattr(npz.np, "savez", broken_savez)
     with pytest.raises(OSError):
-        fim_cmd.save_npz(str(tmp_path / "f"), sp.eye(3), np.arange(3), np.zeros(3), ["x"], "paper", [0])
+        npz.save_npz(str(tmp_path / "f"), sp.eye(3), np.arange(3), np.zeros(3), ["x"], "paper", [0])
     assert target.read_bytes() == b"previous" and [p.name for p in tmp_path.iterdir()] == ["f.npz"]
 
 

@@ -14,6 +14,7 @@ from ..core.noise import ROTATION_WEIGHT_MODELS
 from ..core.timing import timed
 from ..datasets import search as datasets
 from ..io import load
+from ..models import MODELS
 from ..models.paper.fim import FIM_VARIANTS
 from ..report.render import FORMATS
 from ..solver.estimate import get_estimate
@@ -110,7 +111,6 @@ def plot_target(plot_path: str | None, out_dir: str | None, name: str) -> str | 
     return str(Path(out_dir) / f"{name}.png") if out_dir else None
 
 
-MODELS = ("paper", "sed")
 
 
 model_option = click.option(

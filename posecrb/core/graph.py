@@ -136,6 +136,19 @@ class PoseGraph:
             raise UsageError(f"pose id {vertex_id} is not in the graph (ids range {self.ids[0]}..{self.ids[-1]})")
         return k
 
+    def check_estimate(self, rot: np.ndarray, trans: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """``(rot, trans)`` as float arrays of shapes (n, d, d) and (n, d) with finite values, or a
+        UsageError: the one check every model applies to the estimate it is evaluated at."""
+        d, n = self.dim, self.n
+        rot = np.asarray(rot, dtype=float)
+        trans = np.asarray(trans, dtype=float)
+        if rot.shape != (n, d, d) or trans.shape != (n, d):
+            raise UsageError(f"estimate shapes {rot.shape}, {trans.shape} do not match the graph "
+                             f"({n} poses, {d}D): expected ({n}, {d}, {d}) and ({n}, {d})")
+        if not (np.isfinite(rot).all() and np.isfinite(trans).all()):
+            raise UsageError("the estimate has non-finite values")
+        return rot, trans
+
     def anchor_index(self, anchor_id: int | None) -> int:
         """Internal index of the anchor; default the smallest id (docs/design.md#anchor)."""
         return 0 if anchor_id is None else self.index_of(anchor_id)

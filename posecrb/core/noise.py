@@ -112,6 +112,13 @@ def rotation_weight(kappa: np.ndarray, dim: int, model: str = "eq59") -> np.ndar
     return omega(kappa) / 3.0
 
 
+def precisions_from_sigma(sigma: float) -> tuple[float, float]:
+    """(tau, kappa) of a noise level ``sigma``: translation precision ``1 / sigma^2`` and the
+    Langevin concentration ``1 / (2 sigma^2)``, whose small-angle rotation noise has per-axis
+    variance ``1 / (2 kappa) = sigma^2`` (eq. 5; ``posecrb datasets synth --noise``)."""
+    return 1.0 / sigma ** 2, 1.0 / (2.0 * sigma ** 2)
+
+
 def isotropic_information(tau, kappa, dim: int) -> np.ndarray:
     """(m, q, q) g2o-order information matrices that SE-Sync's rule maps back to (tau, kappa).
 

@@ -82,18 +82,6 @@ def _not_regular(name: str | os.PathLike) -> None:
     raise ParseError(str(name), None, f"is {path_kind(st)}, not a regular file")
 
 
-def discover(data_dir: str | os.PathLike | None = None) -> list[Path]:
-    """Every dataset file on the search path; the first hit of each name wins."""
-    seen: dict[str, Path] = {}
-    for d in search_path(data_dir):
-        if not d.is_dir():
-            continue
-        for f in sorted(d.iterdir()):
-            if f.is_file() and f.suffix in EXTENSIONS and f.stem.lower() not in seen:
-                seen[f.stem.lower()] = f
-    return list(seen.values())
-
-
 # ---- the manifest on the search path -------------------------------------------
 # Everything below extends the lookup above with the manifest (posecrb.datasets.manifest):
 # which paper/shared datasets are present, where, and whether their bytes are the
@@ -130,16 +118,17 @@ def resolve(name_or_path: str | os.PathLike, data_dir: str | os.PathLike | None 
         return found
 
 
-def dataset_files(data_dir: str | os.PathLike | None = None) -> list[Path]:
-    """Every dataset file in every search directory (not only the first hit of each name)."""
-    seen: set[Path] = set()
+def dataset_files(data_dir: str | os.PathLike | None = None, *, first_per_name: bool = False) -> list[Path]:
+    """Every dataset file in every search directory, in search order, each file once; with
+    ``first_per_name`` only the first hit of each name (what a bare name resolves to)."""
+    seen: set[object] = set()
     out: list[Path] = []
     for d in search_path(data_dir):
         if not d.is_dir():
             continue
         for f in sorted(d.iterdir()):
             if f.is_file() and f.suffix in EXTENSIONS:
-                key = f.resolve()
+                key = f.stem.lower() if first_per_name else f.resolve()
                 if key not in seen:
                     seen.add(key)
                     out.append(f)

@@ -43,6 +43,7 @@ from ..models.paper.fim import FIM_VARIANTS
 from ..sim.montecarlo import Task, level_key, make_tasks, mean_and_stderr, run_tasks
 from ..sim.sampling import NOISE_SCALES, noise_model_graph, perturb_measurements
 from ..solver import solve
+from ..solver.rounding import anchor_estimate
 
 MAX_LEVELS = 1000
 
@@ -90,12 +91,6 @@ def parse_levels(spec: str) -> list[float]:
 
 
 # ---------------------------------------------------------------- errors in the FIM's coordinates
-def anchor_poses(rot: np.ndarray, trans: np.ndarray, anchor: int) -> tuple[np.ndarray, np.ndarray]:
-    """Apply the global transformation that puts pose ``anchor`` at the identity: ``X_a^{-1} X_i``."""
-    ra_t = np.asarray(rot[anchor]).T
-    return ra_t @ rot, (np.asarray(trans) - trans[anchor]) @ ra_t.T
-
-
 def rotation_errors(rot_true: np.ndarray, rot_est: np.ndarray) -> np.ndarray:
     """(n, d_r) rotation errors in the paper FIM's coordinates (right perturbation of the truth).
 
@@ -111,8 +106,8 @@ def rotation_errors(rot_true: np.ndarray, rot_est: np.ndarray) -> np.ndarray:
 
 def pose_errors(rot_true, trans_true, rot_est, trans_est, anchor: int) -> tuple[np.ndarray, np.ndarray]:
     """(translation errors (n, d), rotation errors (n, d_r)) after anchoring both at ``anchor``."""
-    rt, tt = anchor_poses(rot_true, trans_true, anchor)
-    re_, te = anchor_poses(rot_est, trans_est, anchor)
+    rt, tt = anchor_estimate(rot_true, trans_true, anchor)
+    re_, te = anchor_estimate(rot_est, trans_est, anchor)
     return te - tt, rotation_errors(rt, re_)
 
 
@@ -235,7 +230,7 @@ def crlb_sweep(graph: PoseGraph, kcs: Sequence[float], trials: int = 100, seed: 
         res = solve(graph, anchor=anchor, **solver_options)
         truth = (res.rot, res.trans)
         truth_certified, truth_objective = bool(res.certified), float(res.objective)
-    rot, trans = anchor_poses(np.asarray(truth[0], float), np.asarray(truth[1], float), anchor)
+    rot, trans = anchor_estimate(np.asarray(truth[0], float), np.asarray(truth[1], float), anchor)
     kcs = sorted({float(k) for k in kcs})
     tasks = make_tasks(seed, trials, [(level_key(k),) for k in kcs])
     contexts = [{"graph": graph, "rot": rot, "trans": trans, "anchor": anchor, "kc": k, "scale": scale,

@@ -221,3 +221,10 @@ def to_homogeneous(r: np.ndarray, t: np.ndarray) -> np.ndarray:
 def from_homogeneous(x: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     d = x.shape[-1] - 1
     return np.array(x[..., :d, :d], float), np.array(x[..., :d, d], float)
+
+
+def relative_poses(rot: np.ndarray, trans: np.ndarray, src: np.ndarray, dst: np.ndarray
+                   ) -> tuple[np.ndarray, np.ndarray]:
+    """Noise-free measurements ``X_i^{-1} X_j``: ``(R_i^T R_j, R_i^T (t_j - t_i))`` per edge."""
+    ri_t = np.swapaxes(rot[src], -1, -2)
+    return ri_t @ rot[dst], np.einsum("mab,mb->ma", ri_t, trans[dst] - trans[src])

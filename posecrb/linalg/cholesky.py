@@ -144,3 +144,13 @@ def lambda_min(a: sp.spmatrix, factor: Factor | None = None, name: str = "matrix
     vals = eigsh(a, k=1, sigma=0.0, which="LM", OPinv=op_inv, return_eigenvectors=False,
                  v0=np.ones(n), tol=1e-12)
     return float(vals[0])
+
+
+def anchored_logdet(matrix, q: int, anchors: list[int], name: str) -> float:
+    """log det of a pose-major (q per pose) FIM with the anchored poses' rows/columns removed."""
+
+    n = matrix.shape[0] // q
+    keep = np.ones(n, bool)
+    keep[anchors] = False
+    dofs = (np.flatnonzero(keep)[:, None] * q + np.arange(q)).ravel()
+    return logdet(matrix[dofs][:, dofs].tocsc(), name=name)

@@ -69,7 +69,7 @@ def dataset_names(names: Sequence[str] | None = None, data_dir: str | None = Non
     man = load_manifest()
     order = [e.name for e in man.paper()] + [e.name for e in man if e.table is None]
     known = {n.lower() for n in order} | {e.file.lower() for e in man}
-    extra = [p.stem for p in datasets.discover(data_dir)
+    extra = [p.stem for p in datasets.dataset_files(data_dir, first_per_name=True)
              if p.stem.lower() not in known and p.name.lower() not in known]
     return order + extra
 

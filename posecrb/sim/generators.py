@@ -34,6 +34,7 @@ from ..core.errors import UsageError
 from ..core.graph import PoseGraph, rotation_dimension
 from ..core.noise import isotropic_information
 from ..io.rotations import quat_to_rot
+from ..lie.se import relative_poses
 from ..lie.so import so2_exp, so3_exp
 from .sampling import sample_isotropic_gaussian, sample_langevin
 
@@ -46,12 +47,6 @@ OCTAGON_KAPPA = 5e3
 
 
 # ---- shared machinery ------------------------------------------------------------
-
-def relative_poses(rot: np.ndarray, trans: np.ndarray, src: np.ndarray, dst: np.ndarray
-                   ) -> tuple[np.ndarray, np.ndarray]:
-    """Noise-free measurements ``X_i^{-1} X_j``: ``(R_i^T R_j, R_i^T (t_j - t_i))`` per edge."""
-    ri_t = np.swapaxes(rot[src], -1, -2)
-    return ri_t @ rot[dst], np.einsum("mab,mb->ma", ri_t, trans[dst] - trans[src])
 
 
 def _rng(rng: np.random.Generator | int | None, needed: bool) -> np.random.Generator | None:
@@ -481,7 +476,7 @@ def _iroot_ceil(n: int, d: int) -> int:
 
 
 __all__: Sequence[str] = (
-    "KINDS", "relative_poses", "uniform_rotations", "boustrophedon", "grid", "sphere", "torus",
+    "KINDS", "uniform_rotations", "boustrophedon", "grid", "sphere", "torus",
     "octagon", "octagon_candidate_edges", "random_information", "random_graph", "builtin_demo",
     "generate", "DEMO_SEED",
 )

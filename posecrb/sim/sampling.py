@@ -10,7 +10,7 @@ from scipy.special import gammainc, gammaincinv
 
 from ..core.errors import InternalError, UsageError
 from ..core.noise import isotropic_information
-from ..lie.se import se_compose, se_exp
+from ..lie.se import relative_poses, se_compose, se_exp
 from ..lie.so import so2_exp, so3_exp
 
 _SMALL_C = 1e-3        # below this concentration the piece-1 proposal drops e^{-cu}
@@ -195,12 +195,11 @@ def perturb_measurements(graph, rot_true: np.ndarray, trans_true: np.ndarray, rn
     t, k = scaled_precisions(graph, kc, scale, tau, kappa)
     rot_true = np.asarray(rot_true, dtype=float)
     trans_true = np.asarray(trans_true, dtype=float)
-    ri, rj = rot_true[graph.src], rot_true[graph.dst]
-    ri_t = np.swapaxes(ri, 1, 2)
+    rel_rot, rel_trans = relative_poses(rot_true, trans_true, graph.src, graph.dst)
     z = sample_langevin(k, graph.m, graph.dim, rng)
     y = sample_isotropic_gaussian(t, graph.m, graph.dim, rng)
-    rot = ri_t @ rj @ z
-    trans = np.einsum("mab,mb->ma", ri_t, trans_true[graph.dst] - trans_true[graph.src]) + y
+    rot = rel_rot @ z                  # (R_i^T R_j) Z, eq. (80)
+    trans = rel_trans + y
     return replace(graph, rot=rot, trans=trans, info=isotropic_information(t, k, graph.dim),
                    vertex_rot=None, vertex_trans=None, format="synthetic", sha256=None, edge_lines=None)
 

@@ -5,12 +5,9 @@ import logging
 import re
 
 import click
-import numpy as np
 
 from ...core.errors import UsageError
-from ...core.status import Status, log_status, put
-from ...models.paper.crlb import paper_crlb
-from ...models.thesis.frames import coordinate_names, coordinates_description, sed_crb_in_frame
+from ...models import cramer_rao_bound
 from ...report.render import key_value_rows, print_rows
 from ..options import (
     INT64_MAX,
@@ -65,79 +62,13 @@ def crlb_result(file: str, data_dir: str | None, model: str, source: str, anchor
     graph, est, est_info, times = load_with_estimate(file, data_dir, source)
     row: dict = {"dataset": graph.name, "model": model, "dim": graph.dim, "poses": graph.n,
                  "edges": graph.m, "components": graph.n_components}
-    if model == "paper":
-
-        if quotient:
-            raise UsageError("--quotient applies to --model sed (the paper model is anchored)")
-        if len(anchor_ids) > 1:
-            raise UsageError("--model paper takes a single --anchor (its graph must be connected)")
-        anchor = graph.anchor_index(anchor_ids[0] if anchor_ids else None)
-        res = paper_crlb(graph, est.rot, est.trans, anchor=anchor, per_pose=poses, rotation_model=rotation_model,
-                         variant=variant)
-        times.update(res.times)
-        row.update({"kind": "anchored", "fim_variant": res.fim_variant, "rotation_weight": rotation_model,
-                    "anchors": [res.anchor_id], "nullity": 0})
-        acc = _accuracy(row, res.accuracy, graph.name)
-        for key in ("trace_crlb", "mse_bound", "trace_translation", "trace_rotation"):
-            put(row, key, getattr(res, key), acc)
-        if graph.dim == 3:
-            st = res.curvature_status if acc.available else acc
-            log_status(log, f"{graph.name}: curvature-corrected CRLB (eq. 68)", res.curvature_status)
-            put(row, "trace_crlb_curvature", res.trace_crlb_curvature, st)
-            put(row, "mse_bound_curvature", res.mse_bound_curvature, st)
-            row["curvature_correction_max"] = res.curvature_correction_max
-        row["coordinates"] = res.coordinates
-        blocks, curv = res.per_pose, res.per_pose_curvature
-        if not acc.available:
-            blocks = curv = None
-    else:
-
-        anchors = None if not anchor_ids else [graph.index_of(a) for a in anchor_ids]
-        if poses is True:
-            want: bool | list[int] = True
-        elif poses:
-            want = [graph.index_of(p) for p in poses]
-        else:
-            want = False
-        res = sed_crb_in_frame(graph, est.rot, est.trans, frame, anchors=anchors, quotient=quotient, per_pose=want)
-        times.update(res.times)
-        row.update({"kind": res.kind, "anchors": [int(graph.ids[a]) for a in res.anchors],
-                    "nullity": res.nullity})
-        acc = _accuracy(row, res.accuracy, graph.name)
-        put(row, "trace_crlb", res.trace_crlb, acc)
-        put(row, "mse_bound", res.mse_bound, acc)
-        row["coordinates"] = coordinate_names(graph.dim, frame)
-        blocks = None if res.per_pose is None else {int(graph.ids[k]): v for k, v in res.per_pose.items()}
-        curv = None
-        if not acc.available:
-            blocks = None
-
-    row["frame"] = frame
-    row["coordinates_description"] = coordinates_description(graph.dim, frame)
-    per_rows: list[dict] = []
-    if blocks is not None:
-        row["per_pose"] = {str(k): v for k, v in blocks.items()}
-        if curv is not None:
-            row["per_pose_curvature"] = {str(k): v for k, v in curv.items()}
-        names = row["coordinates"]
-        for k, v in blocks.items():
-            r = {"id": k, **{f"var_{c}": float(x) for c, x in zip(names, np.diag(v))}, "trace": float(np.trace(v))}
-            if curv is not None:
-                r["trace_curvature"] = float(np.trace(curv[k]))
-            per_rows.append(r)
+    crb = cramer_rao_bound(graph, est.rot, est.trans, model=model, anchor_ids=anchor_ids, quotient=quotient,
+                           poses=poses, rotation_model=rotation_model, variant=variant, frame=frame)
+    times.update(crb.times)
+    row.update(crb.row)
     row["estimate"] = est_info
     row["times"] = times
-    return row, per_rows
-
-
-def _accuracy(row: dict, accuracy, name: str) -> Status:
-    """Record the inverse's accuracy estimate in ``row`` (key ``accuracy``), warn on stderr when it
-    is not ok, and return the status that the bound's numbers inherit when it is unavailable."""
-    if accuracy is None:
-        return Status()
-    row["accuracy"] = accuracy.as_json()
-    log_status(log, f"{name}: CRLB", accuracy.status)
-    return accuracy.status if not accuracy.status.available else Status()
+    return row, crb.pose_rows
 
 
 @click.command("crlb")

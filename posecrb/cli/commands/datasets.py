@@ -10,6 +10,7 @@ from rich.console import Console
 from rich.progress import BarColumn, DownloadColumn, Progress, TextColumn, TimeRemainingColumn, TransferSpeedColumn
 
 from ...core.errors import PosecrbError
+from ...core.noise import precisions_from_sigma
 from ...datasets import search as ds
 from ...datasets import verify as dsv
 from ...datasets.fetch import PROBE_TIMEOUT, fetch, fetch_many
@@ -204,7 +205,7 @@ def synth_cmd(kind: str, poses: int | None, sigma: float | None, tau: float | No
     if sigma is not None and (tau is not None or kappa is not None):
         raise click.UsageError("--noise sets tau and kappa; do not combine it with --tau/--kappa")
     if sigma is not None:
-        tau, kappa = 1.0 / sigma ** 2, 1.0 / (2.0 * sigma ** 2)
+        tau, kappa = precisions_from_sigma(sigma)
     noisy = (sigma is not None or tau is not None or kappa is not None) and not noise_free
     if kind == "demo" and (poses or sigma or tau or kappa or noise_free):
         raise click.UsageError("`demo` is fixed: no --poses/--noise/--tau/--kappa/--noise-free")

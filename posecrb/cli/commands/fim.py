@@ -2,20 +2,14 @@
 from __future__ import annotations
 
 import logging
-import time
 
 import click
-import numpy as np
 
-from ...core.errors import UsageError
-from ...core.status import OK, log_status, put
 from ...datasets import search as datasets
-from ...io import atomic_write, check_output_file
-from ...linalg.cholesky import logdet
-from ...models.paper.bounds import t_optimality
-from ...models.paper.fim import fim_logdet, paper_fim, trace_fim
-from ...models.thesis.fim import sed_fim
-from ...models.thesis.frames import convert_information, coordinate_names, coordinates_description
+from ...io import check_output_file
+from ...io.npz import npz_path
+from ...models import fisher_information
+from ...models.thesis.frames import coordinates_description
 from ...report.render import key_value_rows, print_rows
 from ..options import (
     POSE_ID,
@@ -35,38 +29,6 @@ from ..options import (
 log = logging.getLogger("posecrb")
 
 
-def anchored_logdet(matrix, q: int, anchors: list[int], name: str) -> float:
-    """log det of a pose-major (q per pose) FIM with the anchored poses' rows/columns removed."""
-
-    n = matrix.shape[0] // q
-    keep = np.ones(n, bool)
-    keep[anchors] = False
-    dofs = (np.flatnonzero(keep)[:, None] * q + np.arange(q)).ravel()
-    return logdet(matrix[dofs][:, dofs].tocsc(), name=name)
-
-
-def npz_path(path: str) -> str:
-    """The file ``--save PATH`` writes: numpy's rule, ``.npz`` appended unless present."""
-    return path if path.endswith(".npz") else path + ".npz"
-
-
-def save_npz(path: str, matrix, row_ids: np.ndarray, row_coord: np.ndarray, names: list[str],
-             model: str, anchors: list[int], frame: str = "mixed") -> str:
-    """A scipy sparse .npz (``scipy.sparse.load_npz`` reads it) plus the index map:
-    ``row_pose_id[k]`` and ``row_coordinate[k]`` (into ``coordinate_names``) for row k, and
-    ``frame`` (world/body for sed, mixed for the paper model).
-    Written atomically to ``npz_path(path)``, which is returned."""
-
-    m = matrix.tocsc()
-    target = npz_path(path)
-    with atomic_write(target, "wb") as fh:
-        np.savez(fh, data=m.data, indices=m.indices, indptr=m.indptr, format=np.array("csc"),
-             shape=np.array(m.shape), row_pose_id=np.asarray(row_ids, np.int64),
-             row_coordinate=np.asarray(row_coord, np.int64), coordinate_names=np.array(names),
-                 model=np.array(model), anchor_ids=np.asarray(anchors, np.int64), frame=np.array(frame))
-    return target
-
-
 def fim_row(file: str, data_dir: str | None, model: str, source: str, anchor_id: int | None,
             rotation_model: str, save: str | None, fim_variant: str | None = None,
             frame: str | None = None) -> dict:
@@ -79,51 +41,13 @@ def fim_row(file: str, data_dir: str | None, model: str, source: str, anchor_id:
     graph, est, est_info, times = load_with_estimate(file, data_dir, source)
     row: dict = {"dataset": graph.name, "model": model, "dim": graph.dim, "poses": graph.n,
                  "edges": graph.m, "components": graph.n_components}
-    if model == "paper":
-
-        anchor = graph.anchor_index(anchor_id)
-        fim = paper_fim(graph, est.rot, est.trans, anchor=anchor, rotation_model=rotation_model, variant=variant)
-        times["fim_build"] = fim.build_time
-        t0 = time.perf_counter()
-        ld = fim_logdet(fim)
-        times["fim_logdet"] = time.perf_counter() - t0
-        row.update({"anchors": [fim.anchor_id], "layout": fim.layout, "size": fim.size, "nnz": fim.nnz,
-                    "logdet": ld, "trace": trace_fim(fim),
-                    "t_opt_approx": t_optimality(graph, anchor, rotation_model)[1],
-                    "rank": fim.size, "nullity": 0, "rotation_weight": rotation_model,
-                    "fim_variant": fim.variant})
-        if save:
-            ids, coord = fim.index_map()
-            save_npz(save, fim.matrix, ids, coord, fim.coordinate_names(), "paper", [fim.anchor_id])
-    else:
-
-        fim = sed_fim(graph, est.rot, est.trans)
-        times.update(fim.times)
-        # log-det, rank and nullity are the same in both frames (det B_i = +-1, posecrb.models.thesis.frames)
-        matrix = fim.matrix if frame == "world" else convert_information(fim.matrix, est.rot, est.trans, "body")
-        if anchor_id is not None:
-            if graph.n_components > 1:
-                raise UsageError("--anchor with --model sed needs a connected graph "
-                                 "(`posecrb crlb --anchor` takes one anchor per component)")
-            anchors = [graph.anchor_index(anchor_id)]
-            t0 = time.perf_counter()
-            ld = anchored_logdet(fim.matrix, fim.q, anchors, "SE(d) FIM on the free poses")
-            times["fim_logdet"] = time.perf_counter() - t0
-        else:
-            anchors, ld = list(fim.anchors), fim.logdet_anchored
-        names = coordinate_names(graph.dim, frame)
-        layout = "poses (rotation first)" if frame == "world" else f"poses (GTSAM order: {', '.join(names)})"
-        row.update({"anchors": [int(graph.ids[a]) for a in anchors], "layout": layout,
-                    "size": int(matrix.shape[0]), "nnz": int(matrix.nnz)})
-        put(row, "logdet", ld, fim.logdet_status if anchor_id is None else OK)
-        row.update({"trace": float(matrix.diagonal().sum()), "rank": fim.rank, "nullity": fim.nullity,
-                    "expected_nullity": fim.q * fim.components})
-        if anchor_id is None:
-            log_status(log, f"{graph.name}: log det of the SE(d) FIM", fim.logdet_status)
-        if save:
-            save_npz(save, matrix, np.repeat(graph.ids, fim.q), np.tile(np.arange(fim.q), graph.n),
-                     names, "sed", row["anchors"], frame=frame)
-
+    fim = fisher_information(graph, est.rot, est.trans, model=model, anchor_id=anchor_id,
+                             rotation_model=rotation_model, variant=variant,
+                             frame=frame if model == "sed" else "world")
+    times.update(fim.times)
+    row.update(fim.to_row())
+    if save:
+        fim.save(save)
     row["frame"] = frame
     row["coordinates_description"] = coordinates_description(graph.dim, frame)
     if save:

@@ -160,17 +160,6 @@ def _layout_permutation(n_free: int, d: int, dr: int, layout: str) -> np.ndarray
     return np.hstack([trans, rot]).ravel()
 
 
-def _check_estimate(graph: PoseGraph, rot: np.ndarray, trans: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    d, n = graph.dim, graph.n
-    rot = np.asarray(rot, dtype=float)
-    trans = np.asarray(trans, dtype=float)
-    if rot.shape != (n, d, d) or trans.shape != (n, d):
-        raise UsageError(f"estimate shapes {rot.shape}, {trans.shape} do not match the graph "
-                         f"({n} poses, {d}D): expected ({n}, {d}, {d}) and ({n}, {d})")
-    if not (np.isfinite(rot).all() and np.isfinite(trans).all()):
-        raise UsageError("the estimate has non-finite values")
-    return rot, trans
-
 
 def rotation_jacobians(graph: PoseGraph, rot: np.ndarray, trans: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """Per edge: ``R_i`` (m, d, d) and ``D = dr_ij/dtheta_i`` (m, d, d_r) in the paper's coordinates."""
@@ -209,7 +198,7 @@ def paper_fim(graph: PoseGraph, rot: np.ndarray, trans: np.ndarray, anchor: int 
     if variant not in FIM_VARIANTS:
         raise UsageError(f"variant must be one of {FIM_VARIANTS}, got {variant!r}")
     graph.require_connected()
-    rot, trans = _check_estimate(graph, rot, trans)
+    rot, trans = graph.check_estimate(rot, trans)
     if not 0 <= anchor < graph.n:
         raise UsageError(f"anchor index {anchor} out of range 0..{graph.n - 1}")
     d, dr, n = graph.dim, graph.rot_dim, graph.n

@@ -193,18 +193,10 @@ def right_information_from_left(rot: np.ndarray, trans: np.ndarray, omega_left: 
 
 
 # ------------------------------------------------------------------ residuals and Jacobians
-def _check_estimate(graph: PoseGraph, rot: np.ndarray, trans: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    rot, trans = np.asarray(rot, float), np.asarray(trans, float)
-    d = graph.dim
-    if rot.shape != (graph.n, d, d) or trans.shape != (graph.n, d):
-        raise UsageError(f"estimate shapes {rot.shape}, {trans.shape} do not match "
-                         f"the graph's (n, d, d) = ({graph.n}, {d}, {d}) and (n, d)")
-    return rot, trans
-
 
 def edge_residuals(graph: PoseGraph, rot: np.ndarray, trans: np.ndarray) -> np.ndarray:
     """(m, q) residuals ``r_ij = Log(z_ij T_j T_i^{-1})`` with ``T = X^{-1}`` (Prop. 4.3.2)."""
-    rot, trans = _check_estimate(graph, rot, trans)
+    rot, trans = graph.check_estimate(rot, trans)
     ri, rj = rot[graph.src], rot[graph.dst]
     ti, tj = trans[graph.src], trans[graph.dst]
     rjt = np.swapaxes(rj, 1, 2)
@@ -218,7 +210,7 @@ def edge_residuals(graph: PoseGraph, rot: np.ndarray, trans: np.ndarray) -> np.n
 
 def edge_kinematics(graph: PoseGraph, rot: np.ndarray, trans: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """Residuals (m, q) and ``A_ij = Jr^{-1}(r_ij) Ad_{T_i}`` (m, q, q): ``J_i = -A``, ``J_j = A`` (4.7)."""
-    rot, trans = _check_estimate(graph, rot, trans)
+    rot, trans = graph.check_estimate(rot, trans)
     res = edge_residuals(graph, rot, trans)
     ad_ti = se_adjoint(*se_inverse(rot[graph.src], trans[graph.src]))
     return res, se_jr_inv(res) @ ad_ti
