@@ -99,10 +99,6 @@ test-fast: lint
 	@$(PY) -m posecrb --version >&2
 	$(PY) -m pytest -q -m "not slow" $(PYTEST_ARGS)
 
-# the suite without the long real-data and multi-process tests (marked `slow`)
-test-fast: lint
-	$(PYTHON) -m pytest -q -m "not slow" $(PYTEST_ARGS)
-
 regress: install
 	@$(PY) -m posecrb regress
 

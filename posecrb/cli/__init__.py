@@ -19,11 +19,21 @@ import sys
 import warnings
 
 import click
-from click.utils import make_default_short_help
 
 from .. import __version__
 from ..core.errors import PosecrbError, UsageError
 from ..core.files import Terminated, handle_sigterm, remove_temporaries
+
+with warnings.catch_warnings():
+    # click 8.4 deprecates this helper (removed in click 9); the --help listing must match what
+    # click itself renders, so use click's while it exists and a first-sentence fallback after.
+    warnings.simplefilter("ignore", DeprecationWarning)
+    try:
+        from click.utils import make_default_short_help
+    except ImportError:  # pragma: no cover - click >= 9
+        def make_default_short_help(help: str, max_length: int = 45) -> str:
+            first = help.split("\n\n")[0].split(". ")[0].strip().rstrip(".")
+            return first if len(first) <= max_length else first[: max_length - 3].rsplit(" ", 1)[0] + "..."
 
 log = logging.getLogger("posecrb")
 
