@@ -17,14 +17,12 @@ import os
 from dataclasses import dataclass
 from pathlib import Path
 
-from ..core.errors import PosecrbError
+from ..core.errors import InternalError, PosecrbError
 from ..core.files import read_regular_file, write_text
 from ..datasets import search as datasets
 from ..io import load
-from ..models.paper.bounds import compute_bounds
 from ..models.paper.crlb import crlb_from_fim
-from ..models.paper.fim import fim_logdet, paper_fim
-from ..solver.estimate import get_estimate
+from .evaluate import EvaluationSettings, evaluate
 
 GRAPH_ONLY = ("lb", "ub", "ub_lambda")
 ESTIMATE_DEPENDENT = ("fim_logdet", "objective", "trace_crlb")
@@ -66,14 +64,15 @@ def compute_metrics(name: str, data_dir: str | None = None, variant: str = "cons
 
     path = datasets.resolve(name, data_dir)
     graph = load(path)
-    b = compute_bounds(graph)
-    est = get_estimate(graph, "solve")
+    m = evaluate(graph, EvaluationSettings(fim_variant=variant))
+    b, est, fim = m.bounds, m.estimate, m.fim
+    if est is None or fim is None:
+        raise InternalError("evaluate() returned no FIM and no error")
     if not est.certified:
         raise PosecrbError(f"{name}: the solver did not certify its estimate")
-    fim = paper_fim(graph, est.rot, est.trans, 0, variant=variant)
     crlb = crlb_from_fim(fim, graph)   # the same FIM, built once
     return {"sha256": graph.sha256, "fim_variant": fim.variant, "lb": b.lb, "ub": b.ub, "ub_lambda": b.ub_lambda,
-            "fim_logdet": fim_logdet(fim), "objective": est.objective,
+            "fim_logdet": m.fim_logdet, "objective": est.objective,
             "trace_crlb": crlb.trace_crlb,
             "trace_crlb_error_bound": crlb.accuracy.error_bound if crlb.accuracy is not None else 0.0}
 

@@ -20,16 +20,14 @@ from collections.abc import Callable, Iterable, Sequence
 from concurrent.futures import ProcessPoolExecutor, as_completed
 from dataclasses import asdict, dataclass, field
 
-from ..core.errors import DatasetNotFound, PosecrbError, status_of
+from ..core.errors import DatasetNotFound, InternalError, PosecrbError, status_of
 from ..core.provenance import machine, versions
 from ..core.status import put
 from ..core.timing import timed
 from ..datasets import search as datasets
 from ..datasets.manifest import load_manifest
 from ..io import load
-from ..models.paper.bounds import compute_bounds
-from ..models.paper.fim import fim_logdet, paper_fim
-from ..solver.estimate import get_estimate
+from .evaluate import EvaluationSettings, evaluate
 from .published import TABLE_II_FIT_FOOTNOTE, TABLE_II_FOOTNOTE, TABLE_II_PUBLISHED_FOOTNOTE, paper_row
 
 log = logging.getLogger("posecrb")
@@ -95,22 +93,24 @@ def dataset_row(name: str, settings: TableSettings,
             row["dataset"] = graph.name
         row.update(path=str(path), sha256=graph.sha256, dim=graph.dim,
                    poses=graph.n, edges=graph.m)
-        step("bounds")
-        b = compute_bounds(graph, 0, settings.rotation_model, settings.repeat)
+        m = evaluate(graph, EvaluationSettings(rotation_model=settings.rotation_model, fim_variant=settings.fim_variant,
+                                               repeat=settings.repeat, solver=settings.solver),
+                     step=step, errors="keep")
+        b = m.bounds
         row.update(lb=b.lb)
         put(row, "ub", b.ub, b.ub_status)
         row.update(ub_lambda=b.ub_lambda, lb_time=b.times["lb"], ub_time=b.times["ub"],
                    ub_lambda_time=b.times["ub_lambda"], laplacians_build_time=b.times["laplacians"])
-        step("solve")
-        est = get_estimate(graph, "solve", **settings.solver)
-        row.update(objective=est.objective, certified=est.certified, solve_time=est.solve_time)
-        step("fim")
-
-        fim, t_build = timed(lambda: paper_fim(graph, est.rot, est.trans, 0, settings.rotation_model,
-                                               variant=settings.fim_variant), settings.repeat)
-        ld, t_ld = timed(lambda: fim_logdet(fim), settings.repeat)
-        row.update(fim_logdet=ld, fim_variant=fim.variant, rotation_weight=settings.rotation_model, fim_time=t_ld,
-                   fim_build_time=t_build)
+        est = m.estimate
+        if est is not None:
+            row.update(objective=est.objective, certified=est.certified, solve_time=est.solve_time)
+        if m.error is not None:
+            raise m.error       # reported below, with what was computed before it
+        if est is None or m.fim is None or m.fim_logdet is None:
+            raise InternalError("evaluate() returned no FIM and no error")
+        ld = m.fim_logdet
+        row.update(fim_logdet=ld, fim_variant=m.fim.variant, rotation_weight=settings.rotation_model,
+                   fim_time=m.times["fim_logdet"], fim_build_time=m.times["fim_build"])
         row.update(gap_ub_rel=None if b.ub is None else (b.ub - b.lb) / b.lb, gap_fim_rel=(ld - b.lb) / b.lb,
                    parse_time=t_parse)
         if not est.certified:

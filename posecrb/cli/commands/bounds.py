@@ -8,11 +8,9 @@ import click
 from ...core.errors import PosecrbError, status_of
 from ...core.noise import ROTATION_WEIGHT_MODELS
 from ...core.status import log_status, put
-from ...core.timing import timed
-from ...models.paper.bounds import compute_bounds
-from ...models.paper.fim import fim_logdet, paper_fim, trace_fim
+from ...metrics.evaluate import EvaluationSettings, evaluate
+from ...models.paper.fim import trace_fim
 from ...report.render import print_rows
-from ...solver.estimate import get_estimate
 from ..options import anchor_option, data_dir_option, fim_variant_option, format_option, load_dataset, repeat_option
 
 log = logging.getLogger("posecrb")
@@ -28,7 +26,10 @@ def bounds_row(name_or_path: str, data_dir: str | None, anchor_id: int | None, r
                rotation_model: str, estimate: str = "none", fim_variant: str | None = None) -> dict:
     graph, t_parse = load_dataset(name_or_path, data_dir, repeat)
     anchor = graph.anchor_index(anchor_id)
-    b = compute_bounds(graph, anchor, rotation_model, repeat)
+    m = evaluate(graph, EvaluationSettings(anchor=anchor, rotation_model=rotation_model,
+                                           fim_variant=fim_variant or "consistent", repeat=repeat, estimate=estimate,
+                                           solver={"anchor": anchor} if estimate == "solve" else {}))
+    b = m.bounds
     row = {
         "dataset": graph.name, "path": graph.path, "sha256": graph.sha256, "dim": graph.dim,
         "poses": graph.n, "edges": graph.m, "components": graph.n_components,
@@ -45,16 +46,11 @@ def bounds_row(name_or_path: str, data_dir: str | None, anchor_id: int | None, r
     log_status(log, f"{graph.name}: Lemma 4 gap bound", b.gap_bound_status)
     row.update({"t_opt_graph": b.t_opt_graph, "t_opt_approx": b.t_opt_approx, "total_degree": b.total_degree,
                 "times": {"parse": t_parse, **b.times}})
-    if estimate != "none":
-
-        variant = fim_variant or "consistent"
-        est = get_estimate(graph, estimate, anchor=anchor) if estimate == "solve" else get_estimate(graph, estimate)
-        fim, t_build = timed(lambda: paper_fim(graph, est.rot, est.trans, anchor, rotation_model, variant=variant),
-                             repeat)
-        ld, t_ld = timed(lambda: fim_logdet(fim), repeat)
-        row.update(fim_logdet=ld, trace_fim=trace_fim(fim), fim_variant=fim.variant,
+    if m.estimate is not None and m.fim is not None:
+        est, fim = m.estimate, m.fim
+        row.update(fim_logdet=m.fim_logdet, trace_fim=trace_fim(fim), fim_variant=fim.variant,
                    estimate={"source": est.source, "certified": est.certified, "objective": est.objective})
-        row["times"].update(fim_build=t_build, fim_logdet=t_ld, solve=est.solve_time)
+        row["times"].update(fim_build=m.times["fim_build"], fim_logdet=m.times["fim_logdet"], solve=est.solve_time)
         if est.certified is False:
             row["status"] = "uncertified"
     return row

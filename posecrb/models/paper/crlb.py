@@ -156,7 +156,7 @@ def inverse_accuracy(a, factor, name: str = "matrix", columns: int = ACCURACY_CO
     return InverseAccuracy(eta, cond_s, cond, bound, k, status)
 
 
-@dataclass(frozen=True, eq=False)
+@dataclass(frozen=True, eq=False, kw_only=True)
 class CrlbResult:
     """CRLB of the paper model at one estimate.
 
@@ -279,9 +279,12 @@ def crlb_from_fim(fim: PaperFim, graph: PoseGraph, per_pose: bool | Sequence[int
         pp = {int(i): (blocks[r] if f else zero) for i, r, f in zip(ids, row, free)}
         if curv_blocks is not None:
             ppc = {int(i): (curv_blocks[r] if f else zero) for i, r, f in zip(ids, row, free)}
-    return CrlbResult("paper", d, graph.n, npf, fim.anchor_id, trace, trace / npf if npf else 0.0, tr_t, tr_r,
-                      trace_curv, mse_curv, coordinate_names(d), pp, ppc, times, fim_variant=fim.variant,
-                      accuracy=accuracy, curvature_status=status, curvature_correction_max=worst)
+    return CrlbResult(model="paper", dim=d, poses=graph.n, n_free=npf, anchor_id=fim.anchor_id, trace_crlb=trace,
+                      mse_bound=trace / npf if npf else 0.0, trace_translation=tr_t, trace_rotation=tr_r,
+                      trace_crlb_curvature=trace_curv, mse_bound_curvature=mse_curv,
+                      coordinates=coordinate_names(d), per_pose=pp, per_pose_curvature=ppc, times=times,
+                      fim_variant=fim.variant, accuracy=accuracy, curvature_status=status,
+                      curvature_correction_max=worst)
 
 
 def paper_crlb(graph: PoseGraph, rot: np.ndarray, trans: np.ndarray, anchor: int = 0,

@@ -69,7 +69,7 @@ LAYOUTS = ("blocks", "poses")
 FIM_VARIANTS = ("eq64", "consistent")
 
 
-@dataclass(frozen=True, eq=False)
+@dataclass(frozen=True, eq=False, kw_only=True)
 class PaperFim:
     """The anchored paper FIM.
 
@@ -249,8 +249,9 @@ def paper_fim(graph: PoseGraph, rot: np.ndarray, trans: np.ndarray, anchor: int 
     mat = sp.csc_matrix((vals[keep], (rows[keep], cols_[keep])), shape=(size, size))
     mat.sum_duplicates()
     pose_ids = np.delete(graph.ids, anchor)
-    fim = PaperFim(mat, d, int(anchor), int(graph.ids[anchor]), pose_ids, "blocks", rotation_model,
-                   variant=variant, build_time=time.perf_counter() - t0)
+    fim = PaperFim(matrix=mat, dim=d, anchor=int(anchor), anchor_id=int(graph.ids[anchor]), pose_ids=pose_ids,
+                   layout="blocks", rotation_model=rotation_model, variant=variant,
+                   build_time=time.perf_counter() - t0)
     if layout != "blocks":
         fim = fim.to_layout(layout)
     return fim

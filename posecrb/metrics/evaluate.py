@@ -1,0 +1,74 @@
+"""The one pipeline behind ``bounds``, ``tables`` and ``regress``: graph -> bounds -> estimate ->
+paper FIM -> log-det (docs/design.md#tables, timing regions as in #timing-protocol).
+
+Each command renders its own row from the ``DatasetMetrics`` (its keys are unchanged); the
+numbers come from here only.
+"""
+from __future__ import annotations
+
+from collections.abc import Callable, Mapping
+from dataclasses import dataclass, field
+from typing import Any
+
+from ..core.errors import PosecrbError
+from ..core.graph import PoseGraph
+from ..core.timing import timed
+from ..models.paper.bounds import BoundsResult, compute_bounds
+from ..models.paper.fim import PaperFim, fim_logdet, paper_fim
+from ..solver.estimate import Estimate, get_estimate
+
+
+@dataclass(frozen=True, kw_only=True)
+class EvaluationSettings:
+    """``anchor``: internal index of the anchored pose; ``estimate``: "solve", "vertices", a file,
+    or "none" (bounds only); ``solver``: options of the certified solver; ``repeat``: the timing
+    protocol's repeats (1: each step runs once, untimed warm-up skipped)."""
+
+    anchor: int = 0
+    rotation_model: str = "eq59"
+    fim_variant: str = "consistent"
+    repeat: int = 1
+    estimate: str = "solve"
+    solver: Mapping[str, Any] = field(default_factory=dict)
+
+
+@dataclass(frozen=True, kw_only=True)
+class DatasetMetrics:
+    """What the pipeline computed, as far as it got: ``error`` is the PosecrbError that stopped it
+    after the bounds (only with ``errors="keep"``)."""
+
+    graph: PoseGraph
+    bounds: BoundsResult
+    estimate: Estimate | None = None
+    fim: PaperFim | None = None
+    fim_logdet: float | None = None
+    times: dict[str, float] = field(default_factory=dict)    # fim_build, fim_logdet (median of repeat)
+    error: PosecrbError | None = None
+
+
+def evaluate(graph: PoseGraph, settings: EvaluationSettings, *, step: Callable[[str], None] | None = None,
+             errors: str = "raise") -> DatasetMetrics:
+    """Bounds (section VII-B), the estimate, the anchored paper FIM there and its log-det.
+
+    ``step`` is told each stage's name ("bounds", "solve", "fim") before it starts.
+    ``errors="keep"``: a PosecrbError after the bounds ends the pipeline and is returned in
+    ``error`` with what was computed so far; ``"raise"`` lets it through."""
+    say = step or (lambda s: None)
+    say("bounds")
+    b = compute_bounds(graph, settings.anchor, settings.rotation_model, settings.repeat)
+    if settings.estimate == "none":
+        return DatasetMetrics(graph=graph, bounds=b)
+    est: Estimate | None = None
+    try:
+        say("solve")
+        est = get_estimate(graph, settings.estimate, **settings.solver)
+        say("fim")
+        fim, t_build = timed(lambda: paper_fim(graph, est.rot, est.trans, settings.anchor, settings.rotation_model,
+                                               variant=settings.fim_variant), settings.repeat)
+        ld, t_ld = timed(lambda: fim_logdet(fim), settings.repeat)
+    except PosecrbError as exc:
+        if errors != "keep":
+            raise
+        return DatasetMetrics(graph=graph, bounds=b, estimate=est, error=exc)
+    return DatasetMetrics(graph=graph, bounds=b, estimate=est, fim=fim, fim_logdet=ld,
+                          times={"fim_build": t_build, "fim_logdet": t_ld})
