@@ -25,7 +25,7 @@ import tempfile
 import threading
 from collections.abc import Callable, Iterator, Sequence
 from pathlib import Path
-from typing import IO
+from typing import IO, Any
 
 from .errors import ParseError, UsageError
 
@@ -205,7 +205,7 @@ def atomic_write(path: str | os.PathLike, mode: str = "w", *, encoding: str | No
     fd, tmp = tempfile.mkstemp(prefix=f".{base}.", suffix=suffix, dir=directory)
     _LIVE.add(tmp)
     try:
-        kwargs = {} if mode == "wb" else {"encoding": encoding, "newline": newline}
+        kwargs: dict[str, Any] = {} if mode == "wb" else {"encoding": encoding, "newline": newline}
         with os.fdopen(fd, mode, **kwargs) as fh:
             yield fh
             fh.flush()

@@ -13,6 +13,7 @@ from fractions import Fraction
 from math import factorial
 
 import numpy as np
+import numpy.typing as npt
 from scipy.special import ive
 
 from .errors import UsageError
@@ -119,7 +120,7 @@ def precisions_from_sigma(sigma: float) -> tuple[float, float]:
     return 1.0 / sigma ** 2, 1.0 / (2.0 * sigma ** 2)
 
 
-def isotropic_information(tau, kappa, dim: int) -> np.ndarray:
+def isotropic_information(tau: npt.ArrayLike, kappa: npt.ArrayLike, dim: int) -> np.ndarray:
     """(m, q, q) g2o-order information matrices that SE-Sync's rule maps back to (tau, kappa).
 
     Inverse of ``isotropic_precisions`` (docs/design.md#noise-model): 2D

@@ -78,7 +78,7 @@ def worst(*statuses: Status) -> Status:
     return best
 
 
-def put(row: dict, key: str, value, status: Status) -> None:
+def put(row: dict, key: str, value: object, status: Status) -> None:
     """``row[key] = value`` (None when unavailable) plus ``row[key + "_status"]`` unless ok."""
     row[key] = value if status.available else None
     if not status.ok:

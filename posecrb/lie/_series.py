@@ -4,6 +4,7 @@ closed forms lose digits to cancellation, so a truncated Taylor series is used t
 from __future__ import annotations
 
 import math
+from collections.abc import Callable
 
 import numpy as np
 
@@ -52,7 +53,8 @@ def _coef_b(th: np.ndarray) -> np.ndarray:
     return 0.5 * s * s
 
 
-def _series_or(th: np.ndarray, coeffs: list[float], closed, below: float = _SERIES) -> np.ndarray:
+def _series_or(th: np.ndarray, coeffs: list[float], closed: Callable[[np.ndarray], np.ndarray],
+               below: float = _SERIES) -> np.ndarray:
     th = np.asarray(th, float)
     small = np.abs(th) < below
     ts = np.where(small, 1.0, th)
