@@ -6,6 +6,7 @@ import os
 
 import numpy as np
 
+from ..core.errors import UsageError
 from ..core.files import atomic_write
 from ..core.graph import PoseGraph
 from ..lie.so import so2_log
@@ -29,15 +30,17 @@ def write_g2o(graph: PoseGraph, path: str | os.PathLike, rot: np.ndarray | None 
     """
     rot = graph.vertex_rot if rot is None else rot
     trans = graph.vertex_trans if trans is None else trans
+    if (rot is None) != (trans is None):
+        raise UsageError("write_g2o: vertex rotations and translations must be given together")
     iu = np.triu_indices(graph.q)
     info = graph.info[:, iu[0], iu[1]]
     if graph.dim == 2:
         vtag, etag = "VERTEX_SE2", "EDGE_SE2"
-        vcols = None if rot is None else np.column_stack([trans, so2_log(rot)])
+        vcols = None if rot is None or trans is None else np.column_stack([trans, so2_log(rot)])
         ecols = np.column_stack([graph.trans, so2_log(graph.rot), info])
     else:
         vtag, etag = "VERTEX_SE3:QUAT", "EDGE_SE3:QUAT"
-        vcols = None if rot is None else np.column_stack([trans, rot_to_quat(rot)])
+        vcols = None if rot is None or trans is None else np.column_stack([trans, rot_to_quat(rot)])
         ecols = np.column_stack([graph.trans, rot_to_quat(graph.rot), info])
     lines: list[str] = []
     if vcols is not None:

@@ -1,9 +1,14 @@
 """A Fisher information matrix as a scipy sparse ``.npz`` with its index map (``posecrb fim --save``)."""
 from __future__ import annotations
 
+from typing import TYPE_CHECKING
+
 import numpy as np
 
 from ..core.files import atomic_write
+
+if TYPE_CHECKING:
+    import scipy.sparse as sp
 
 
 def npz_path(path: str) -> str:
@@ -11,7 +16,7 @@ def npz_path(path: str) -> str:
     return path if path.endswith(".npz") else path + ".npz"
 
 
-def save_npz(path: str, matrix, row_ids: np.ndarray, row_coord: np.ndarray, names: list[str],
+def save_npz(path: str, matrix: sp.spmatrix | sp.sparray, row_ids: np.ndarray, row_coord: np.ndarray, names: list[str],
              model: str, anchors: list[int], frame: str = "mixed") -> str:
     """A scipy sparse .npz (``scipy.sparse.load_npz`` reads it) plus the index map:
     ``row_pose_id[k]`` and ``row_coordinate[k]`` (into ``coordinate_names``) for row k, and

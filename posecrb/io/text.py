@@ -58,7 +58,7 @@ _NOT_ID_CHAR = re.compile(r"[^0-9 ]")
 _INT64_MAX = np.iinfo(np.int64).max
 
 
-def _fmt(x) -> str:
+def _fmt(x: float) -> str:
     """A number as users write it (never ``np.float64(...)``)."""
     x = float(x)
     return f"{x:.6g}" if x == x and abs(x) != float("inf") else str(x)
@@ -199,7 +199,7 @@ def _check_positive_definite(path: str, lines: np.ndarray, tag: str, ends: tuple
     """
     b = block.shape[-1]
     diag = np.diagonal(block, axis1=1, axis2=2)
-    pos = (diag > 0).all(axis=1)
+    pos = np.all(diag > 0, axis=1)
     d = np.where(diag > 0, diag, 1.0) ** -0.5
     corr = block * d[:, :, None] * d[:, None, :]
     eig = np.linalg.eigvalsh(corr)[:, 0]
@@ -247,7 +247,8 @@ def _check_precisions(path: str, lines: np.ndarray, tag: str, ends: tuple, info:
 
 
 def _decode_edges(path: str, rec: RecordKind, ids: np.ndarray, vals: np.ndarray, lines: np.ndarray,
-                  normalize: bool = True):
+                  normalize: bool = True
+                  ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray, tuple[np.ndarray, np.ndarray]]:
     i, j = ids[:, 0], ids[:, 1]
     loop = np.flatnonzero(i == j)
     if loop.size:
@@ -259,7 +260,7 @@ def _decode_edges(path: str, rec: RecordKind, ids: np.ndarray, vals: np.ndarray,
         r = so2_exp(vals[:, 2])
         raw = vals[:, 3:9]
         if rec.family == "toro":
-            raw = raw[:, [TORO2_INFO_ORDER[rc] for rc in zip(*np.triu_indices(3))]]
+            raw = raw[:, np.array([TORO2_INFO_ORDER[(int(a), int(b))] for a, b in zip(*np.triu_indices(3))])]
     else:
         if rec.family == "g2o":
             r = _quaternions(path, vals[:, 3:7], lines, rec.tag, normalize)
@@ -278,7 +279,8 @@ def _decode_edges(path: str, rec: RecordKind, ids: np.ndarray, vals: np.ndarray,
     return i, j, r, t, info, precisions
 
 
-def _decode_vertices(path: str, rec: RecordKind, ids: np.ndarray, vals: np.ndarray, lines: np.ndarray):
+def _decode_vertices(path: str, rec: RecordKind, ids: np.ndarray, vals: np.ndarray,
+                     lines: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     vid = ids[:, 0]
     d = rec.dim
     trans = vals[:, :d]
