@@ -146,7 +146,7 @@ def lambda_min(a: sp.spmatrix, factor: Factor | None = None, name: str = "matrix
     return float(vals[0])
 
 
-def anchored_logdet(matrix, q: int, anchors: list[int], name: str) -> float:
+def anchored_logdet(matrix: sp.spmatrix, q: int, anchors: list[int], name: str) -> float:
     """log det of a pose-major (q per pose) FIM with the anchored poses' rows/columns removed."""
 
     n = matrix.shape[0] // q

@@ -21,7 +21,7 @@ from ..core.errors import InternalError
 try:  # numba is a declared dependency
     from numba import njit
 except ImportError:  # pragma: no cover
-    def njit(*args, **kwargs):
+    def njit(*args, **kwargs):  # type: ignore[no-redef]  # stands in for the untyped numba.njit
         if args and callable(args[0]):
             return args[0]
         return lambda f: f

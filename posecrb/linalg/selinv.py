@@ -32,7 +32,7 @@ import scipy.sparse as sp
 from threadpoolctl import threadpool_limits
 
 from ..core.errors import NumericalError, UsageError
-from .cholesky import SymbolicCholesky
+from .cholesky import Factor, SymbolicCholesky
 
 log = logging.getLogger("posecrb")
 
@@ -41,7 +41,7 @@ try:  # numba is a declared dependency; the fallback only keeps the module impor
 except ImportError:  # pragma: no cover
     log.warning("numba is not installed: selected inversion runs as slow pure Python")
 
-    def njit(*args, **kwargs):
+    def njit(*args, **kwargs):  # type: ignore[no-redef]  # stands in for the untyped numba.njit
         if args and callable(args[0]):
             return args[0]
         return lambda f: f
@@ -182,7 +182,7 @@ def _one_blas_thread():
 class SelectedInverse:
     """Entries of ``A^{-1}`` on the (permuted) pattern of the Cholesky factor of ``A``."""
 
-    def __init__(self, factor, name: str = "matrix"):
+    def __init__(self, factor: Factor, name: str = "matrix") -> None:
         lower = factor.L()
         lower = sp.csc_matrix(lower)
         lower.sort_indices()
@@ -234,7 +234,7 @@ def _block_pattern_padded(a: sp.spmatrix, block: int) -> sp.csc_matrix:
 _METIS_FROM = 4000
 
 
-def _factor(a: sp.spmatrix, name: str):
+def _factor(a: sp.spmatrix, name: str) -> Factor:
     ordering = "metis" if a.shape[0] >= _METIS_FROM else "default"
     try:
         symbolic = SymbolicCholesky(a, ordering_method=ordering)
@@ -243,7 +243,8 @@ def _factor(a: sp.spmatrix, name: str):
     return symbolic.factor(a, name=name)
 
 
-def inverse_block_diagonal(a: sp.spmatrix, block: int, name: str = "matrix", factor=None) -> np.ndarray:
+def inverse_block_diagonal(a: sp.spmatrix, block: int, name: str = "matrix",
+                           factor: Factor | None = None) -> np.ndarray:
     """The ``(n // block, block, block)`` diagonal blocks of ``a^{-1}`` for a sparse SPD ``a``.
 
     Exact selected inversion (Takahashi recurrences on the Cholesky factor). ``factor``
@@ -274,7 +275,7 @@ def inverse_block_diagonal(a: sp.spmatrix, block: int, name: str = "matrix", fac
     return vals.reshape(nb, block, block)
 
 
-def trace_inverse(a: sp.spmatrix, name: str = "matrix", factor=None) -> float:
+def trace_inverse(a: sp.spmatrix, name: str = "matrix", factor: Factor | None = None) -> float:
     """trace(a^{-1}) exactly, from the selected inverse's diagonal."""
     if a.shape[0] == 0:
         return 0.0
@@ -282,7 +283,7 @@ def trace_inverse(a: sp.spmatrix, name: str = "matrix", factor=None) -> float:
     return float(SelectedInverse(factor, name).diagonal().sum())
 
 
-def diagonal_inverse(a: sp.spmatrix, name: str = "matrix", factor=None) -> np.ndarray:
+def diagonal_inverse(a: sp.spmatrix, name: str = "matrix", factor: Factor | None = None) -> np.ndarray:
     """diag(a^{-1}) in the original ordering."""
     factor = factor if factor is not None else _factor(a, name)
     return SelectedInverse(factor, name).diagonal()
