@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import time
 from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
 
@@ -30,7 +31,7 @@ class Estimate:
 
 
 def from_vertices(graph: PoseGraph) -> Estimate:
-    if not graph.has_vertices:
+    if graph.vertex_rot is None or graph.vertex_trans is None:  # not graph.has_vertices
         raise PosecrbError(f"{graph.path}: the file has no VERTEX lines; use --estimate solve or --estimate FILE")
     return Estimate(graph.vertex_rot, graph.vertex_trans, "vertices", None, None, None)
 
@@ -38,7 +39,7 @@ def from_vertices(graph: PoseGraph) -> Estimate:
 def from_file(graph: PoseGraph, path: str) -> Estimate:
 
     other = load(path)
-    if not other.has_vertices:
+    if other.vertex_rot is None or other.vertex_trans is None:  # not other.has_vertices
         raise ParseError(path, None, "estimate file has no VERTEX lines")
     if other.dim != graph.dim:
         raise ParseError(path, None, f"estimate is {other.dim}D, the graph is {graph.dim}D")
@@ -50,7 +51,7 @@ def from_file(graph: PoseGraph, path: str) -> Estimate:
     return Estimate(other.vertex_rot[pos], other.vertex_trans[pos], str(path), None, None, None)
 
 
-def from_solver(graph: PoseGraph, **options) -> Estimate:
+def from_solver(graph: PoseGraph, **options: Any) -> Estimate:
 
     t0 = time.perf_counter()
     res = solve(graph, **options)
@@ -59,7 +60,7 @@ def from_solver(graph: PoseGraph, **options) -> Estimate:
                     "ok" if res.certified else "uncertified")
 
 
-def get_estimate(graph: PoseGraph, source: str = "solve", **solver_options) -> Estimate:
+def get_estimate(graph: PoseGraph, source: str = "solve", **solver_options: Any) -> Estimate:
     if source == "solve":
         return from_solver(graph, **solver_options)
     if source == "vertices":

@@ -236,6 +236,8 @@ class Problem:
     def full_matrix(self, lam_blocks: np.ndarray | None, shift: float) -> sp.csc_matrix:
         """M_red(s) = [[L_red, V_red], [V_red^T, C - Lambda + s I]] (sparse, (n-1+dn) square)."""
         self._full_parts()
+        if self._full_base is None or self._full_pattern is None:  # set by _full_parts
+            raise InternalError("M_red: pattern not analysed")
         data = self._full_base.copy()
         data[self._full_diag_pos] += shift
         if lam_blocks is not None:
@@ -248,6 +250,8 @@ class Problem:
     def factor_full(self, lam_blocks: np.ndarray | None, shift: float, name: str) -> Factor:
         """Cholesky of M_red(shift) with the shared symbolic analysis; raises NotPositiveDefinite."""
         self._full_parts()
+        if self._full_symbolic is None:  # set by _full_parts
+            raise InternalError("M_red: pattern not analysed")
         return self._full_symbolic.factor(self.full_matrix(lam_blocks, shift), name=name)
 
     def schur_solve(self, factor: Factor, W: np.ndarray) -> np.ndarray:

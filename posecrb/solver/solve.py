@@ -11,6 +11,7 @@ from __future__ import annotations
 import logging
 import time
 from dataclasses import dataclass, field
+from typing import Any
 
 import numpy as np
 from threadpoolctl import ThreadpoolController
@@ -57,7 +58,7 @@ def _blas_controller():
     return _BLAS_CONTROLLER
 
 
-def solve(graph: PoseGraph, **kwargs) -> SolveResult:
+def solve(graph: PoseGraph, **kwargs: Any) -> SolveResult:
     """Certifiably correct maximum-likelihood estimate of a pose graph (see :func:`_solve`).
 
     BLAS runs single-threaded inside: the work is many small dense products, for which
@@ -70,11 +71,11 @@ def solve(graph: PoseGraph, **kwargs) -> SolveResult:
         return _solve(graph, **kwargs)
 
 
-def _solve(graph: PoseGraph, *, r0: int | None = None, rmax: int = 10, init: str = "chordal",
+def _solve(graph: PoseGraph, *, r0: int | None = None, rmax: int = 10, init: str | np.ndarray = "chordal",
           anchor: int | None = None, max_iterations: int = 500, certificate_tol: float = 1e-3,
           verbose: bool = False, seed: int = 0, precondition: bool = True,
           precond_max_cond: float = 1e6, adaptive_precond: float | None = 1e-10, refactor_hvps: int | None = 30,
-          **tuning) -> SolveResult:
+          **tuning: Any) -> SolveResult:
     """Certifiably correct maximum-likelihood estimate of a pose graph.
 
     ``r0`` is the first staircase rank (default d + 1), ``rmax`` the last. ``init`` is

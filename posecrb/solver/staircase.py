@@ -37,6 +37,7 @@ import numpy as np
 from scipy.sparse.linalg import ArpackNoConvergence, LinearOperator, eigsh
 
 from ..core.errors import NotPositiveDefinite, SolverError
+from ..linalg.cholesky import Factor
 from .problem import Problem
 from .stiefel import (
     gram_eigh,
@@ -56,8 +57,8 @@ log = logging.getLogger("posecrb")
 class RelaxedModel:
     """f(Z) = tr(Z^T Q Z) on St(d, r)^n with gradient, Hessian and a Schur-complement preconditioner."""
 
-    def __init__(self, problem: Problem, precond_factor=None, adaptive_shift: float | None = None,
-                 refactor_hvps: int | None = 30):
+    def __init__(self, problem: Problem, precond_factor: Factor | None = None, adaptive_shift: float | None = None,
+                 refactor_hvps: int | None = 30) -> None:
         self.problem = problem
         self.base_factor = precond_factor
         self.precond_factor = precond_factor
@@ -166,8 +167,8 @@ class Certificate:
     lanczos_solves: int
 
 
-def _largest_inverse_eig(problem: Problem, factor, dn: int, rng: np.random.Generator, maxiter: int,
-                         tol: float, v0: np.ndarray | None = None):
+def _largest_inverse_eig(problem: Problem, factor: Factor, dn: int, rng: np.random.Generator, maxiter: int,
+                         tol: float, v0: np.ndarray | None = None) -> tuple[float, np.ndarray, int]:
     """Largest eigenpair of (S + s I)^{-1} through the sparse factor of M_red(s)."""
     count = [0]
 

@@ -64,7 +64,8 @@ class TRResult:
     status: str
 
 
-def _tcg(model: Model, state: State, delta: float, opt: TROptions):
+def _tcg(model: Model, state: State, delta: float,
+         opt: TROptions) -> tuple[np.ndarray, np.ndarray, int, str, bool]:
     """Steihaug-Toint truncated CG on the trust-region subproblem; returns (eta, Heta, hvps, reason, boundary)."""
     grad = state.grad
     eta = np.zeros_like(grad)
