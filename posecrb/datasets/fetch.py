@@ -24,6 +24,7 @@ import urllib.request
 from collections.abc import Callable, Iterable
 from dataclasses import dataclass
 from pathlib import Path
+from typing import IO
 
 from .. import __version__
 from ..core.errors import PosecrbError
@@ -78,7 +79,7 @@ def size_cap(entry: DatasetEntry) -> int:
     return int(entry.size) if entry.size else MAX_UNKNOWN_SIZE
 
 
-def _download(url: str, fh, progress: Progress | None, timeout: float, deadline: float | None = None,
+def _download(url: str, fh: IO[bytes], progress: Progress | None, timeout: float, deadline: float | None = None,
               max_bytes: int | None = None) -> int:
     """Stream ``url`` into ``fh``; raises FetchError unless every announced byte arrived within
     ``deadline`` seconds and no more than ``max_bytes`` came.
@@ -265,8 +266,8 @@ def fetch_many(names: Iterable[str | DatasetEntry], *, dest: str | os.PathLike |
     for entry in entries:
         algo, expected = entry.checksum
         host = urllib.parse.urlsplit(entry.url).netloc
-        if have[entry.name] is not None:
-            out.append(have[entry.name])
+        if (found := have[entry.name]) is not None:
+            out.append(found)
         elif reason_by_host.get(host):
             out.append(FetchResult(entry.name, target_path(entry, dest), "offline", 0, algo, expected,
                                    entry.url, f"{host}: {reason_by_host[host]}"))
