@@ -19,6 +19,8 @@ import os
 from collections.abc import Callable, Iterable, Sequence
 from concurrent.futures import ProcessPoolExecutor, as_completed
 from dataclasses import asdict, dataclass, field
+from functools import partial
+from typing import Any
 
 from ..core.errors import DatasetNotFound, InternalError, PosecrbError, status_of
 from ..core.provenance import machine, versions
@@ -53,7 +55,7 @@ class TableSettings:
         return self.rotation_model == "table2" and self.fim_variant == "eq64"
 
 
-def published_settings(**kwargs) -> TableSettings:
+def published_settings(**kwargs: Any) -> TableSettings:
     """Eq. (64) as printed with the empirical Table II rotation weight (``posecrb tables --as-published``)."""
     return TableSettings(rotation_model="table2", fim_variant="eq64", **kwargs)
 
@@ -134,7 +136,7 @@ def build_rows(names: Sequence[str], settings: TableSettings, jobs: int = 1,
     if jobs <= 1:
         rows = []
         for n in names:
-            rows.append(dataset_row(n, settings, (lambda s, n=n: on_step(n, s)) if on_step else None))
+            rows.append(dataset_row(n, settings, partial(on_step, n) if on_step else None))
             if on_done:
                 on_done(n, rows[-1])
         return rows
@@ -231,7 +233,7 @@ def failed(rows: Iterable[dict], requested: Sequence[str] | None) -> list[dict]:
 
 
 # ---- LaTeX --------------------------------------------------------------------------
-def _tex_number(v) -> str:
+def _tex_number(v: object) -> str:
     if v is None:
         return "--"
     if isinstance(v, bool):
