@@ -9,6 +9,7 @@ from __future__ import annotations
 import os
 from collections.abc import Iterable, Sequence
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import matplotlib
 
@@ -19,6 +20,13 @@ import numpy as np
 from ..core.errors import UsageError
 from ..core.files import atomic_write
 from ..metrics.published import paper_row
+
+if TYPE_CHECKING:
+    from matplotlib.figure import Figure
+
+    from ..experiments.crlb_sweep import CrlbSweepResult
+    from ..experiments.octagon import OctagonResult
+    from ..experiments.thesis import ThesisResult
 
 DPI = 100
 FIGURE_FORMATS = (".png", ".svg")
@@ -44,7 +52,7 @@ def check_figure_path(path: str | os.PathLike) -> Path:
     return path
 
 
-def _save(fig, path) -> Path:
+def _save(fig: Figure, path: str | os.PathLike) -> Path:
     """savefig to a temporary in the target directory, renamed into place (atomic_write);
     the format follows the suffix (PNG without one)."""
 
@@ -60,7 +68,7 @@ def _save(fig, path) -> Path:
     return path
 
 
-def plot_crlb_sweep(result, path) -> Path:
+def plot_crlb_sweep(result: CrlbSweepResult, path: str | os.PathLike) -> Path:
     """Fig. 6 / 7: MSE per pose of the certified MLE vs the CRLB per pose, over k_c."""
     kc = np.array([lv.kc for lv in result.levels])
     mse = np.array([lv.mse for lv in result.levels])
@@ -86,7 +94,7 @@ def plot_crlb_sweep(result, path) -> Path:
     return _save(fig, path)
 
 
-def plot_thesis(result, path) -> Path:
+def plot_thesis(result: ThesisResult, path: str | os.PathLike) -> Path:
     """Graphs 6.8 / 6.9: ||Cov - CRB||_F vs m (log-log), anchored and quotient, with the relative error."""
     fig, axes = plt.subplots(1, 2, figsize=(8.0, 3.6))
     for form, marker in (("anchored", "o"), ("quotient", "s")):
@@ -106,7 +114,7 @@ def plot_thesis(result, path) -> Path:
     return _save(fig, path)
 
 
-def plot_octagon(result, path) -> Path:
+def plot_octagon(result: OctagonResult, path: str | os.PathLike) -> Path:
     """Fig. 4 / 5: T-optimality and D-optimality against the total node degree."""
     deg = np.array([g.total_degree for g in result.graphs], dtype=float)
     tr = np.array([g.trace for g in result.graphs])
@@ -152,7 +160,7 @@ def _plottable(rows: Iterable[dict]) -> list[dict]:
             and r["lb"] > 0]
 
 
-def plot_tables(rows: Sequence[dict], path, note: str | None = None) -> Path:
+def plot_tables(rows: Sequence[dict], path: str | os.PathLike, note: str | None = None) -> Path:
     """Tables I-IV at a glance, one column per dataset (2D then 3D).
 
     Top: the FIM log-det and ub as their relative distance above lb, ``(x - lb)/lb``

@@ -129,7 +129,7 @@ def to_markdown(rows: Sequence[dict[str, Any]], columns: Sequence[str] | None = 
 
 def to_rich_table(rows: Sequence[dict[str, Any]], columns: Sequence[str] | None = None,
                   title: str | None = None, headers: dict[str, str] | None = None,
-                  caption: str | None = None):
+                  caption: str | None = None) -> Table:
 
     flat = [flatten(render_statuses(_plain(r))) for r in rows]
     cols = _columns(flat, columns)
