@@ -21,8 +21,9 @@ from ..core.status import OK, Status, log_status, put
 from ..io.npz import save_npz
 from ..linalg.cholesky import anchored_logdet
 from .paper.bounds import t_optimality
-from .paper.crlb import paper_crlb
+from .paper.crlb import CrlbResult, InverseAccuracy, paper_crlb
 from .paper.fim import fim_logdet, paper_fim, trace_fim
+from .thesis.crb import SedCrbResult
 from .thesis.fim import sed_fim
 from .thesis.frames import convert_information, coordinate_names, coordinates_description, sed_crb_in_frame
 
@@ -90,7 +91,7 @@ def fisher_information(graph: PoseGraph, rot: np.ndarray, trans: np.ndarray, *, 
         fim = paper_fim(graph, rot, trans, anchor=anchor, rotation_model=rotation_model, variant=variant)
         times = {"fim_build": fim.build_time}
         t0 = time.perf_counter()
-        ld = fim_logdet(fim)
+        ld: float | None = fim_logdet(fim)
         times["fim_logdet"] = time.perf_counter() - t0
         ids, coord = fim.index_map()
         return FisherInformation(model="paper", matrix=fim.matrix, row_ids=ids, row_coord=coord,
@@ -108,7 +109,7 @@ def fisher_information(graph: PoseGraph, rot: np.ndarray, trans: np.ndarray, *, 
                              "(`posecrb crlb --anchor` takes one anchor per component)")
         anchors = [graph.anchor_index(anchor_id)]
         t0 = time.perf_counter()
-        ld: float | None = anchored_logdet(sfim.matrix, sfim.q, anchors, "SE(d) FIM on the free poses")
+        ld = anchored_logdet(sfim.matrix, sfim.q, anchors, "SE(d) FIM on the free poses")
         times["fim_logdet"] = time.perf_counter() - t0
         status = OK
     else:
@@ -149,6 +150,7 @@ def cramer_rao_bound(graph: PoseGraph, rot: np.ndarray, trans: np.ndarray, *, mo
     if model not in MODELS:
         raise UsageError(f"model must be one of {MODELS}, got {model!r}")
     row: dict = {}
+    res: CrlbResult | SedCrbResult
     if model == "paper":
 
         if quotient:
@@ -210,7 +212,7 @@ def cramer_rao_bound(graph: PoseGraph, rot: np.ndarray, trans: np.ndarray, *, mo
     return CramerRaoBound(row=row, pose_rows=per_rows, times=dict(res.times))
 
 
-def _accuracy(row: dict, accuracy, name: str) -> Status:
+def _accuracy(row: dict, accuracy: InverseAccuracy | None, name: str) -> Status:
     """Record the inverse's accuracy estimate in ``row`` (key ``accuracy``), warn on stderr when it
     is not ok, and return the status that the bound's numbers inherit when it is unavailable."""
     if accuracy is None:

@@ -32,7 +32,7 @@ from ...core.graph import PoseGraph
 from ...core.noise import isotropic_precisions, rotation_weight
 from ...core.status import OK, Status
 from ...core.timing import timed
-from ...linalg.cholesky import SymbolicCholesky
+from ...linalg.cholesky import Factor, SymbolicCholesky
 from ...linalg.laplacian import kron_identity, reduced_index, reduced_laplacian
 
 # lambda_min(L_w) is reported with a warning when its certified interval is wider than this
@@ -137,7 +137,7 @@ def tree_lambda_min_bound(n: int, src: np.ndarray, dst: np.ndarray, w: np.ndarra
 
 
 def rotation_lambda_min(lap: WeightedLaplacians, graph: PoseGraph, symbolic: SymbolicCholesky,
-                        factor=None, name: str = "reduced rotation Laplacian L_w") -> EigenEstimate:
+                        factor: Factor | None = None, name: str = "reduced rotation Laplacian L_w") -> EigenEstimate:
     """Smallest eigenvalue of the reduced L_w with a certified interval, or a status.
 
     1. eigenvector of the smallest eigenvalue: dense ``eigh`` up to 200 rows, otherwise
@@ -248,13 +248,13 @@ def compute_bounds(graph: PoseGraph, anchor: int | None = None, rotation_model: 
     d, dr = graph.dim, graph.rot_dim
     lap, t_lap = timed(lambda: weighted_laplacians(graph, anchor, rotation_model), repeat)
 
-    def lower():
+    def lower_terms():
         sym = SymbolicCholesky(lap.l_tau)
         _, ld_tau = sym.factor_logdet(lap.l_tau, "reduced translation Laplacian L_tau")
         f_w, ld_w = sym.factor_logdet(lap.l_w, "reduced rotation Laplacian L_w")
         return sym, f_w, ld_tau, ld_w
 
-    (sym, f_w, ld_tau, ld_w), t_lb = timed(lower, repeat)
+    (sym, f_w, ld_tau, ld_w), t_lb = timed(lower_terms, repeat)
 
     def upper():
         psi, _ = source_terms(graph, lap.tau, anchor)

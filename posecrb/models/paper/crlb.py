@@ -36,7 +36,7 @@ Statuses (``posecrb.core.status``), never a silent number:
 from __future__ import annotations
 
 import time
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -44,6 +44,7 @@ import scipy.sparse as sp
 
 from ...core.graph import PoseGraph
 from ...core.status import OK, Status
+from ...linalg.cholesky import Factor
 from ...linalg.selinv import _block_pattern_padded, _factor, inverse_block_diagonal
 from .fim import PaperFim, coordinate_names, paper_fim
 
@@ -86,7 +87,7 @@ class InverseAccuracy:
                 "columns": self.columns, **self.status.as_json()}
 
 
-def _onenorm_inverse(solve, n: int) -> float:
+def _onenorm_inverse(solve: Callable[[np.ndarray], np.ndarray], n: int) -> float:
     """Hager's / Higham's (LAPACK xLACON) estimate of ``||B||_1`` for a symmetric B given by
     ``solve`` (x -> B x); deterministic, a handful of products."""
     if n == 0:
@@ -113,7 +114,7 @@ def _onenorm_inverse(solve, n: int) -> float:
     return max(est, est2)
 
 
-def inverse_accuracy(a, factor, name: str = "matrix", columns: int = ACCURACY_COLUMNS,
+def inverse_accuracy(a: sp.spmatrix, factor: Factor, name: str = "matrix", columns: int = ACCURACY_COLUMNS,
                      seed: int = ACCURACY_SEED) -> InverseAccuracy:
     """Accuracy estimate of ``a^{-1}`` computed from ``factor`` (a CHOLMOD factor of ``a``)."""
 

@@ -139,7 +139,7 @@ def sed_crb(graph: PoseGraph, rot: np.ndarray, trans: np.ndarray, anchors: Seque
         kind = "quotient"
 
     per = None
-    if need_blocks:
+    if want is not None and out is not None:  # need_blocks
         per = {int(i): out[i] for i in want}
     return SedCrbResult(
         model="sed", kind=kind, dim=fim.dim, q=q, n=n, trace_crlb=trace,

@@ -14,6 +14,7 @@ Pose ids are the thesis' labels 1..5; internal indices are 0..4.
 from __future__ import annotations
 
 import numpy as np
+import numpy.typing as npt
 
 from ...core.errors import UsageError
 from ...core.graph import PoseGraph
@@ -46,7 +47,7 @@ COMPONENTS = ((1, 2), (3, 4, 5))
 N_ZERO_EIGENVALUES = 6
 
 
-def _index(ids) -> np.ndarray:
+def _index(ids: npt.ArrayLike) -> np.ndarray:
     return np.asarray(ids, dtype=np.int64) - 1
 
 

@@ -79,7 +79,7 @@ from ...core.errors import NotPositiveDefinite, UsageError
 from ...core.graph import PoseGraph
 from ...core.status import OK, Status
 from ...lie.se import se_adjoint, se_inverse, se_jr_inv, se_log
-from ...linalg.cholesky import cholesky
+from ...linalg.cholesky import Factor, cholesky
 
 log = logging.getLogger("posecrb")
 
@@ -261,7 +261,7 @@ def _free_matrix(f: sp.csc_matrix, n: int, q: int, anchors: Sequence[int]) -> tu
     return f[dofs][:, dofs].tocsc(), free
 
 
-def _factor_free(ff: sp.csc_matrix, name: str):
+def _factor_free(ff: sp.csc_matrix, name: str) -> Factor | None:
     """Cholesky of F on the free poses, or None if it is (numerically) singular."""
     try:
         fac = cholesky(ff, name=name)

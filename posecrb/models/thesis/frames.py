@@ -35,6 +35,7 @@ from __future__ import annotations
 
 from collections.abc import Sequence
 from dataclasses import replace
+from typing import Any
 
 import numpy as np
 import scipy.sparse as sp
@@ -42,7 +43,7 @@ import scipy.sparse as sp
 from ...core.errors import InternalError, UsageError
 from ...core.graph import PoseGraph
 from ...lie.se import se_adjoint, se_inverse
-from .crb import sed_crb
+from .crb import SedCrbResult, sed_crb
 
 FRAMES = ("world", "body")
 
@@ -139,7 +140,7 @@ def convert_information(matrix: sp.spmatrix, rot: np.ndarray, trans: np.ndarray,
 
 def sed_crb_in_frame(graph: PoseGraph, rot: np.ndarray, trans: np.ndarray, frame: str = "world", *,
                      anchors: Sequence[int] | None = None, quotient: bool = False,
-                     per_pose: bool | Sequence[int] = False, **sed_options):
+                     per_pose: bool | Sequence[int] = False, **sed_options: Any) -> SedCrbResult:
     """``posecrb.models.thesis.crb.sed_crb`` with traces and per-pose blocks in ``frame`` ("world" or "body").
 
     "world" is ``sed_crb`` unchanged. "body" converts every per-pose block (5.1 / 5.5) with
@@ -159,6 +160,8 @@ def sed_crb_in_frame(graph: PoseGraph, rot: np.ndarray, trans: np.ndarray, frame
         if want.size and (want[0] < 0 or want[-1] >= graph.n):
             raise UsageError(f"pose index out of range 0..{graph.n - 1}")
     res = sed_crb(graph, rot, trans, anchors=anchors, quotient=quotient, per_pose=True, **sed_options)
+    if res.per_pose is None:  # per_pose=True asks for every block
+        raise InternalError("sed_crb returned no per-pose blocks")
     keys = np.fromiter(res.per_pose.keys(), np.int64, res.n)
     if not np.array_equal(keys, np.arange(res.n)):  # the stacking below relies on pose order
         raise InternalError("sed_crb returned per-pose blocks out of pose order")
