@@ -27,10 +27,12 @@ from __future__ import annotations
 import math
 from collections.abc import Iterable, Sequence
 from dataclasses import replace
+from typing import Any
 
 import numpy as np
+import numpy.typing as npt
 
-from ..core.errors import UsageError
+from ..core.errors import InternalError, UsageError
 from ..core.graph import PoseGraph, rotation_dimension
 from ..core.noise import isotropic_information
 from ..io.rotations import quat_to_rot
@@ -59,6 +61,13 @@ def _rng(rng: np.random.Generator | int | None, needed: bool) -> np.random.Gener
     return np.random.default_rng(rng)
 
 
+def _given(rng: np.random.Generator | None) -> np.random.Generator:
+    """``rng`` where ``_rng(..., needed=True)`` produced it (so never None)."""
+    if rng is None:
+        raise InternalError("a random generator is needed here")
+    return rng
+
+
 def _isotropic_noise(rot: np.ndarray, trans: np.ndarray, tau: np.ndarray, kappa: np.ndarray,
                      dim: int, rng: np.random.Generator) -> tuple[np.ndarray, np.ndarray]:
     """Eq. (80): right-multiplied Langevin rotation noise, additive isotropic Gaussian translation noise."""
@@ -70,7 +79,7 @@ def _isotropic_noise(rot: np.ndarray, trans: np.ndarray, tau: np.ndarray, kappa:
 
 
 def _assemble(dim: int, rot: np.ndarray, trans: np.ndarray, src: np.ndarray, dst: np.ndarray,
-              tau, kappa, noise: bool, rng: np.random.Generator | None,
+              tau: npt.ArrayLike, kappa: npt.ArrayLike, noise: bool, rng: np.random.Generator | None,
               ids: np.ndarray | None = None, info: np.ndarray | None = None) -> PoseGraph:
     """Measurements from the truth (optionally noisy), isotropic information, truth as vertices."""
 
@@ -83,7 +92,7 @@ def _assemble(dim: int, rot: np.ndarray, trans: np.ndarray, src: np.ndarray, dst
         raise UsageError("tau and kappa must be > 0")
     mrot, mtrans = relative_poses(rot, trans, src, dst)
     if noise:
-        mrot, mtrans = _isotropic_noise(mrot, mtrans, tau, kappa, dim, rng)
+        mrot, mtrans = _isotropic_noise(mrot, mtrans, tau, kappa, dim, _given(rng))
     n = rot.shape[0]
     return PoseGraph(
         dim=dim, ids=np.arange(n, dtype=np.int64) if ids is None else np.asarray(ids, dtype=np.int64),
@@ -151,7 +160,7 @@ def grid(dim: int, side: int, *, poses: int | None = None, spacing: float = 1.0,
     coords = boustrophedon(side, dim, n)
     trans = spacing * coords.astype(float)
     if orientation == "random":
-        rot = uniform_rotations(n, dim, rng)
+        rot = uniform_rotations(n, dim, _given(rng))
     elif orientation == "travel":
         step = np.diff(coords, axis=0)
         # Heading of the step leaving each pose; vertical steps (3D) and the last pose
@@ -325,8 +334,9 @@ def random_information(rng: np.random.Generator, m: int, dim: int, kind: str = "
     q = dim + r
     if kind == "isotropic":
 
-        tau = np.exp(rng.uniform(*np.log(tau_range), m))
-        kappa = np.exp(rng.uniform(*np.log(kappa_range), m))
+        (lo_t, hi_t), (lo_k, hi_k) = np.log(tau_range), np.log(kappa_range)
+        tau = np.exp(rng.uniform(lo_t, hi_t, m))
+        kappa = np.exp(rng.uniform(lo_k, hi_k, m))
         return isotropic_information(tau, kappa, dim)
     if kind not in ("block", "full"):
         raise UsageError(f"kind must be isotropic, block or full, got {kind!r}")
@@ -378,9 +388,9 @@ def random_graph(rng: np.random.Generator, n: int, m: int, dim: int, *, info: st
         j = (i + rng.integers(1, n, extra)) % n  # never a self-loop
         a.append(i)
         b.append(j)
-    a, b = np.concatenate(a), np.concatenate(b)
+    a_all, b_all = np.concatenate(a), np.concatenate(b)
     flip = rng.random(m) < 0.5
-    src, dst = np.where(flip, b, a), np.where(flip, a, b)
+    src, dst = np.where(flip, b_all, a_all), np.where(flip, a_all, b_all)
     shuffle = rng.permutation(m)
     src, dst = src[shuffle], dst[shuffle]
 
@@ -449,7 +459,7 @@ def generate(kind: str, poses: int | None = None, *, tau: float | None = None, k
                        kappa=OCTAGON_KAPPA if kappa is None else kappa, noise=noise, rng=seed)
     tau = DEFAULT_TAU if tau is None else tau
     kappa = DEFAULT_KAPPA if kappa is None else kappa
-    common = {"tau": tau, "kappa": kappa, "noise": noise, "rng": seed}
+    common: dict[str, Any] = {"tau": tau, "kappa": kappa, "noise": noise, "rng": seed}
     if kind in ("grid2d", "grid3d"):
         d = 2 if kind == "grid2d" else 3
         n = poses or (100 if d == 2 else 125)

@@ -31,7 +31,7 @@ import multiprocessing
 from collections.abc import Callable, Sequence
 from concurrent.futures import ProcessPoolExecutor, as_completed
 from dataclasses import dataclass
-from typing import Any
+from typing import Any, cast
 
 import numpy as np
 from threadpoolctl import threadpool_limits
@@ -79,7 +79,8 @@ def make_tasks(seed: int, trials: int, keys: Sequence[Sequence[int]]) -> list[Ta
 
 def seed_record(task: Task) -> dict:
     """How to rebuild a task's seed (for run.json)."""
-    return {"entropy": int(task.seed.entropy), "spawn_key": list(task.seed.spawn_key)}
+    # trial_seeds seeds every SeedSequence with an int (numpy also allows a sequence or None)
+    return {"entropy": int(cast(int, task.seed.entropy)), "spawn_key": list(task.seed.spawn_key)}
 
 
 # ---------------------------------------------------------------- execution in one place
@@ -122,7 +123,7 @@ def default_chunksize(n_tasks: int, workers: int) -> int:
 
 
 def run_tasks(fn: Callable[[Any, Task], Any], contexts: Sequence[Any], tasks: Sequence[Task], *,
-              executor: str = "serial", jobs: int = 1, scheduler: str | None = None, client=None,
+              executor: str = "serial", jobs: int = 1, scheduler: str | None = None, client: Any = None,
               chunksize: int | None = None, progress: Callable[[int], None] | None = None) -> list[Any]:
     """Run ``fn(contexts[task.group], task)`` for every task; results in task order.
 

@@ -5,10 +5,12 @@ from __future__ import annotations
 from dataclasses import replace
 
 import numpy as np
+import numpy.typing as npt
 from scipy.special import gamma as gamma_fn
 from scipy.special import gammainc, gammaincinv
 
 from ..core.errors import InternalError, UsageError
+from ..core.graph import PoseGraph
 from ..core.noise import isotropic_information
 from ..lie.se import relative_poses, se_compose, se_exp
 from ..lie.so import so2_exp, so3_exp
@@ -17,7 +19,7 @@ _SMALL_C = 1e-3        # below this concentration the piece-1 proposal drops e^{
 _MAX_ROUNDS = 10_000   # acceptance is >= ~0.3 for every c, so this is never reached
 
 
-def _concentrations(kappa, size: int) -> np.ndarray:
+def _concentrations(kappa: npt.ArrayLike, size: int) -> np.ndarray:
     k = np.broadcast_to(np.asarray(kappa, dtype=float), (size,)).copy()
     if not np.all(np.isfinite(k)) or np.any(k <= 0):
         raise UsageError("Langevin concentration kappa must be finite and > 0")
@@ -83,7 +85,7 @@ def _angle_from_versine(u: np.ndarray, v: np.ndarray) -> np.ndarray:
                     np.pi - 2.0 * np.arcsin(np.sqrt(np.minimum(v, 2.0) / 2.0)))
 
 
-def sample_langevin_angle_so2(kappa, size: int, rng: np.random.Generator) -> np.ndarray:
+def sample_langevin_angle_so2(kappa: npt.ArrayLike, size: int, rng: np.random.Generator) -> np.ndarray:
     """(size,) signed angles of Z ~ Lang(I, kappa) on SO(2) (density prop. to exp(kappa tr Z), eq. 5).
 
     ``tr Z = 2 cos t``, so the angle is von Mises with concentration ``2 kappa``.
@@ -95,13 +97,13 @@ def sample_langevin_angle_so2(kappa, size: int, rng: np.random.Generator) -> np.
     return sign * _angle_from_versine(u, v)
 
 
-def sample_langevin_so2(kappa, size: int, rng: np.random.Generator) -> np.ndarray:
+def sample_langevin_so2(kappa: npt.ArrayLike, size: int, rng: np.random.Generator) -> np.ndarray:
     """(size, 2, 2) draws of Z ~ Lang(I, kappa) on SO(2) (paper eq. 5)."""
 
     return so2_exp(sample_langevin_angle_so2(kappa, size, rng))
 
 
-def sample_langevin_angle_so3(kappa, size: int, rng: np.random.Generator) -> np.ndarray:
+def sample_langevin_angle_so3(kappa: npt.ArrayLike, size: int, rng: np.random.Generator) -> np.ndarray:
     """(size,) rotation angles t in [0, pi] of Z ~ Lang(I, kappa) on SO(3).
 
     By the Weyl integration formula (paper Appendix C) the angle has density
@@ -112,7 +114,7 @@ def sample_langevin_angle_so3(kappa, size: int, rng: np.random.Generator) -> np.
     return _angle_from_versine(u, v)
 
 
-def sample_langevin_so3(kappa, size: int, rng: np.random.Generator) -> np.ndarray:
+def sample_langevin_so3(kappa: npt.ArrayLike, size: int, rng: np.random.Generator) -> np.ndarray:
     """(size, 3, 3) draws of Z ~ Lang(I, kappa) on SO(3) (density prop. to exp(kappa tr Z), eq. 5).
 
     Class function: the angle comes from ``sample_langevin_angle_so3`` and the
@@ -125,7 +127,7 @@ def sample_langevin_so3(kappa, size: int, rng: np.random.Generator) -> np.ndarra
     return so3_exp(axis * t[:, None])
 
 
-def sample_langevin(kappa, size: int, dim: int, rng: np.random.Generator) -> np.ndarray:
+def sample_langevin(kappa: npt.ArrayLike, size: int, dim: int, rng: np.random.Generator) -> np.ndarray:
     """(size, d, d) Langevin rotations on SO(2) or SO(3)."""
     if dim == 2:
         return sample_langevin_so2(kappa, size, rng)
@@ -134,7 +136,7 @@ def sample_langevin(kappa, size: int, dim: int, rng: np.random.Generator) -> np.
     raise UsageError(f"dimension must be 2 or 3, got {dim}")
 
 
-def sample_isotropic_gaussian(tau, size: int, dim: int, rng: np.random.Generator) -> np.ndarray:
+def sample_isotropic_gaussian(tau: npt.ArrayLike, size: int, dim: int, rng: np.random.Generator) -> np.ndarray:
     """(size, d) draws of y ~ N(0, I / tau) (paper eq. 3, tau = delta^-2)."""
     tau = np.broadcast_to(np.asarray(tau, dtype=float), (size,))
     if np.any(tau <= 0) or not np.all(np.isfinite(tau)):
@@ -145,8 +147,8 @@ def sample_isotropic_gaussian(tau, size: int, dim: int, rng: np.random.Generator
 NOISE_SCALES = ("both", "rotation")
 
 
-def scaled_precisions(graph, kc: float = 1.0, scale: str = "both", tau=None,
-                      kappa=None) -> tuple[np.ndarray, np.ndarray]:
+def scaled_precisions(graph: PoseGraph, kc: float = 1.0, scale: str = "both", tau: npt.ArrayLike | None = None,
+                      kappa: npt.ArrayLike | None = None) -> tuple[np.ndarray, np.ndarray]:
     """(tau, kappa) per edge of the Monte Carlo noise model of eq. (80).
 
     ``tau`` / ``kappa`` (scalar or (m,)) replace the graph's own precisions (the
@@ -165,7 +167,8 @@ def scaled_precisions(graph, kc: float = 1.0, scale: str = "both", tau=None,
     return (kc * t if scale == "both" else t.copy()), kc * k
 
 
-def noise_model_graph(graph, kc: float = 1.0, scale: str = "both", tau=None, kappa=None):
+def noise_model_graph(graph: PoseGraph, kc: float = 1.0, scale: str = "both", tau: npt.ArrayLike | None = None,
+                      kappa: npt.ArrayLike | None = None) -> PoseGraph:
     """The graph with its information matrices replaced by the isotropic noise model of eq. (80).
 
     Same measurements; use it to evaluate the FIM/CRLB of the Monte Carlo model.
@@ -175,8 +178,9 @@ def noise_model_graph(graph, kc: float = 1.0, scale: str = "both", tau=None, kap
     return replace(graph, info=isotropic_information(t, k, graph.dim))
 
 
-def perturb_measurements(graph, rot_true: np.ndarray, trans_true: np.ndarray, rng: np.random.Generator,
-                         kc: float = 1.0, scale: str = "both", tau=None, kappa=None):
+def perturb_measurements(graph: PoseGraph, rot_true: np.ndarray, trans_true: np.ndarray, rng: np.random.Generator,
+                         kc: float = 1.0, scale: str = "both", tau: npt.ArrayLike | None = None,
+                         kappa: npt.ArrayLike | None = None) -> PoseGraph:
     """A new PoseGraph with measurements regenerated from a ground truth by eq. (80).
 
     Rotation: ``R~_ij = R_i^T R_j Z_ij``, ``Z_ij ~ Lang(I, k_c kappa_ij)``: the model of g2o /
