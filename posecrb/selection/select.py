@@ -52,23 +52,23 @@ import math
 import re
 import time
 from dataclasses import dataclass, field, replace
-from typing import Any
+from typing import Any, Literal
 
 import numpy as np
 import scipy.sparse as sp
 from scipy.sparse.csgraph import connected_components, minimum_spanning_tree
 from scipy.sparse.linalg import LinearOperator, eigsh
 
-from ..core.errors import InternalError, ParseError, PosecrbError, UsageError
+from ..core.errors import InternalError, NumericalError, ParseError, PosecrbError, UsageError
 from ..core.graph import PoseGraph
 from ..core.noise import isotropic_precisions, rotation_weight
 from ..io import write_g2o
-from ..linalg.cholesky import SymbolicCholesky
+from ..linalg.cholesky import Factor, SymbolicCholesky
 from ..linalg.laplacian import laplacian, reduced_index
 from ..linalg.pathchol import PathFactor, logdet_eye_plus, scalar_greedy_steps, woodbury_downdate, woodbury_downdate1
 from ..linalg.selinv import SelectedInverse
 from ..models.paper.fim import rotation_jacobians
-from ..solver.estimate import get_estimate
+from ..solver.estimate import Estimate, get_estimate
 
 log = logging.getLogger("posecrb")
 
@@ -276,10 +276,10 @@ class _Block:
         vals = (x[:, None, None] * self.G).ravel()[self._keep]
         return self._csc(np.bincount(self._inv, weights=vals, minlength=self.indices.size))
 
-    def factor(self, x: np.ndarray):
+    def factor(self, x: np.ndarray) -> tuple[Factor, float]:
         return self.symbolic.factor_logdet(self.matrix(x), name=self.name)
 
-    def h_selected(self, factor, edges: np.ndarray) -> np.ndarray:
+    def h_selected(self, factor: Factor, edges: np.ndarray) -> np.ndarray:
         """``H_e = U_e^T M^{-1} U_e`` for many edges from one selected inversion."""
 
         sel = SelectedInverse(factor, self.name)
@@ -288,7 +288,7 @@ class _Block:
         r = np.repeat(rows, p, axis=1).ravel()
         c = np.tile(rows, (1, p)).ravel()
         ok = (np.repeat(valid, p, axis=1) & np.tile(valid, (1, p))).ravel()
-        s = np.zeros(r.size)
+        s: np.ndarray = np.zeros(r.size)
         s[ok] = sel.entries(r[ok], c[ok])
         if np.isnan(s).any():  # pragma: no cover - the pattern holds every edge's block
             raise InternalError(f"{self.name}: an edge block is missing from the factor's pattern")
@@ -307,7 +307,7 @@ class _Block:
         out[rows, cols] = self.U[edges][valid]
         return out
 
-    def h_solve(self, factor, edges: np.ndarray) -> np.ndarray:
+    def h_solve(self, factor: Factor, edges: np.ndarray) -> np.ndarray:
         """``H_e`` by solves with the current (possibly updated) factor."""
         b = self.rhs(edges)
         y = factor.solve_A(b)
@@ -315,7 +315,7 @@ class _Block:
         r = self.U.shape[2]
         return np.einsum("ska,skb->kab", b.reshape(self.size, k, r), y.reshape(self.size, k, r))
 
-    def update(self, factor, e: int) -> None:
+    def update(self, factor: Factor, e: int) -> None:
         """Factor of ``M + U_e U_e^T`` in place (CHOLMOD rank-r update)."""
         rows, U, valid = self.rows[e], self.U[e], self.valid[e]
         r = U.shape[1]
@@ -324,7 +324,8 @@ class _Block:
         c = sp.csc_matrix((U[valid].ravel(), (rr, cc)), shape=(self.size, r))
         factor.update_inplace(c)
 
-    def h_projected(self, factor, x: np.ndarray, edges: np.ndarray, k: int, rng: np.random.Generator) -> np.ndarray:
+    def h_projected(self, factor: Factor, x: np.ndarray, edges: np.ndarray, k: int,
+                    rng: np.random.Generator) -> np.ndarray:
         """Johnson-Lindenstrauss estimate of ``H_e``: with ``M = W W^T``, ``W = [sqrt(x_e) U_e]``,
         ``H_e = ||W^T M^{-1} U_e||^2 ~ ||Q W^T M^{-1} U_e||^2`` for a k-row Gaussian Q (k solves)."""
         m, _, r = self.U.shape
@@ -358,7 +359,7 @@ class _State:
 class LogDetObjective:
     """``f(x) = sum_b mult_b logdet(M_b(x)) + const_b`` over edge weights x in [0, 1]^m."""
 
-    kind = "logdet"
+    kind: Literal["logdet"] = "logdet"
 
     def __init__(self, name: str, blocks: list[_Block], m: int):
         self.name, self.blocks, self.m = name, blocks, m
@@ -376,15 +377,16 @@ class LogDetObjective:
 
     def gains(self, state: _State, edges: np.ndarray) -> np.ndarray:
         """Exact marginal gains ``sum_b mult_b logdet(I + H_be)`` (one selected inversion per block)."""
-        return sum(b.mult * _logdet_i_plus(h) for b, h in zip(self.blocks, self._h(state, edges)))
+        return sum((b.mult * _logdet_i_plus(h) for b, h in zip(self.blocks, self._h(state, edges))),
+                   np.zeros(edges.size))
 
     def gradient(self, state: _State, edges: np.ndarray) -> np.ndarray:
         """``df/dx_e = sum_b mult_b trace(H_be)``."""
         return sum(b.mult * np.trace(h, axis1=1, axis2=2) for b, h in zip(self.blocks, self._h(state, edges)))
 
     def gains_projected(self, state: _State, edges: np.ndarray, k: int, rng: np.random.Generator) -> np.ndarray:
-        return sum(b.mult * _logdet_i_plus(b.h_projected(f, state.x, edges, k, rng))
-                   for b, f in zip(self.blocks, state.data))
+        return sum((b.mult * _logdet_i_plus(b.h_projected(f, state.x, edges, k, rng))
+                    for b, f in zip(self.blocks, state.data)), np.zeros(edges.size))
 
 
 
@@ -469,7 +471,7 @@ def fim_objective(graph: PoseGraph, rot: np.ndarray, trans: np.ndarray, anchor: 
 class FiedlerObjective:
     """``lambda_2`` of the full Laplacian ``sum_e x_e w_e (e_i - e_j)(e_i - e_j)^T``."""
 
-    kind = "fiedler"
+    kind: Literal["fiedler"] = "fiedler"
 
     def __init__(self, graph: PoseGraph, weights: np.ndarray, anchor: int = 0):
         self.n, self.m = graph.n, graph.m
@@ -550,7 +552,7 @@ class _Engine:
         self.obj, self.kind = obj, kind
         if kind == "path":
 
-            self.factors = [PathFactor(f) for f in factors]
+            self.factors: list[Any] = [PathFactor(f) for f in factors]  # CHOLMOD Factors otherwise
         else:
             self.factors = factors
 
@@ -674,7 +676,9 @@ def _incremental_greedy_scalar(obj: LogDetObjective, x: np.ndarray, cand: np.nda
     online = math.inf
     refreshes = solves = 0
     step = 0
-    h = pf = prow = None
+    h: np.ndarray        # h, pf and prow are set by the refresh at step 0
+    pf: PathFactor
+    prow: np.ndarray
     value = 0.0
     while step < k:
         if step % refresh_every == 0:
@@ -756,7 +760,7 @@ def _lazy_greedy(obj: LogDetObjective, x: np.ndarray, cand: np.ndarray, k: int, 
             refreshes += 1
             evals_step = 0
             continue
-        stale = []
+        stale: list[int] = []
         while heap and heap[0][2] != step and len(stale) < batch:
             stale.append(heapq.heappop(heap)[1])
         g = eng.gains(np.array(stale, dtype=np.int64))
@@ -790,6 +794,8 @@ def _greedy_fiedler(obj: FiedlerObjective, x: np.ndarray, cand: np.ndarray, k: i
             evals += 1
             if st.value > best:
                 best, best_state, best_pos = st.value, st, pos
+        if best_state is None:  # every candidate's lambda_2 was NaN (or there was no candidate)
+            raise NumericalError("lambda_2 greedy: no candidate edge gives a finite algebraic connectivity")
         avail[best_pos] = False
         x[cand[best_pos]] = 1.0
         chosen.append(int(cand[best_pos]))
@@ -817,7 +823,8 @@ def _top_k(scores: np.ndarray, k: int, tiebreak: np.ndarray | None = None) -> np
     return np.lexsort(keys)[:k]
 
 
-def frank_wolfe(obj, x_full: np.ndarray, cand: np.ndarray, k: int, start: np.ndarray, *, max_iter: int,
+def frank_wolfe(obj: LogDetObjective | FiedlerObjective, x_full: np.ndarray, cand: np.ndarray, k: int,
+                start: np.ndarray, *, max_iter: int,
                 tol: float, base_value: float, step: str = "backtracking") -> Relaxation:
     """Frank-Wolfe ascent on ``f(x)`` over ``{0 <= x <= 1, sum x = K}`` (candidates only).
 
@@ -976,9 +983,13 @@ class SelectionResult:
         }
 
     def _ids(self, edges: np.ndarray) -> np.ndarray:
-        return self.selected_ids[:0] if edges.size == 0 else self._id_pairs[edges]
+        if edges.size == 0:
+            return self.selected_ids[:0]
+        if self._id_pairs is None:  # select_edges always sets it
+            raise InternalError("selection result without its edges' id pairs")
+        return self._id_pairs[edges]
 
-    _id_pairs: np.ndarray = field(default=None, repr=False)
+    _id_pairs: np.ndarray | None = field(default=None, repr=False)
 
 
 def _submodular_bound(obj: LogDetObjective, x: np.ndarray, cand: np.ndarray, k: int) -> tuple[float, float]:
@@ -991,8 +1002,8 @@ def _submodular_bound(obj: LogDetObjective, x: np.ndarray, cand: np.ndarray, k: 
     return state.value, state.value + float(np.sort(g)[::-1][:k].sum())
 
 
-def make_objective(graph: PoseGraph, objective: str, anchor: int = 0, estimate=None,
-                   fiedler_weight: str = "w", rotation_model: str = "eq59"):
+def make_objective(graph: PoseGraph, objective: str, anchor: int = 0, estimate: Estimate | None = None,
+                   fiedler_weight: str = "w", rotation_model: str = "eq59") -> LogDetObjective | FiedlerObjective:
     """The objective as a function of edge weights (all m edges)."""
     if objective == "tree":
         return tree_objective(graph, anchor, rotation_model)
@@ -1016,7 +1027,7 @@ def select_edges(graph: PoseGraph, budget: str | int, *, objective: str = "tree"
                  fixed: str = "odometry", certify: bool = False, seed: int = 0, anchor: int | None = None,
                  estimate: str = "solve", gains: str = "auto", max_iter: int | None = None,
                  tol: float = 1e-3, fiedler_weight: str = "w", split: EdgeSplit | None = None,
-                 reference=None, engine: str = "path", strategy: str = "auto") -> SelectionResult:
+                 reference: Estimate | None = None, engine: str = "path", strategy: str = "auto") -> SelectionResult:
     """Choose ``budget`` candidate edges maximising ``objective`` (module docstring).
 
     ``budget``: K or "P%" of the candidates. ``method``: ``greedy`` (exact greedy; MAC's
@@ -1102,13 +1113,13 @@ def select_edges(graph: PoseGraph, budget: str | int, *, objective: str = "tree"
         stats.update(vars(gstats), strategy=strategy, engine=engine)
         order = chosen
         chosen = np.sort(chosen)
-    elif method == "greedy":
+    elif method == "greedy" and obj.kind == "fiedler":
         if k * graph.n > 2_000_000:
             log.warning("%s: the lambda_2 greedy (MAC's GreedyEig) solves at least one eigenproblem of %d poses "
                         "per selected edge (%d); this takes long, fiedler-relax is the scalable method",
                         graph.name, graph.n, k)
-        chosen, gstats = _greedy_fiedler(obj, base.copy(), cand, k)
-        stats.update(gstats)
+        chosen, fstats = _greedy_fiedler(obj, base.copy(), cand, k)
+        stats.update(fstats)
         order = chosen
         chosen = np.sort(chosen)
     else:  # relax
