@@ -32,6 +32,7 @@ import re
 import time
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
+from typing import Any
 
 import numpy as np
 
@@ -104,7 +105,8 @@ def rotation_errors(rot_true: np.ndarray, rot_est: np.ndarray) -> np.ndarray:
     return np.sqrt(2.0) * so3_log(rel)
 
 
-def pose_errors(rot_true, trans_true, rot_est, trans_est, anchor: int) -> tuple[np.ndarray, np.ndarray]:
+def pose_errors(rot_true: np.ndarray, trans_true: np.ndarray, rot_est: np.ndarray, trans_est: np.ndarray,
+                anchor: int) -> tuple[np.ndarray, np.ndarray]:
     """(translation errors (n, d), rotation errors (n, d_r)) after anchoring both at ``anchor``."""
     rt, tt = anchor_estimate(rot_true, trans_true, anchor)
     re_, te = anchor_estimate(rot_est, trans_est, anchor)
@@ -182,8 +184,8 @@ def _crlb_trial(context: dict, task: Task) -> dict:
             "certified": bool(res.certified), "objective": float(res.objective)}
 
 
-def _bounds(graph: PoseGraph, rot, trans, anchor: int, kc: float, scale: str, tau, kappa,
-            variant: str = "consistent") -> dict:
+def _bounds(graph: PoseGraph, rot: np.ndarray, trans: np.ndarray, anchor: int, kc: float, scale: str,
+            tau: float | None, kappa: float | None, variant: str = "consistent") -> dict:
     """Bounds per pose of the scaled noise model at the truth (``posecrb.models.paper.crlb.paper_crlb``:
     eq. 67, 3D eq. 68) from the FIM ``variant``: the simulated model's Fisher information
     (``"consistent"``) or eq. (64) as printed (``"eq64"``); the same matrix in 2D."""
@@ -191,8 +193,9 @@ def _bounds(graph: PoseGraph, rot, trans, anchor: int, kc: float, scale: str, ta
     model = noise_model_graph(graph, kc, scale, tau, kappa)
     n_p = graph.n - 1
     res = paper_crlb(model, rot, trans, anchor=anchor, variant=variant)
-    out = {"mse_bound": float(res.trace_crlb) / n_p, "mse_bound_trans": float(res.trace_translation) / n_p,
-           "mse_bound_rot": float(res.trace_rotation) / n_p}
+    out: dict[str, Any] = {"mse_bound": float(res.trace_crlb) / n_p,
+                           "mse_bound_trans": float(res.trace_translation) / n_p,
+                           "mse_bound_rot": float(res.trace_rotation) / n_p}
     curv = res.trace_crlb_curvature if graph.dim == 3 else None
     out["mse_bound_curvature"] = None if curv is None else float(curv) / n_p
     out["curvature_status"] = None if res.curvature_status.ok else res.curvature_status.as_json()
@@ -204,7 +207,7 @@ def crlb_sweep(graph: PoseGraph, kcs: Sequence[float], trials: int = 100, seed: 
                scale: str = "both", tau: float | None = None, kappa: float | None = None,
                anchor: int | None = None, truth: tuple[np.ndarray, np.ndarray] | None = None,
                solver_options: dict | None = None, executor: str = "serial", jobs: int = 1,
-               scheduler: str | None = None, client=None,
+               scheduler: str | None = None, client: Any = None,
                progress: Callable[[int], None] | None = None, fim_variant: str = "consistent") -> CrlbSweepResult:
     """Fig. 6/7: MSE of the certified MLE vs trace(CRLB)/n_p for each k_c in ``kcs``.
 

@@ -25,11 +25,11 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from ..core.errors import UsageError
+from ..core.errors import InternalError, UsageError
 from ..models.paper.bounds import compute_bounds
 from ..models.paper.fim import fim_logdet, paper_fim, trace_fim
 from ..sim.generators import octagon, octagon_candidate_edges
-from ..sim.montecarlo import Task, make_tasks, run_tasks
+from ..sim.montecarlo import Task, make_tasks, run_tasks, seed_record
 
 DEFAULT_RADIUS = 0.1   # the paper gives no size; small enough that sum tau ||p||^2 is small (sec. IX-A)
 
@@ -89,7 +89,7 @@ def _subsets(k: int, trials: int, rng: np.random.Generator, n_cand: int) -> list
     if total <= trials:
         return list(itertools.combinations(range(n_cand), k))
     seen: set[tuple[int, ...]] = set()
-    out = []
+    out: list[tuple[int, ...]] = []
     while len(out) < trials:       # trials < total, so distinct subsets always exist
         s = tuple(sorted(rng.choice(n_cand, size=k, replace=False).tolist()))
         if s not in seen:
@@ -106,6 +106,8 @@ def _octagon_level(context: dict, task: Task) -> list[OctagonGraph]:
     for subset in _subsets(context["k"], context["trials"], task.rng(), len(cand)):
         extra = tuple(cand[p] for p in subset)
         g = octagon(list(extra), radius=context["radius"], tau=context["tau"], kappa=context["kappa"])
+        if g.vertex_rot is None or g.vertex_trans is None:  # octagon() stores the true poses as vertices
+            raise InternalError("octagon graph without its poses")
         fim = paper_fim(g, g.vertex_rot, g.vertex_trans, anchor=0)
         deg = int(g.degree[1:].sum())
         # eq. (73): sum over free poses and their edges of (w_ij + d tau_ij); uniform weights here
@@ -150,6 +152,5 @@ def octagon_experiment(trials: int = 50, seed: int = 0, *, radius: float = DEFAU
         graphs=graphs, levels=rows, trials=trials, seed=seed, radius=radius, tau=tau, kappa=kappa,
         corr_trace_degree=float(np.corrcoef(deg, tr)[0, 1]), corr_logdet_degree=float(np.corrcoef(deg, ld)[0, 1]),
         trace_slope=float(deg @ tr / (deg @ deg)), flagged=int(sum(r.flagged for r in rows)),
-        seeds=[{"level": k, "entropy": int(t.seed.entropy), "spawn_key": list(t.seed.spawn_key)}
-               for k, t in zip(levels, tasks)],
+        seeds=[{"level": k, **seed_record(t)} for k, t in zip(levels, tasks)],
     )

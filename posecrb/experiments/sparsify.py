@@ -26,6 +26,7 @@ import re
 import time
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
+from typing import Any
 
 import numpy as np
 
@@ -44,7 +45,7 @@ from ..selection.select import (
     split_edges,
     tree_objective,
 )
-from ..sim.montecarlo import Task, make_tasks, run_tasks
+from ..sim.montecarlo import Task, make_tasks, run_tasks, seed_record
 from ..solver import solve
 from ..solver.estimate import Estimate
 
@@ -73,7 +74,7 @@ def parse_methods(spec: str | Sequence[str], objective: str = "tree") -> list[tu
     """``[objective-]method`` labels -> (label, objective, method)."""
 
     parts = spec.split(",") if isinstance(spec, str) else list(spec)
-    out = []
+    out: list[tuple[str, str, str]] = []
     for label in (str(x).strip() for x in parts):
         if not label:
             continue
@@ -254,7 +255,7 @@ def sparsify_experiment(graph: PoseGraph, budgets: Sequence[str] = DEFAULT_BUDGE
         raise SolverError(f"{graph.name}: the full graph's optimum is not certified ({full.reason}); "
                           "it cannot serve as the reference")
     ref = Estimate(full.rot, full.trans, "solve", True, float(full.objective), float(full.times["total"]))
-    context = {"graph": graph, "split": split, "reference": ref, "anchor": anchor, "seed": seed,
+    context: dict[str, Any] = {"graph": graph, "split": split, "reference": ref, "anchor": anchor, "seed": seed,
                "certify": certify, "max_iter": max_iter,
                "jobs": [(b, label, obj, meth) for b in budgets for (label, obj, meth) in triples]}
     ev = _evaluate(context, np.ones(graph.m, dtype=bool))
@@ -273,10 +274,10 @@ def sparsify_experiment(graph: PoseGraph, budgets: Sequence[str] = DEFAULT_BUDGE
         fixed=int(split.fixed.size), fixed_rule=split.rule, candidates=int(split.candidates.size),
         anchor_id=int(graph.ids[anchor]), objective=objective, reference=reference, rows=rows,
         budgets=budgets, methods=[t[0] for t in triples], seed=seed,
-        seeds=[{"task": t.trial, "entropy": int(t.seed.entropy), "spawn_key": list(t.seed.spawn_key)} for t in tasks])
+        seeds=[{"task": t.trial, **seed_record(t)} for t in tasks])
 
 
-def plot_sparsify(result: SparsifyResult, path) -> str:
+def plot_sparsify(result: SparsifyResult, path: str | os.PathLike) -> str:
     """Share of the full graph's gain in the objective (``(f(S) - f(F)) / (f(all) - f(F))``),
     lambda_2 and ATE against the budget, one line per method; written atomically."""
 

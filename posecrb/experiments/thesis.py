@@ -38,6 +38,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from ..core.errors import UsageError
+from ..core.graph import PoseGraph
 from ..lie.se import se_compose, se_exp, se_inverse, se_jr_inv, se_log
 from ..models.thesis.example import ANCHORS, left_information, sample_graph, thesis_graph, true_estimate, true_poses
 from ..models.thesis.fim import edge_kinematics, kernel_basis, sed_fim
@@ -55,12 +56,13 @@ def _poses_T() -> tuple[np.ndarray, np.ndarray]:
     return true_poses()
 
 
-def _to_x(rot: np.ndarray, trans: np.ndarray):
+def _to_x(rot: np.ndarray, trans: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
 
     return se_inverse(rot, trans)
 
 
-def intrinsic_errors(rot_true, trans_true, rot_est, trans_est) -> np.ndarray:
+def intrinsic_errors(rot_true: np.ndarray, trans_true: np.ndarray, rot_est: np.ndarray,
+                     trans_est: np.ndarray) -> np.ndarray:
     """(n, q) ``Log(T_true^{-1} T_est)``: coordinates of the right perturbation T_true Exp(delta)."""
 
     ri, ti = se_inverse(rot_true, trans_true)
@@ -106,7 +108,8 @@ def _cost_grad_hess(graph, omega, rot, trans, free_dofs):
     return cost, grad.ravel()[free_dofs], hess[np.ix_(free_dofs, free_dofs)]
 
 
-def _initial_poses(graph, anchors: Sequence[int], rot_anchor, trans_anchor):
+def _initial_poses(graph: PoseGraph, anchors: Sequence[int], rot_anchor: np.ndarray,
+                   trans_anchor: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """Compose the measurements outward from the anchors (one pass over a BFS tree of the arcs)."""
 
     n = graph.n
@@ -139,7 +142,7 @@ def _initial_poses(graph, anchors: Sequence[int], rot_anchor, trans_anchor):
     return rot, trans
 
 
-def anchored_mle(graph, omega: np.ndarray, anchors: Sequence[int], rot_anchor: np.ndarray,
+def anchored_mle(graph: PoseGraph, omega: np.ndarray, anchors: Sequence[int], rot_anchor: np.ndarray,
                  trans_anchor: np.ndarray, *, max_iterations: int = 100, tol: float = 1e-12) -> MleResult:
     """MLE on the anchored submanifold (5.7): Levenberg-Marquardt, analytic Jacobians (4.7).
 
@@ -177,7 +180,8 @@ def anchored_mle(graph, omega: np.ndarray, anchors: Sequence[int], rot_anchor: n
     return MleResult(rot, trans, it, converged, cost)
 
 
-def horizontal_errors(rot_true, trans_true, rot_est, trans_est, labels: np.ndarray,
+def horizontal_errors(rot_true: np.ndarray, trans_true: np.ndarray, rot_est: np.ndarray, trans_est: np.ndarray,
+                      labels: np.ndarray,
                       iterations: int = 20) -> np.ndarray:
     """(n, q) errors after the right gauge action ``T_k G_c`` that makes each component's mean error zero.
 
