@@ -107,7 +107,7 @@ def _nearest_existing(p: Path) -> Path:
     return Path("/")
 
 
-def check_output_file(path: str | os.PathLike, inputs: Sequence[str | os.PathLike] = (), *,
+def check_output_file(path: str | os.PathLike, inputs: Sequence[str | os.PathLike | None] = (), *,
                       option: str = "--out", create_parents: bool = False) -> Path:
     """Validate an output file before any work: exit 2 (UsageError) when it is a directory or
     another non-regular file, when its directory is missing (unless ``create_parents``) or not
@@ -141,7 +141,7 @@ def check_output_file(path: str | os.PathLike, inputs: Sequence[str | os.PathLik
     return Path(shown)
 
 
-def check_output_dir(path: str | os.PathLike, inputs: Sequence[str | os.PathLike] = (),
+def check_output_dir(path: str | os.PathLike, inputs: Sequence[str | os.PathLike | None] = (),
                      names: Sequence[str] = (), *, option: str = "--out") -> Path:
     """Validate an output directory (created later if missing): exit 2 when it exists and is
     not a directory, when it cannot be created or written, or when one of the ``names`` it
