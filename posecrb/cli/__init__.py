@@ -17,6 +17,7 @@ import logging
 import os
 import sys
 import warnings
+from typing import TextIO
 
 import click
 
@@ -137,7 +138,8 @@ def _warning_origin(filename: str) -> str:
     return os.path.basename(filename)
 
 
-def _route_warning(message, category, filename, lineno, file=None, line=None) -> None:
+def _route_warning(message: Warning | str, category: type[Warning], filename: str, lineno: int,
+                   file: TextIO | None = None, line: str | None = None) -> None:
     """warnings.showwarning replacement: one line through the posecrb logger, no source line."""
     text = " ".join(str(message).split())
     origin = _warning_origin(filename)

@@ -17,7 +17,7 @@ from ..io import load
 from ..models import MODELS
 from ..models.paper.fim import FIM_VARIANTS
 from ..report.render import FORMATS
-from ..solver.estimate import get_estimate
+from ..solver.estimate import Estimate, get_estimate
 
 log = logging.getLogger("posecrb")
 
@@ -164,7 +164,7 @@ def resolve_fim_variant(model: str, fim_variant: str | None) -> str:
     return fim_variant or "consistent"
 
 
-def load_with_estimate(file: str, data_dir: str | None, source: str):
+def load_with_estimate(file: str, data_dir: str | None, source: str) -> tuple[PoseGraph, Estimate, dict, dict]:
     """Graph, estimate and a JSON-ready description of the estimate plus parse/solve times."""
 
     graph, t_parse = load_dataset(file, data_dir)

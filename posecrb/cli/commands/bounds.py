@@ -2,6 +2,7 @@
 from __future__ import annotations
 
 import logging
+from typing import Any
 
 import click
 
@@ -30,7 +31,7 @@ def bounds_row(name_or_path: str, data_dir: str | None, anchor_id: int | None, r
                                            fim_variant=fim_variant or "consistent", repeat=repeat, estimate=estimate,
                                            solver={"anchor": anchor} if estimate == "solve" else {}))
     b = m.bounds
-    row = {
+    row: dict[str, Any] = {
         "dataset": graph.name, "path": graph.path, "sha256": graph.sha256, "dim": graph.dim,
         "poses": graph.n, "edges": graph.m, "components": graph.n_components,
         "anchor": b.anchor_id, "rotation_weight": rotation_model,

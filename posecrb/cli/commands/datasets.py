@@ -136,9 +136,10 @@ def fetch_cmd(names: tuple[str, ...], all_: bool, dest: str | None, url: str | N
                single_json=False, title="posecrb datasets fetch")
     if offline:
         reasons = "; ".join(dict.fromkeys(r.error for r in offline))
-        names = [r.name for r in offline]
+        skipped = [r.name for r in offline]
         log.warning("no network (%s): %d dataset(s) not downloaded: %s", reasons, len(offline),
-                    ", ".join(names) if len(names) <= 6 else ", ".join(names[:4]) + f", ... and {len(names) - 4} more")
+                    ", ".join(skipped) if len(skipped) <= 6
+                    else ", ".join(skipped[:4]) + f", ... and {len(skipped) - 4} more")
     for r in failed:
         log.warning("%s", r.error)
     if failed or (offline and not offline_ok):
@@ -168,7 +169,7 @@ def verify_cmd(data_dir: str | None, parse: bool, fmt: str) -> None:
     if bad:
         raise PosecrbError(f"{len(bad)} file(s) do not match the manifest: "
                            + "; ".join(f"{c.path} ({c.status}: {c.algorithm} expected {c.expected}, got {c.actual})"
-                                       if c.status != "count mismatch" else
+                                       if c.status != "count mismatch" or c.entry is None else
                                        f"{c.path} (count mismatch: {c.poses} poses / {c.edges} edges, expected "
                                        f"{c.entry.poses} / {c.entry.edges})" for c in bad))
 

@@ -11,7 +11,9 @@ import json
 import logging
 import sys
 import time
+from collections.abc import Callable
 from pathlib import Path
+from typing import Any
 
 import click
 
@@ -40,7 +42,7 @@ log = logging.getLogger("posecrb")
 
 
 # ---------------------------------------------------------------- shared options and helpers
-def _run_options(default_trials: str):
+def _run_options(default_trials: str) -> Callable[[Callable[..., Any]], Callable[..., Any]]:
     def deco(f):
         opts = [
             click.option("--trials", type=click.IntRange(2, 10 ** 7), default=None,
@@ -87,7 +89,7 @@ def _write_out(out_dir: str | None, experiment: str, settings: dict, rows: list[
 
 
 def _check_outputs(plot_path: str | None, out_dir: str | None, name: str, extra: tuple[str, ...] = (),
-                   inputs: tuple[str, ...] = ()) -> None:
+                   inputs: tuple[str | None, ...] = ()) -> None:
     """Validate --plot and --out before the trials run (exit 2), not after."""
 
     if out_dir:

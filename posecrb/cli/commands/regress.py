@@ -8,7 +8,7 @@ import click
 
 from ...core.errors import DatasetNotFound, PosecrbError
 from ...io import check_output_file
-from ...metrics.regress import compare, compute_metrics, default_expected_path, load_expected, save_expected
+from ...metrics.regress import Diff, compare, compute_metrics, default_expected_path, load_expected, save_expected
 from ...report.render import print_rows
 from ..options import data_dir_option, format_option
 
@@ -39,7 +39,8 @@ def command(names, update, expected_path, all_rows, data_dir, fmt):
     todo = requested or sorted(stored)
     if not todo:
         raise click.UsageError("nothing to compare: the expected file is empty; name datasets and use --update")
-    diffs, missing = [], []
+    diffs: list[Diff] = []
+    missing: list[str] = []
     for name in todo:
         try:
             got = compute_metrics(name, data_dir)

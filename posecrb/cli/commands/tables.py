@@ -6,6 +6,7 @@ import logging
 import os
 import sys
 import tempfile
+from collections.abc import Sequence
 from pathlib import Path
 
 import click
@@ -40,18 +41,20 @@ OUT_FILES = [f"table{t}.{ext}" for t in ROMAN for ext in ("md", "csv", "json", "
     ["rows.csv", "rows.json", "run.json"]
 
 
-def _progress(total: int):
+def _progress(total: int) -> Progress:
 
     return Progress(TextColumn("{task.description}"), BarColumn(), MofNCompleteColumn(), TimeElapsedColumn(),
                     console=Console(stderr=True), transient=True, disable=not sys.stderr.isatty())
 
 
-def _shown(rows, tables, compare, settings: TableSettings, explicit: bool):
+def _shown(rows: list[dict], tables: Sequence[int], compare: bool, settings: TableSettings,
+           explicit: bool) -> list[tuple[int, list[dict], list[str], str | None]]:
     """(table, rows, columns, note) of every table that has rows; each distinct note only once.
 
     A table without rows (Tables II/IV when every dataset is 2D) is not printed: said on
     stderr, as a warning when it was asked for with --table."""
-    out, seen = [], set()
+    out: list[tuple[int, list[dict], list[str], str | None]] = []
+    seen = set()
     for t in tables:
         trs, cols = table_rows(rows, t, compare)
         if not trs:
@@ -64,7 +67,8 @@ def _shown(rows, tables, compare, settings: TableSettings, explicit: bool):
     return out
 
 
-def _render(rows, tables, fmt, compare, settings: TableSettings, explicit: bool = False) -> str:
+def _render(rows: list[dict], tables: Sequence[int], fmt: str, compare: bool, settings: TableSettings,
+            explicit: bool = False) -> str:
     parts = []
     if fmt == "json":
         return to_json({"rows": rows, "tables": {ROMAN[t]: table_rows(rows, t, compare)[0] for t in tables}})
