@@ -69,7 +69,7 @@ ifdef OWN_VENV
 	fi
 endif
 	# (Re)install unless this very checkout is the installed posecrb and every dependency imports.
-	$(PY) -I -c "import os, sys, posecrb, sksparse.cholmod, numba, threadpoolctl, pytest, hypothesis, mpmath, ruff; \
+	$(PY) -I -c "import os, sys, posecrb, sksparse.cholmod, numba, threadpoolctl, pytest, hypothesis, mpmath, ruff, mypy; \
 	  sys.exit(os.path.dirname(os.path.dirname(os.path.realpath(posecrb.__file__))) != os.path.realpath('.'))" \
 	  2>/dev/null || { say "installing posecrb (editable, dev extras) into $$($(PY) -c 'import sys; print(sys.prefix)')"; \
 	                   $(PY) -m pip install -q -e '.[dev]'; \
@@ -86,9 +86,11 @@ run: install
 	$(PY) -m posecrb -v datasets fetch --all --offline-ok >/dev/null
 	$(PY) -m posecrb tables --all
 
-# ruff: lint and import order (configuration in pyproject.toml); part of `make test`, so CI runs it.
+# ruff (lint and import order) and mypy (types of the library, not the tests); configuration in
+# pyproject.toml; part of `make test`, so CI runs both. .pre-commit-config.yaml runs the same on commit.
 lint: install
 	@$(PY) -m ruff check .
+	$(PY) -m mypy
 
 test: lint
 	@$(PY) -m posecrb --version >&2
