@@ -17,9 +17,9 @@ def __getattr__(name: str) -> Any:
     """``PoseGraph`` and ``load`` on first use: importing them loads numpy and scipy, which the
     command line's start-up (``posecrb --help``, ``posecrb.cli``) does not need."""
     if name == "PoseGraph":
-        from .core.graph import PoseGraph  # noqa: PLC0415 -- start-up time (numpy, scipy)
+        from .core.graph import PoseGraph  # noqa: PLC0415 -- lazy: start-up time (numpy)
         return PoseGraph
     if name == "load":
-        from .io import load  # noqa: PLC0415 -- start-up time (numpy, scipy)
+        from .io import load  # noqa: PLC0415 -- lazy: start-up time (numpy)
         return load
     raise AttributeError(f"module 'posecrb' has no attribute {name!r}")

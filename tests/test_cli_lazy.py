@@ -2,13 +2,20 @@
 importing any command module, and that table says what the commands themselves say."""
 from __future__ import annotations
 
+import json
 import subprocess
 import sys
+from pathlib import Path
 
 import click
+import numpy as np
 import pytest
 
+import posecrb
 from posecrb.cli import _EXPLICIT_SHORT_HELP, COMMANDS, cli
+from posecrb.io import write_g2o
+
+from .helpers import make_random_graph
 
 
 @pytest.mark.parametrize("name", sorted(COMMANDS))
@@ -35,3 +42,112 @@ def test_help_imports_no_command_module_and_no_numerics():
             "'numba', 'sksparse'))); print(rc, bad, file=sys.stderr)")
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
     assert out.stderr.strip().splitlines()[-1] == "0 []"
+
+
+# ---- whole-process start-up: what each command imports --------------------------------------------
+
+# A hand-written 2D g2o file: a triangle (ids 0, 1, 2), a separate edge (ids 5, 7) and an isolated
+# vertex (id 9), so three components, four edges and six poses, known without running posecrb.
+_SMALL_G2O = """\
+VERTEX_SE2 0 0 0 0
+VERTEX_SE2 1 1 0 0
+VERTEX_SE2 2 1 1 0
+VERTEX_SE2 5 4 0 0
+VERTEX_SE2 7 5 0 0
+VERTEX_SE2 9 7 7 0
+EDGE_SE2 0 1 1 0 0 100 0 0 100 0 1000
+EDGE_SE2 1 2 0 1 1.5707963267948966 100 0 0 100 0 1000
+EDGE_SE2 2 0 -1 0 -1.5707963267948966 100 0 0 100 0 1000
+EDGE_SE2 5 7 1 0 0 100 0 0 100 0 1000
+"""
+
+# Run ``python -m posecrb ARGS`` exactly as a user does (runpy, __main__), then print the modules
+# that were imported, as JSON, on the last line of stderr (atexit runs after sys.exit).
+_RUN_AND_LIST = ("import atexit, json, runpy, sys; "
+                 "atexit.register(lambda: print('MODULES ' + json.dumps(sorted(sys.modules)), file=sys.stderr)); "
+                 "sys.argv = ['posecrb', *sys.argv[1:]]; runpy.run_module('posecrb', run_name='__main__')")
+
+
+def _run(args: list[str], listing: bool = False) -> tuple[subprocess.CompletedProcess, set[str]]:
+    argv = [sys.executable, "-c", _RUN_AND_LIST, *args] if listing else [sys.executable, "-m", "posecrb", *args]
+    out = subprocess.run(argv, capture_output=True, text=True, check=False, timeout=300)
+    modules: set[str] = set()
+    if listing:
+        last = [line for line in out.stderr.splitlines() if line.startswith("MODULES ")]
+        assert last, out.stderr
+        modules = set(json.loads(last[-1][len("MODULES "):]))
+    return out, modules
+
+
+def _loaded(modules: set[str], *packages: str) -> list[str]:
+    """The packages among ``packages`` of which some module was imported."""
+    return sorted(p for p in packages if any(m == p or m.startswith(p + ".") for m in modules))
+
+
+@pytest.fixture(scope="module")
+def small_g2o(tmp_path_factory) -> Path:
+    path = tmp_path_factory.mktemp("lazy") / "small.g2o"
+    path.write_text(_SMALL_G2O)
+    return path
+
+
+@pytest.fixture(scope="module")
+def solvable_g2o(tmp_path_factory) -> Path:
+    """A connected random 3D graph (3D: the rotation weights need scipy.special; solve needs CHOLMOD)."""
+    path = tmp_path_factory.mktemp("lazy") / "solvable.g2o"
+    write_g2o(make_random_graph(np.random.default_rng(11), n=12, extra=8, dim=3, sparse_ids=False), path)
+    return path
+
+
+def test_python_m_help_imports_no_numerics():
+    out, modules = _run(["--help"], listing=True)
+    assert out.returncode == 0, out.stderr
+    assert "Commands:" in out.stdout and "solve" in out.stdout
+    assert _loaded(modules, "numpy", "scipy", "numba", "sksparse", "rich", "pandas") == []
+    assert not any(m.startswith("posecrb.cli.commands.") for m in modules)
+
+
+def test_python_m_version():
+    out, _ = _run(["--version"])
+    assert out.returncode == 0, out.stderr
+    assert out.stdout.startswith(f"posecrb {posecrb.__version__} from ")
+
+
+def test_info_imports_numpy_but_no_scipy(small_g2o):
+    out, modules = _run(["info", str(small_g2o), "--format", "json"], listing=True)
+    assert out.returncode == 0, out.stderr
+    row = json.loads(out.stdout)
+    assert (row["poses"], row["edges"], row["components"], row["component_sizes"]) == (6, 4, 3, [3, 2, 1])
+    assert (row["id_min"], row["id_max"], row["degree_min"], row["degree_max"]) == (0, 9, 0, 2)
+    assert _loaded(modules, "numpy") == ["numpy"]
+    assert _loaded(modules, "scipy", "numba", "sksparse", "rich", "pandas", "matplotlib", "dask") == []
+
+
+def test_info_table_works_from_python_m(small_g2o):
+    out, _ = _run(["info", str(small_g2o)])
+    assert out.returncode == 0, out.stderr
+    assert "small" in out.stdout and "components" in out.stdout
+    lines = [line for line in out.stdout.splitlines() if "components" in line and "sizes" not in line]
+    assert lines and lines[0].split()[-2] == "3", out.stdout
+
+
+def test_solve_json_imports_only_what_it_needs(solvable_g2o):
+    out, modules = _run(["solve", str(solvable_g2o), "--format", "json"], listing=True)
+    assert out.returncode == 0, out.stderr
+    row = json.loads(out.stdout)
+    assert row["certified"] is True and row["poses"] == 12
+    assert _loaded(modules, "numba", "rich", "pandas", "matplotlib", "dask") == []
+    assert _loaded(modules, "numpy", "scipy.sparse", "sksparse") == ["numpy", "scipy.sparse", "sksparse"]
+
+
+def test_option_choices_are_the_librarys():
+    from posecrb.cli import options
+    from posecrb.core.noise import ROTATION_WEIGHT_MODELS
+    from posecrb.models import MODELS
+    from posecrb.models.paper.fim import FIM_VARIANTS
+    from posecrb.report.render import FORMATS
+
+    assert options.FORMATS == FORMATS
+    assert options.MODELS == MODELS
+    assert options.FIM_VARIANTS == FIM_VARIANTS
+    assert options.ROTATION_WEIGHT_MODELS == ROTATION_WEIGHT_MODELS

@@ -5,21 +5,28 @@ import logging
 import math
 import re
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import click
 
 from ..core.errors import UsageError
-from ..core.graph import PoseGraph
-from ..core.noise import ROTATION_WEIGHT_MODELS
 from ..core.timing import timed
 from ..datasets import search as datasets
-from ..io import load
-from ..models import MODELS
-from ..models.paper.fim import FIM_VARIANTS
-from ..report.render import FORMATS
-from ..solver.estimate import Estimate, get_estimate
+
+if TYPE_CHECKING:
+    from ..core.graph import PoseGraph
+    from ..solver.estimate import Estimate
 
 log = logging.getLogger("posecrb")
+
+# Option choices, spelled out rather than imported: importing the modules that define them
+# (posecrb.models, posecrb.core.noise, posecrb.report.render) would load numpy, scipy and numba
+# before the command line is even parsed (start-up time). tests/test_cli_lazy.py checks that
+# each tuple equals the library's own.
+FORMATS = ("table", "json", "csv", "markdown")              # posecrb.report.render.FORMATS
+MODELS = ("paper", "sed")                                    # posecrb.models.MODELS
+FIM_VARIANTS = ("eq64", "consistent")                        # posecrb.models.paper.fim.FIM_VARIANTS
+ROTATION_WEIGHT_MODELS = ("eq59", "table2")                  # posecrb.core.noise.ROTATION_WEIGHT_MODELS
 
 _PLAIN_NUMBER = re.compile(r"[+-]?(?:[0-9]+\.?[0-9]*|\.[0-9]+)(?:[eE][+-]?[0-9]+)?")
 INT64_MAX = 2 ** 63 - 1
@@ -94,6 +101,8 @@ def estimate_inputs(source: str | None) -> list[str]:
 
 def load_dataset(name_or_path: str, data_dir: str | None = None, repeat: int = 1) -> tuple[PoseGraph, float]:
     """Resolve a path or bare name and parse it; returns the graph and the median parse time."""
+    from ..io import load  # noqa: PLC0415 -- lazy: start-up time (numpy)
+
     path = datasets.resolve(name_or_path, data_dir)
     return timed(lambda: load(path), repeat=repeat)
 
@@ -166,6 +175,7 @@ def resolve_fim_variant(model: str, fim_variant: str | None) -> str:
 
 def load_with_estimate(file: str, data_dir: str | None, source: str) -> tuple[PoseGraph, Estimate, dict, dict]:
     """Graph, estimate and a JSON-ready description of the estimate plus parse/solve times."""
+    from ..solver.estimate import get_estimate  # noqa: PLC0415 -- lazy: start-up time (scipy, sksparse)
 
     graph, t_parse = load_dataset(file, data_dir)
     est = get_estimate(graph, source)

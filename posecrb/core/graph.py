@@ -12,11 +12,41 @@ from dataclasses import dataclass, field, replace
 from functools import cached_property
 
 import numpy as np
-import scipy.sparse as sp
-from scipy.sparse.csgraph import connected_components
 
 from .errors import ComponentSummary, DisconnectedGraph, UsageError
 from .noise import isotropic_precisions, rotation_weight
+
+
+def connected_components(n: int, src: np.ndarray, dst: np.ndarray) -> tuple[int, np.ndarray]:
+    """Number of connected components of the undirected graph on 0..n-1 with edges (src[k], dst[k]),
+    and each vertex's component, components numbered by their smallest vertex (as
+    ``scipy.sparse.csgraph.connected_components`` numbers them).
+
+    numpy only, so that ``posecrb info`` needs no scipy (start-up time): min-label hooking with
+    pointer jumping over the edge arrays. Every round hooks the larger of the two roots of each edge
+    whose endpoints are still apart onto the smaller (``label[v] <= v`` throughout, so every tree is
+    rooted at its smallest vertex), then shortcuts every vertex to its root; each round strictly lowers
+    some label, so the loop ends, and it ends only when both ends of every edge share a root. Random
+    and pose graphs take a handful of rounds, each O(m + n log depth).
+    """
+    label = np.arange(n, dtype=np.intp)
+    u = np.asarray(src, dtype=np.intp)
+    v = np.asarray(dst, dtype=np.intp)
+    while u.size:
+        lu, lv = label[u], label[v]
+        apart = lu != lv
+        if not apart.any():
+            break
+        u, v, lu, lv = u[apart], v[apart], lu[apart], lv[apart]   # joined edges stay joined
+        np.minimum.at(label, np.maximum(lu, lv), np.minimum(lu, lv))
+        while True:
+            jumped = label[label]
+            if np.array_equal(jumped, label):
+                break
+            label = jumped
+    is_root = label == np.arange(n)
+    component = np.cumsum(is_root) - 1          # roots in increasing order = by smallest vertex
+    return int(np.count_nonzero(is_root)), component[label]
 
 
 def rotation_dimension(dim: int) -> int:
@@ -95,10 +125,7 @@ class PoseGraph:
     # ---- topology ----------------------------------------------------------
     @cached_property
     def _components(self) -> tuple[int, np.ndarray]:
-        adj = sp.coo_matrix(
-            (np.ones(self.m), (self.src, self.dst)), shape=(self.n, self.n)
-        ).tocsr()
-        return connected_components(adj, directed=False)
+        return connected_components(self.n, self.src, self.dst)
 
     @property
     def n_components(self) -> int:

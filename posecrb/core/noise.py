@@ -14,7 +14,6 @@ from math import factorial
 
 import numpy as np
 import numpy.typing as npt
-from scipy.special import ive
 
 from .errors import UsageError
 
@@ -81,6 +80,8 @@ def omega(kappa: np.ndarray | float) -> np.ndarray:
     analytically, so omega is accurate to ~1 ulp from kappa = 1e-3 to 1e8 and
     ``omega / 3 -> kappa`` as kappa grows.
     """
+    from scipy.special import ive  # noqa: PLC0415 -- lazy: start-up time (only 3D rotation weights use it)
+
     k = np.asarray(kappa, dtype=float)
     x = 2.0 * k
     out = np.empty_like(x)

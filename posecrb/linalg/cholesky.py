@@ -12,7 +12,6 @@ import logging
 
 import numpy as np
 import scipy.sparse as sp
-from scipy.sparse.linalg import LinearOperator, eigsh
 from sksparse.cholmod import CholmodNotPositiveDefiniteError, Factor, analyze
 
 from ..core.errors import NotPositiveDefinite, UsageError
@@ -139,6 +138,8 @@ def lambda_min(a: sp.spmatrix, factor: Factor | None = None, name: str = "matrix
     n = a.shape[0]
     if n <= 200:
         return float(np.linalg.eigvalsh(a.toarray())[0])
+    from scipy.sparse.linalg import LinearOperator, eigsh  # noqa: PLC0415 -- lazy: start-up time (scipy.linalg)
+
     factor = factor or cholesky(a, name=name)
     op_inv = LinearOperator((n, n), matvec=lambda x: factor(np.asarray(x, float)), dtype=float)
     vals = eigsh(a, k=1, sigma=0.0, which="LM", OPinv=op_inv, return_eigenvectors=False,

@@ -15,14 +15,15 @@ import json
 import math
 import sys
 from collections.abc import Iterable, Sequence
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import click
 import numpy as np
-from rich.console import Console
-from rich.table import Table
 
 from ..core.errors import UsageError
+
+if TYPE_CHECKING:
+    from rich.table import Table
 
 FORMATS = ("table", "json", "csv", "markdown")
 
@@ -130,6 +131,7 @@ def to_markdown(rows: Sequence[dict[str, Any]], columns: Sequence[str] | None = 
 def to_rich_table(rows: Sequence[dict[str, Any]], columns: Sequence[str] | None = None,
                   title: str | None = None, headers: dict[str, str] | None = None,
                   caption: str | None = None) -> Table:
+    from rich.table import Table  # noqa: PLC0415 -- lazy: start-up time (rich only for table output)
 
     flat = [flatten(render_statuses(_plain(r))) for r in rows]
     cols = _columns(flat, columns)
@@ -155,7 +157,7 @@ def print_rows(rows: list[dict[str, Any]], fmt: str, columns: Sequence[str] | No
     elif fmt == "markdown":
         click.echo(to_markdown(rows, columns, headers), nl=False)
     elif fmt == "table":
-
+        from rich.console import Console  # noqa: PLC0415 -- lazy: start-up time (rich only for table output)
 
         # Piped output: no terminal width to respect, so never squeeze columns.
         width = None if sys.stdout.isatty() else 250

@@ -34,7 +34,6 @@ import math
 from dataclasses import dataclass
 
 import numpy as np
-from scipy.sparse.linalg import ArpackNoConvergence, LinearOperator, eigsh
 
 from ..core.errors import NotPositiveDefinite, SolverError
 from ..linalg.cholesky import Factor
@@ -170,6 +169,8 @@ class Certificate:
 def _largest_inverse_eig(problem: Problem, factor: Factor, dn: int, rng: np.random.Generator, maxiter: int,
                          tol: float, v0: np.ndarray | None = None) -> tuple[float, np.ndarray, int]:
     """Largest eigenpair of (S + s I)^{-1} through the sparse factor of M_red(s)."""
+    from scipy.sparse.linalg import ArpackNoConvergence, LinearOperator, eigsh  # noqa: PLC0415 -- lazy: start-up time
+
     count = [0]
 
     def mv(x):

@@ -6,8 +6,6 @@ import sys
 from pathlib import Path
 
 import click
-from rich.console import Console
-from rich.progress import BarColumn, DownloadColumn, Progress, TextColumn, TimeRemainingColumn, TransferSpeedColumn
 
 from ...core.errors import PosecrbError
 from ...core.noise import precisions_from_sigma
@@ -17,7 +15,6 @@ from ...datasets.fetch import PROBE_TIMEOUT, fetch, fetch_many
 from ...datasets.manifest import load_manifest
 from ...io import check_output_dir, check_output_file, write_g2o
 from ...report.render import print_rows
-from ...sim.generators import generate
 from ..options import FiniteFloat, data_dir_option, format_option
 
 log = logging.getLogger("posecrb")
@@ -57,6 +54,15 @@ def path_cmd(name: str, data_dir: str | None) -> None:
 
 def _progress_bar():
     """Download bars on a terminal; elsewhere (logs, CI) none: each download is logged instead (-v)."""
+    from rich.console import Console  # noqa: PLC0415 -- lazy: start-up time (rich)
+    from rich.progress import (  # noqa: PLC0415 -- lazy: start-up time (rich)
+        BarColumn,
+        DownloadColumn,
+        Progress,
+        TextColumn,
+        TimeRemainingColumn,
+        TransferSpeedColumn,
+    )
 
     return Progress(TextColumn("{task.description}"), BarColumn(), DownloadColumn(), TransferSpeedColumn(),
                     TimeRemainingColumn(), console=Console(stderr=True), disable=not sys.stderr.isatty())
@@ -211,6 +217,8 @@ def synth_cmd(kind: str, poses: int | None, sigma: float | None, tau: float | No
     if kind == "demo" and (poses or sigma or tau or kappa or noise_free):
         raise click.UsageError("`demo` is fixed: no --poses/--noise/--tau/--kappa/--noise-free")
     check_output_file(out, option="--out", create_parents=True)
+    from ...sim.generators import generate  # noqa: PLC0415 -- lazy: start-up time (scipy.special)
+
     graph = generate(kind, poses, tau=tau, kappa=kappa, noise=noisy, seed=seed, extra_edges=extra_edges)
     Path(out).parent.mkdir(parents=True, exist_ok=True)
     write_g2o(graph, out)

@@ -24,8 +24,6 @@ from dataclasses import dataclass, field
 
 import numpy as np
 import scipy.sparse as sp
-from scipy.sparse.csgraph import minimum_spanning_tree, shortest_path
-from scipy.sparse.linalg import ArpackError, ArpackNoConvergence, LinearOperator, eigsh
 
 from ...core.errors import NotPositiveDefinite
 from ...core.graph import PoseGraph
@@ -120,6 +118,7 @@ def tree_lambda_min_bound(n: int, src: np.ndarray, dst: np.ndarray, w: np.ndarra
     positive numbers: no cancellation, valid at any conditioning. 0.0 when a weight is not
     positive and finite.
     """
+    from scipy.sparse.csgraph import minimum_spanning_tree, shortest_path  # noqa: PLC0415 -- lazy: start-up time
 
     w = np.asarray(w, dtype=float)
     if not (np.all(np.isfinite(w)) and np.all(w > 0)):
@@ -150,6 +149,8 @@ def rotation_lambda_min(lap: WeightedLaplacians, graph: PoseGraph, symbolic: Sym
        ``lower = s - delta`` is a lower bound of lambda_min. When ``lower <= 0`` the eigenvalue is
        below what double precision resolves for this matrix: unavailable, with the reason.
     """
+    # lazy: start-up time (scipy.sparse.linalg loads scipy.linalg; `posecrb fim` never needs it)
+    from scipy.sparse.linalg import ArpackError, ArpackNoConvergence, LinearOperator, eigsh  # noqa: PLC0415
 
     a = sp.csc_matrix(lap.l_w)
     n = a.shape[0]

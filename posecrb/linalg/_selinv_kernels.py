@@ -1,0 +1,151 @@
+"""The numba kernels of ``posecrb.linalg.selinv`` (selected inversion by the Takahashi recurrences).
+
+A module of their own so that importing ``posecrb.linalg.selinv`` (and the models that use it)
+does not import numba: ``selinv`` imports this module on the first inversion. Compiled with
+``cache=True``: the first call in a process loads the cached machine code.
+"""
+from __future__ import annotations
+
+import logging
+
+import numpy as np
+
+log = logging.getLogger("posecrb")
+
+try:  # numba is a declared dependency; the fallback only keeps the module importable
+    from numba import njit
+except ImportError:  # pragma: no cover
+    log.warning("numba is not installed: selected inversion runs as slow pure Python")
+
+    def njit(*args, **kwargs):  # type: ignore[no-redef]  # stands in for the untyped numba.njit
+        if args and callable(args[0]):
+            return args[0]
+        return lambda f: f
+
+
+@njit(cache=True, nogil=True)
+def _supernodes(indptr, indices):  # pragma: no cover - compiled
+    """Column boundaries of the supernodes of a closed Cholesky pattern: column j+1 joins
+    column j's supernode when L[j+1, j] != 0 and |col j+1| = |col j| - 1 (then, the pattern
+    being closed, both columns have the same structure below the supernode)."""
+    n = indptr.shape[0] - 1
+    bounds = np.empty(n + 1, np.int64)
+    bounds[0] = 0
+    count = 1
+    for j in range(n - 1):
+        cj = indptr[j + 1] - indptr[j]
+        if not (cj > 1 and indices[indptr[j] + 1] == j + 1 and indptr[j + 2] - indptr[j + 1] == cj - 1):
+            bounds[count] = j + 1
+            count += 1
+    bounds[count] = n
+    return bounds[:count + 1]
+
+
+@njit(cache=True, nogil=True)
+def _takahashi(indptr, indices, lval):  # pragma: no cover - compiled
+    """Selected inverse ``Z = (L L^T)^{-1}`` on the pattern of ``L`` (CSC, rows sorted,
+    diagonal first in each column), supernode by supernode from the root down:
+
+        Y = L_SJ L_JJ^{-1},  Z_SJ = -Z_SS Y,  Z_JJ = L_JJ^{-T} L_JJ^{-1} - Y^T Z_SJ
+
+    (the block form of the Takahashi recurrences; ``Z_SS`` is gathered from ancestor
+    supernodes, the products go to BLAS). Returns (zval, status): status 0 = ok,
+    otherwise 1 + a column whose pattern is not closed."""
+    n = indptr.shape[0] - 1
+    bounds = _supernodes(indptr, indices)
+    nsn = bounds.shape[0] - 1
+    col2sn = np.empty(n, np.int64)
+    for sidx in range(nsn):
+        col2sn[bounds[sidx]:bounds[sidx + 1]] = sidx
+    zval = np.zeros(lval.shape[0])
+    posbuf = np.empty(n, np.int64)
+    for sn in range(nsn - 1, -1, -1):
+        j0 = bounds[sn]
+        w = bounds[sn + 1] - j0
+        p0 = indptr[j0]
+        s = indptr[j0 + 1] - p0 - w
+        ljj = np.zeros((w, w))
+        lsj = np.empty((s, w))
+        for c in range(w):
+            q = indptr[j0 + c] - c
+            for r in range(c, w):
+                ljj[r, c] = lval[q + r]
+            for r in range(s):
+                lsj[r, c] = lval[q + w + r]
+        # inverse of the lower-triangular diagonal block: forward substitution for small
+        # blocks, LAPACK for the large separator blocks near the root
+        linv = np.zeros((w, w))
+        if w > 48:
+            full = np.linalg.inv(ljj)
+            for c in range(w):
+                for r in range(c, w):
+                    linv[r, c] = full[r, c]
+        else:
+            for c in range(w):
+                linv[c, c] = 1.0 / ljj[c, c]
+                for r in range(c + 1, w):
+                    acc = 0.0
+                    for k in range(c, r):
+                        acc += ljj[r, k] * linv[k, c]
+                    linv[r, c] = -acc / ljj[r, r]
+        zjj = np.dot(np.ascontiguousarray(linv.T), linv)
+        zsj = np.empty((s, w))
+        if s > 0:
+            y = np.dot(lsj, linv)
+            zss = np.empty((s, s))
+            t = p0 + w  # S = indices[p0 + w: p0 + w + s]
+            a = 0
+            while a < s:
+                k = indices[t + a]
+                anc = col2sn[k]
+                k0 = bounds[anc]
+                k1 = bounds[anc + 1]
+                r0 = indptr[k0]
+                r1 = indptr[k0 + 1]
+                ptr = r0
+                for u in range(a, s):  # positions of S[a:] in the ancestor's row list
+                    target = indices[t + u]
+                    while ptr < r1 and indices[ptr] < target:
+                        ptr += 1
+                    if ptr == r1 or indices[ptr] != target:
+                        return zval, j0 + 1
+                    posbuf[u] = ptr - r0
+                a2 = a
+                while a2 < s and indices[t + a2] < k1:
+                    a2 += 1
+                for b in range(a, a2):
+                    kk = indices[t + b]
+                    base = indptr[kk] - (kk - k0)
+                    for u in range(b, s):
+                        v = zval[base + posbuf[u]]
+                        zss[u, b] = v
+                        zss[b, u] = v
+                a = a2
+            zsj = -np.dot(zss, y)
+            zjj -= np.dot(np.ascontiguousarray(y.T), zsj)
+        for c in range(w):
+            q = indptr[j0 + c] - c
+            for r in range(c, w):
+                zval[q + r] = zjj[r, c]
+            for r in range(s):
+                zval[q + w + r] = zsj[r, c]
+    return zval, 0
+
+
+@njit(cache=True, nogil=True)
+def _lookup(indptr, indices, zval, rows, cols):  # pragma: no cover - compiled
+    """Z[rows[k], cols[k]] for rows >= cols (lower triangle); NaN where outside the pattern."""
+    out = np.empty(rows.shape[0])
+    for k in range(rows.shape[0]):
+        i = rows[k]
+        j = cols[k]
+        lo = indptr[j]
+        hi = indptr[j + 1]
+        while lo < hi:  # binary search, rows sorted
+            mid = (lo + hi) // 2
+            if indices[mid] < i:
+                lo = mid + 1
+            else:
+                hi = mid
+        out[k] = zval[lo] if lo < indptr[j + 1] and indices[lo] == i else np.nan
+    return out
