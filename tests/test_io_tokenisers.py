@@ -137,3 +137,35 @@ def _files(draw) -> bytes:
 @given(data=_files())
 def test_layouts_same_outcome(data):
     _assert_same_outcome(data)
+
+
+def _near_halfway(x: float, digits: int, up: bool) -> str:
+    """A decimal with ``digits`` significant digits just below or above the midpoint between
+    ``x`` and the next double up: the hardest inputs for a correctly rounded conversion."""
+    from decimal import ROUND_CEILING, ROUND_FLOOR, Context, Decimal
+
+    mid = (Decimal(x) + Decimal(np.nextafter(x, np.inf))) / 2
+    ctx = Context(prec=digits, rounding=ROUND_CEILING if up else ROUND_FLOOR)
+    return format(ctx.plus(mid), "f")
+
+
+def test_fast_path_reads_numbers_as_python_float():
+    """The fast tokeniser's numbers against Python's float (correctly rounded) on 7*10^4 tokens:
+    random doubles in the formats files use, long random digit strings, and decimals within
+    10^-19 relative of a halfway point between two doubles."""
+    rng = np.random.default_rng(7)
+    xs = rng.standard_normal(4000) * 10.0 ** rng.integers(-8, 9, 4000)
+    fmts = ["{!r}", "{:.17g}", "{:.16g}", "{:.15g}", "{:.18g}", "{:.19g}", "{:.20g}", "{:.6g}", "{:.12e}",
+            "{:.3f}", "{:+.9E}", "{:.0f}"]
+    tokens = [f.format(float(x)) for x in xs for f in fmts]
+    for _ in range(20000):
+        digits = "".join(rng.choice(list("0123456789"), rng.integers(1, 22)))
+        cut = int(rng.integers(0, len(digits) + 1))
+        tokens.append(("-" if rng.random() < 0.5 else "") + digits[:cut] + "." + digits[cut:] + "0")
+    tokens += [_near_halfway(float(abs(x)), d, up) for x in xs[:1500] for d in (17, 19) for up in (False, True)]
+    tokens += ["0", "-0", "+0.0", "1e22", "1e-22", "9007199254740993", "9007199254740992.5", "0.1e+001", "5.e-3"]
+    data = "".join(f"EDGE_SE2 {k} {k + 1} {t} 0 0 {INFO2}\n" for k, t in enumerate(tokens)).encode()
+    got = parse(scan_bytes(data), FORMATS, "n.g2o").trans[:, 0]   # no Fallback
+    want = np.array([float(t) for t in tokens])
+    np.testing.assert_array_equal(got, want)
+    assert np.array_equal(np.signbit(got), np.signbit(want))   # -0 stays -0

@@ -196,14 +196,14 @@ def scan_bytes(data: bytes) -> Tokens:
         raise Fallback
     buf = np.frombuffer(data, dtype=np.uint8)
     nl = np.flatnonzero(buf == 10)
-    n_lines = nl.size + 1                     # as text.split("\n"): a final newline ends an empty line
     word = (buf != 32) & (buf != 9) & (buf != 10)
     edge = np.diff(word.view(np.int8), prepend=np.int8(0), append=np.int8(0))
     tok_start = np.flatnonzero(edge == 1)
     tok_end = np.flatnonzero(edge == -1)      # exclusive
-    tok_line = np.searchsorted(nl, tok_start)
-    counts = np.bincount(tok_line, minlength=n_lines)
-    first_tok = np.cumsum(counts) - counts    # index of each line's first token
+    line_start = np.concatenate(([0], nl + 1))   # as text.split("\n"): a final newline ends an empty line
+    line_end = np.append(nl, buf.size)
+    first_tok = np.searchsorted(tok_start, line_start)    # index of each line's first token
+    counts = np.diff(first_tok, append=tok_start.size)    # tokens per line
     used = np.flatnonzero(counts)
     tag_start, tag_end = tok_start[first_tok[used]], tok_end[first_tok[used]]
     tag_len = tag_end - tag_start
@@ -223,9 +223,6 @@ def scan_bytes(data: bytes) -> Tokens:
             tag_of_line[tag] = lines
             first_seen[tag] = int(lines[0])
     groups = {tag: tag_of_line[tag] for tag in sorted(first_seen, key=first_seen.__getitem__)}
-
-    line_start = np.concatenate(([0], nl + 1))
-    line_end = np.append(nl, buf.size)
 
     def numeric(path: str, rec: RecordKind, idx: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         fields, nid = rec.fields, rec.n_ids
