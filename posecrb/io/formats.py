@@ -11,6 +11,8 @@ from __future__ import annotations
 import hashlib
 import os
 
+import numpy as np
+
 from ..core.errors import UsageError
 from ..core.files import read_regular_file
 from ..core.graph import PoseGraph
@@ -84,7 +86,8 @@ def format_for_path(path: str | os.PathLike) -> Format:
                      f"known suffixes: {known}")
 
 
-def save(graph: PoseGraph, path: str | os.PathLike, format: str | None = None, rot=None, trans=None) -> None:
+def save(graph: PoseGraph, path: str | os.PathLike, format: str | None = None, rot: np.ndarray | None = None,
+         trans: np.ndarray | None = None) -> None:
     """Write ``graph`` in ``format`` (a name in ``FORMATS``) or the format of ``path``'s suffix,
     atomically; vertices from (rot, trans) or the graph's own estimate."""
     if format is None:

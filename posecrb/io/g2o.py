@@ -101,11 +101,11 @@ def write_g2o(graph: PoseGraph, path: str | os.PathLike, rot: np.ndarray | None 
     info = graph.info[:, iu[0], iu[1]]
     if graph.dim == 2:
         vtag, etag = "VERTEX_SE2", "EDGE_SE2"
-        vcols = None if rot is None else np.column_stack([trans, so2_log(rot)])
+        vcols = None if rot is None or trans is None else np.column_stack([trans, so2_log(rot)])
         ecols = np.column_stack([graph.trans, so2_log(graph.rot), info])
     else:
         vtag, etag = "VERTEX_SE3:QUAT", "EDGE_SE3:QUAT"
-        vcols = None if rot is None else np.column_stack([trans, rot_to_quat(rot)])
+        vcols = None if rot is None or trans is None else np.column_stack([trans, rot_to_quat(rot)])
         ecols = np.column_stack([graph.trans, rot_to_quat(graph.rot), info])
     write_lines(path, vtag, etag, graph, vcols, ecols)
 

@@ -46,7 +46,7 @@ def _check_positive_definite(path: str, lines: np.ndarray, tag: str, ends: tuple
     """
     b = block.shape[-1]
     diag = np.diagonal(block, axis1=1, axis2=2)
-    pos = (diag > 0).all(axis=1)
+    pos = np.asarray((diag > 0).all(axis=1))
     d = np.where(diag > 0, diag, 1.0) ** -0.5
     corr = block * d[:, :, None] * d[:, None, :]
     eig = np.linalg.eigvalsh(corr)[:, 0]
@@ -94,7 +94,8 @@ def _check_precisions(path: str, lines: np.ndarray, tag: str, ends: tuple, info:
 
 
 def _decode_edges(path: str, fmt: Format, rec: RecordKind, ids: np.ndarray, vals: np.ndarray, lines: np.ndarray,
-                  normalize: bool = True):
+                  normalize: bool = True) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray,
+                                                tuple[np.ndarray, np.ndarray]]:
     i, j = ids[:, 0], ids[:, 1]
     loop = np.flatnonzero(i == j)
     if loop.size:
@@ -115,7 +116,7 @@ def _decode_edges(path: str, fmt: Format, rec: RecordKind, ids: np.ndarray, vals
 
 
 def _decode_vertices(path: str, fmt: Format, rec: RecordKind, ids: np.ndarray, vals: np.ndarray,
-                     lines: np.ndarray):
+                     lines: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     trans = vals[:, :rec.dim]
     check_magnitude(path, lines, rec.tag, trans, MAX_TRANSLATION, "translation component")
     return ids[:, 0], fmt.decode_vertices(path, rec, vals, lines), trans

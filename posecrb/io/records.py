@@ -5,7 +5,7 @@ and, per format, how numeric fields become rotations and information matrices
 """
 from __future__ import annotations
 
-from collections.abc import Callable, Mapping
+from collections.abc import Callable, Iterable, Mapping
 from dataclasses import dataclass
 from typing import TYPE_CHECKING
 
@@ -55,7 +55,7 @@ class Format:
     decode_vertices: VertexDecoder
     write: Writer
 
-    def sniff(self, tags) -> bool:
+    def sniff(self, tags: Iterable[str]) -> bool:
         """Whether any of ``tags`` (a file's record tags) belongs to this format."""
         return any(tag in self.records for tag in tags)
 

@@ -70,7 +70,7 @@ class Fallback(Exception):
     """The fast tokeniser cannot take this input; ``split_text`` decides (never leaves the module's callers)."""
 
 
-def fmt_number(x) -> str:
+def fmt_number(x: float) -> str:
     """A number as users write it (never ``np.float64(...)``)."""
     x = float(x)
     return f"{x:.6g}" if x == x and abs(x) != float("inf") else str(x)

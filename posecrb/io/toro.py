@@ -26,7 +26,7 @@ RECORDS: dict[str, RecordKind] = {r.tag: r for r in [
 # TORO's EDGE2 stores the information matrix as I11 I12 I22 I33 I13 I23 (TORO's
 # posegraph2.cpp); position in that list of each upper-triangular entry (r, c).
 TORO2_INFO_ORDER = {(0, 0): 0, (0, 1): 1, (1, 1): 2, (2, 2): 3, (0, 2): 4, (1, 2): 5}
-_G2O_FROM_TORO2 = [TORO2_INFO_ORDER[rc] for rc in zip(*np.triu_indices(3))]   # column k of g2o's order
+_G2O_FROM_TORO2 = [TORO2_INFO_ORDER[(int(r), int(c))] for r, c in zip(*np.triu_indices(3))]   # column k of g2o's order
 _TORO2_FROM_G2O = list(np.argsort(_G2O_FROM_TORO2))
 
 
@@ -55,11 +55,11 @@ def write_toro(graph: PoseGraph, path: str | os.PathLike, rot: np.ndarray | None
     info = graph.info[:, iu[0], iu[1]]
     if graph.dim == 2:
         vtag, etag = "VERTEX2", "EDGE2"
-        vcols = None if rot is None else np.column_stack([trans, so2_log(rot)])
+        vcols = None if rot is None or trans is None else np.column_stack([trans, so2_log(rot)])
         ecols = np.column_stack([graph.trans, so2_log(graph.rot), info[:, _TORO2_FROM_G2O]])
     else:
         vtag, etag = "VERTEX3", "EDGE3"
-        vcols = None if rot is None else np.column_stack([trans, rot_to_euler(rot)])
+        vcols = None if rot is None or trans is None else np.column_stack([trans, rot_to_euler(rot)])
         ecols = np.column_stack([graph.trans, rot_to_euler(graph.rot), info])
     write_lines(path, vtag, etag, graph, vcols, ecols)
 
