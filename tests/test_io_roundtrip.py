@@ -1,10 +1,10 @@
-"""Property test of the g2o writer and reader: write -> read gives back the graph.
+"""Property test of the writers and the reader: write -> read gives back the graph, g2o and TORO.
 
 Graphs are drawn by hypothesis (2D and 3D, ids with gaps, parallel edges, edges in both
 directions, full information matrices, with or without vertices). What must survive the round
 trip exactly: ids, edge order and endpoints, translations and information matrices (written with
 17 significant digits, which identify a double uniquely). Rotations go through an angle (2D) or
-a unit quaternion (3D) and come back to within a few ulps.
+a unit quaternion (g2o 3D) or Euler angles (TORO 3D) and come back to within a few ulps.
 """
 from __future__ import annotations
 
@@ -12,11 +12,12 @@ import os
 import tempfile
 
 import numpy as np
+import pytest
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
 from posecrb.core.graph import PoseGraph
-from posecrb.io import load, write_g2o
+from posecrb.io import FORMATS, load, save, write_g2o
 from posecrb.lie.so import so2_exp, so3_exp
 
 EPS = np.finfo(float).eps
@@ -82,18 +83,22 @@ def pose_graphs(draw) -> PoseGraph:
     )
 
 
-def _round_trip(graph: PoseGraph) -> PoseGraph:
+def _round_trip(graph: PoseGraph, fmt: str = "g2o") -> PoseGraph:
     with tempfile.TemporaryDirectory() as tmp:
-        path = os.path.join(tmp, "graph.g2o")
-        write_g2o(graph, path)
+        path = os.path.join(tmp, "graph" + FORMATS[fmt].suffixes[0])
+        if fmt == "g2o":
+            write_g2o(graph, path)
+        else:
+            save(graph, path)   # by suffix
         return load(path)
 
 
+@pytest.mark.parametrize("fmt", ["g2o", "toro"])
 @PROPERTY
 @given(graph=pose_graphs())
-def test_g2o_write_then_read_gives_back_the_graph(graph):
-    back = _round_trip(graph)
-    assert back.dim == graph.dim and back.format == "g2o" and back.skipped == {}
+def test_write_then_read_gives_back_the_graph(fmt, graph):
+    back = _round_trip(graph, fmt)
+    assert back.dim == graph.dim and back.format == fmt and back.skipped == {}
     np.testing.assert_array_equal(back.ids, graph.ids)
     np.testing.assert_array_equal(back.src, graph.src)
     np.testing.assert_array_equal(back.dst, graph.dst)
@@ -107,12 +112,13 @@ def test_g2o_write_then_read_gives_back_the_graph(graph):
         np.testing.assert_allclose(back.vertex_rot, graph.vertex_rot, rtol=0, atol=16 * EPS)
 
 
+@pytest.mark.parametrize("fmt", ["g2o", "toro"])
 @PROPERTY
 @given(graph=pose_graphs())
-def test_second_round_trip_is_stable(graph):
+def test_second_round_trip_is_stable(fmt, graph):
     """Reading what was written and writing it again changes rotations by at most a few ulps more."""
-    once = _round_trip(graph)
-    twice = _round_trip(once)
+    once = _round_trip(graph, fmt)
+    twice = _round_trip(once, fmt)
     np.testing.assert_array_equal(twice.info, once.info)
     np.testing.assert_array_equal(twice.trans, once.trans)
     np.testing.assert_allclose(twice.rot, once.rot, rtol=0, atol=16 * EPS)

@@ -1,11 +1,18 @@
-"""Line formats of g2o and TORO (README "Conventions", datasets/SOURCES.md).
-
-Each record kind maps a file tag to: format family, dimension, vertex or edge,
-and the number of numeric fields after the tag.
+"""What a line format is: its record kinds (tag, family, dimension, vertex or edge, field count)
+and, per format, how numeric fields become rotations and information matrices
+(docs/design.md#formats). The tables themselves live with each format (``g2o.py``,
+``toro.py``); ``formats.py`` registers them.
 """
 from __future__ import annotations
 
+from collections.abc import Callable, Iterable, Mapping
 from dataclasses import dataclass
+from typing import TYPE_CHECKING
+
+import numpy as np
+
+if TYPE_CHECKING:
+    from ..core.graph import PoseGraph
 
 
 @dataclass(frozen=True)
@@ -22,16 +29,36 @@ class RecordKind:
         return 1 if self.kind == "vertex" else 2
 
 
-RECORDS: dict[str, RecordKind] = {r.tag: r for r in [
-    RecordKind("VERTEX_SE2", "g2o", 2, "vertex", 4),          # id x y theta
-    RecordKind("EDGE_SE2", "g2o", 2, "edge", 11),             # i j dx dy dth + I11 I12 I13 I22 I23 I33
-    RecordKind("VERTEX_SE3:QUAT", "g2o", 3, "vertex", 8),     # id x y z qx qy qz qw
-    RecordKind("EDGE_SE3:QUAT", "g2o", 3, "edge", 30),        # i j x y z qx qy qz qw + 21
-    RecordKind("VERTEX2", "toro", 2, "vertex", 4),            # id x y theta
-    RecordKind("EDGE2", "toro", 2, "edge", 11),               # i j dx dy dth + I11 I12 I22 I33 I13 I23
-    RecordKind("VERTEX3", "toro", 3, "vertex", 7),            # id x y z roll pitch yaw
-    RecordKind("EDGE3", "toro", 3, "edge", 29),               # i j x y z roll pitch yaw + 21
-]}
+# (path, record kind, values after the ids, 1-based line numbers, normalise quaternions)
+# -> (rotations (k, d, d), information upper triangles (k, q(q+1)/2) row by row in g2o order)
+EdgeDecoder = Callable[[str, RecordKind, np.ndarray, np.ndarray, bool], tuple[np.ndarray, np.ndarray]]
+# (path, record kind, values after the id, 1-based line numbers) -> rotations (k, d, d)
+VertexDecoder = Callable[[str, RecordKind, np.ndarray, np.ndarray], np.ndarray]
+# (graph, path, vertex rotations or None, vertex translations or None) -> None
+Writer = Callable[["PoseGraph", str, "np.ndarray | None", "np.ndarray | None"], None]
+
+
+@dataclass(frozen=True)
+class Format:
+    """A pose-graph file format: its tags, the decoders of its fields, its writer.
+
+    Reading is shared (``posecrb.io.reader``): translations are always the first d values
+    after the ids; a format says how the rest becomes rotations and information matrices.
+    ``suffixes`` name the files ``posecrb.io.save`` writes in this format; reading never looks
+    at the suffix (the tags decide, ``sniff``).
+    """
+
+    name: str
+    suffixes: tuple[str, ...]
+    records: Mapping[str, RecordKind]
+    decode_edges: EdgeDecoder
+    decode_vertices: VertexDecoder
+    write: Writer
+
+    def sniff(self, tags: Iterable[str]) -> bool:
+        """Whether any of ``tags`` (a file's record tags) belongs to this format."""
+        return any(tag in self.records for tag in tags)
+
 
 # Tags that are legal in these files but carry nothing for a pose graph: skipped
 # with one summary warning (count per tag). Anything else unknown is an error.
@@ -42,7 +69,3 @@ SKIPPED_TAGS = frozenset({
     "VERTEX_TRACKXYZ", "EDGE_SE3_TRACKXYZ", "VERTEX_POINT_XYZ", "EDGE_SE3_POINT_XYZ",
     "PARAMS_SE3OFFSET", "PARAMS_CAMERACALIB", "CACHE_SE3_OFFSET", "LANDMARK", "POINT",
 })
-
-# TORO's EDGE2 stores the information matrix as I11 I12 I22 I33 I13 I23 (TORO's
-# posegraph2.cpp); position in that list of each upper-triangular entry (r, c).
-TORO2_INFO_ORDER = {(0, 0): 0, (0, 1): 1, (1, 1): 2, (2, 2): 3, (0, 2): 4, (1, 2): 5}

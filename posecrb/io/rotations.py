@@ -50,3 +50,23 @@ def euler_to_rot(roll: np.ndarray, pitch: np.ndarray, yaw: np.ndarray) -> np.nda
         np.stack([sy * cp, sy * sp_ * sr + cy * cr, sy * sp_ * cr - cy * sr], -1),
         np.stack([-sp_, cp * sr, cp * cr], -1),
     ], -2)
+
+
+def rot_to_euler(r: np.ndarray) -> np.ndarray:
+    """(..., 3) angles (roll, pitch, yaw) with R = Rz(yaw) Ry(pitch) Rx(roll) (TORO's convention),
+    the inverse of ``euler_to_rot``.
+
+    Yaw comes from the first column; roll and pitch from M = Rz(-yaw) R = Ry(pitch) Rx(roll),
+    whose entries (cos, sin pairs of unit size) keep every angle well conditioned up to the
+    gimbal lock (pitch = +-pi/2, where roll and yaw are no longer separate and yaw = 0 is chosen
+    by atan2(0, 0)); asin(-r20) would lose half the digits of pitch there.
+    """
+    r = np.asarray(r, float)
+    yaw = np.arctan2(r[..., 1, 0], r[..., 0, 0])
+    cy, sy = np.cos(yaw), np.sin(yaw)
+    m00 = cy * r[..., 0, 0] + sy * r[..., 1, 0]
+    m11 = -sy * r[..., 0, 1] + cy * r[..., 1, 1]
+    m12 = -sy * r[..., 0, 2] + cy * r[..., 1, 2]
+    roll = np.arctan2(-m12, m11)
+    pitch = np.arctan2(-r[..., 2, 0], m00)
+    return np.stack([roll, pitch, yaw], -1)

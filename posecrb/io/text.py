@@ -1,9 +1,12 @@
-"""Content-sniffing, vectorised reader for g2o and TORO files (README, "Conventions").
+"""Format-independent text machinery of the readers: lines, fields, numbers, limits, errors.
 
-Robustness rules (each violation is a ``ParseError`` naming file, line and reason):
+Every format (``posecrb.io.g2o``, ``posecrb.io.toro``) is a line format: one record per line,
+a tag then numeric fields. This module turns a file's content into groups of lines by tag and
+each group's numeric block into arrays, with every violation a ``ParseError`` naming file,
+line and reason (docs/design.md#formats). Robustness rules:
 
-* Lines end at ``\n``, ``\r\n`` or ``\r`` only. ``str.splitlines`` would also break at form
-  feed, vertical tab, ``\x1c``-``\x1e``, NEL and U+2028/U+2029, turning the tail of a comment
+* Lines end at ``\\n``, ``\\r\\n`` or ``\\r`` only. ``str.splitlines`` would also break at form
+  feed, vertical tab, ``\\x1c``-``\\x1e``, NEL and U+2028/U+2029, turning the tail of a comment
   into data and shifting every later line number.
 * Fields are separated by ASCII blanks (space, tab, form feed, vertical tab). Numbers follow
   the plain decimal grammar ``[+-]digits[.digits][e[+-]digits]`` (plus nan/inf, rejected as
@@ -12,28 +15,25 @@ Robustness rules (each violation is a ``ParseError`` naming file, line and reaso
 * Vertex ids are parsed as integers, never through float64 (which changes ids above 2^53),
   and must fit int64.
 * Magnitudes stay inside the range where everything downstream is finite (``MAX_*`` below).
+
+Two tokenisers give the same groups and blocks. ``scan_bytes`` is the fast one: it works on the
+file's bytes with whole-buffer numpy operations (newlines, token boundaries, tags) and converts
+each tag's numeric block with one ``np.fromstring`` call; it takes only plain ASCII files whose
+lines are ``TAG`` + blank-separated tokens of ``[0-9.eE+-]`` with short integer ids, and gives up
+(``Fallback``) on anything else. ``split_text`` is the reference tokeniser over ``str``; it takes
+every input and locates every error, so the fast path never has to.
 """
 from __future__ import annotations
 
-import hashlib
-import logging
-import os
 import re
+from collections.abc import Callable
+from dataclasses import dataclass
 from itertools import chain
 
 import numpy as np
 
-from ..core.errors import InternalError, ParseError, UsageError
-from ..core.files import read_regular_file
-from ..core.graph import PoseGraph
-from ..core.noise import isotropic_precisions, rotation_weight
-from ..lie.so import so2_exp
-from .records import RECORDS, SKIPPED_TAGS, TORO2_INFO_ORDER, RecordKind
-from .rotations import euler_to_rot, quat_to_rot
-
-log = logging.getLogger("posecrb")
-
-QUATERNION_MODES = ("normalize", "raw")
+from ..core.errors import InternalError, ParseError
+from .records import RecordKind
 
 # Magnitude limits, checked at parse time so that no quantity built from a file overflows
 # or underflows later (the FIM, the Laplacians, the solver's data matrix and the CRLB are
@@ -57,49 +57,73 @@ _NOT_NUMBER_CHAR = re.compile(r"[^0-9eE.+\- nNaAiIfFtTyY]")
 _NOT_ID_CHAR = re.compile(r"[^0-9 ]")
 _INT64_MAX = np.iinfo(np.int64).max
 
+# The fast tokeniser's alphabet: printable ASCII, tab and newline (no \r, \f, \v or other
+# control characters: their line and field rules are split_text's), and inside numeric blocks
+# only the characters of plain decimal numbers and blanks.
+_PRINTABLE = bytes([9, 10] + list(range(32, 127)))
+_NUMERIC_BYTES = b"0123456789.eE+- \t\n"
+# Ids of at most this many digits are below 2^53, so exact in float64.
+_FAST_ID_DIGITS = 15
 
-def _fmt(x: float) -> str:
+
+class Fallback(Exception):
+    """The fast tokeniser cannot take this input; ``split_text`` decides (never leaves the module's callers)."""
+
+
+def fmt_number(x: float) -> str:
     """A number as users write it (never ``np.float64(...)``)."""
     x = float(x)
     return f"{x:.6g}" if x == x and abs(x) != float("inf") else str(x)
 
 
-def load(path: str | os.PathLike, quaternions: str = "normalize") -> PoseGraph:
-    """Read a g2o or TORO pose-graph file; the format is detected from its content.
-
-    ``quaternions`` says how the g2o 3D edge quaternions (qx, qy, qz, qw) become R~:
-
-    - ``"normalize"`` (default): ``q / |q|`` (computed after scaling q by its
-      largest component, so no norm overflows or underflows) then the rotation matrix;
-      every R~ is in SO(3).
-    - ``"raw"``: SE-Sync's g2o reader, i.e. Eigen's ``Quaternion(qw, qx, qy, qz).toRotationMatrix()``
-      applied to the quaternion AS WRITTEN (no normalisation). Files print quaternions with
-      6-9 digits, so R~ is then slightly non-orthogonal (``|I - R~ R~^T|`` up to ~1e-5 on
-      cubicle.g2o), and SE-Sync's objective (``posecrb.solver``, whose data matrix carries
-      ``kappa I`` / ``-kappa R~`` blocks exactly as SE-Sync's) differs from the normalised
-      reading by up to ~3e-5 relative. This mode exists ONLY to reproduce SE-Sync's numbers;
-      the rest of posecrb (FIM, bounds, CRLB) assumes rotations and should get the default.
-      A quaternion whose squared norm exceeds ``MAX_INFORMATION`` is an error in this mode.
-
-    Either way a zero quaternion is an error, vertex quaternions (an estimate, which
-    SE-Sync's reader ignores) are always normalised, and 2D/TORO files are unaffected.
-    Only regular files are read (a directory, FIFO or device is an error saying so).
-    """
-    path = os.fspath(path)
-    data = read_regular_file(path)
+def decode_utf8(data: bytes, path: str) -> str:
+    """The file's text; invalid UTF-8 is an error at the line where it starts."""
     try:
-        text = data.decode("utf-8")
+        return data.decode("utf-8")
     except UnicodeDecodeError as exc:
         line = len(_LINE_END.findall(data[: exc.start].decode("utf-8", "replace"))) + 1
         raise ParseError(path, line, "not a text file (invalid UTF-8)") from None
-    return parse_text(text, path=path, sha256=hashlib.sha256(data).hexdigest(), quaternions=quaternions)
 
+
+def check_magnitude(path: str, lines: np.ndarray, tag: str, vals: np.ndarray, limit: float, what: str) -> None:
+    """Every entry of each record's ``vals`` within ``limit`` in magnitude (``MAX_*`` above)."""
+    big = np.abs(vals).reshape(vals.shape[0], -1).max(axis=1) > limit
+    if big.any():
+        k = int(np.flatnonzero(big)[0])
+        v = vals[k].ravel()[np.argmax(np.abs(vals[k]).ravel())]
+        raise ParseError(path, int(lines[k]), f"{tag}: {what} {fmt_number(v)} exceeds {fmt_number(limit)} in "
+                                              "magnitude (quantities built from it would overflow)")
+
+
+def _check_finite(path: str, rec: RecordKind, lines: np.ndarray, vals: np.ndarray) -> None:
+    finite = np.isfinite(vals).all(axis=1)
+    if not finite.all():
+        k = int(np.flatnonzero(~finite)[0])
+        raise ParseError(path, int(lines[k]), f"{rec.tag}: non-finite value (NaN or inf)")
+
+
+@dataclass(frozen=True)
+class Tokens:
+    """A file's lines grouped by tag, and the numeric blocks of the groups.
+
+    ``groups`` maps each first field ("tag") to the 0-based indices of its lines, in order of
+    first occurrence (blank lines belong to no group). ``numeric(path, rec, idx)`` gives the
+    ``(k, n_ids)`` int64 ids and ``(k, fields - n_ids)`` float64 values of the lines ``idx`` of
+    record kind ``rec``, or raises ``ParseError`` (``split_text``) / ``Fallback`` (``scan_bytes``).
+    """
+
+    groups: dict[str, np.ndarray]
+    numeric: Callable[[str, RecordKind, np.ndarray], tuple[np.ndarray, np.ndarray]]
+
+
+# --------------------------------------------------------------------------------------------
+# Reference tokeniser: any text, exact error locations.
 
 def _split_lines(text: str) -> list[list[str]]:
-    """Fields of every line; lines end at \n, \r\n, \r only (see the module docstring)."""
+    """Fields of every line; lines end at \\n, \\r\\n, \\r only (see the module docstring)."""
     lines = _LINE_END.split(text) if "\r" in text else text.split("\n")
     if _ODD_SPACE.search(text) is None and "\f" not in text and "\v" not in text:
-        return [ln.split() for ln in lines]          # fast path: only ASCII blanks occur
+        return [ln.split() for ln in lines]          # only ASCII blanks occur
     return [[f for f in _FIELD_SEP.split(ln) if f] for ln in lines]
 
 
@@ -140,231 +164,110 @@ def _numeric_block(path: str, rows: list[list[str]], lines: np.ndarray,
                     raise ParseError(path, int(lines[k]), f"{rec.tag}: {tok!r} is not a number")
         raise InternalError("unreachable: every token matches the number grammar")
     vals = vals.reshape(len(rows), rec.fields - nid)
-    finite = np.isfinite(vals).all(axis=1)
-    if not finite.all():
-        k = int(np.flatnonzero(~finite)[0])
-        raise ParseError(path, int(lines[k]), f"{rec.tag}: non-finite value (NaN or inf)")
+    _check_finite(path, rec, lines, vals)
     return ids, vals
 
 
-def _upper_to_full(vals: np.ndarray, q: int) -> np.ndarray:
-    """(k, q, q) symmetric matrices from row-major upper triangles."""
-    iu = np.triu_indices(q)
-    out = np.zeros((vals.shape[0], q, q))
-    out[:, iu[0], iu[1]] = vals
-    out[:, iu[1], iu[0]] = vals
-    return out
-
-
-def _quaternions(path: str, q: np.ndarray, lines: np.ndarray, tag: str, normalize: bool = True) -> np.ndarray:
-    # Scale by the largest |component| first: q / s has components in [-1, 1] and norm in
-    # [1, 2], so the normalisation neither overflows (1e308 1e308 0 0) nor underflows.
-    s = np.max(np.abs(q), axis=1)
-    bad = np.flatnonzero(~(s > 0))
-    if bad.size:
-        raise ParseError(path, int(lines[bad[0]]), f"{tag}: zero quaternion")
-    qs = q / s[:, None]
-    ns = np.linalg.norm(qs, axis=1)
-    if normalize:
-        return quat_to_rot(qs / ns[:, None])
-    # quat_to_rot is Eigen's toRotationMatrix formula (1 - 2(y^2 + z^2), 2(xy - zw), ...),
-    # so the unnormalised input gives SE-Sync's R~ (load(..., quaternions="raw")).
-    with np.errstate(over="ignore"):
-        norm2 = (s * ns) ** 2
-    big = np.flatnonzero(~(norm2 <= MAX_INFORMATION))
-    if big.size:
-        k = big[0]
-        raise ParseError(path, int(lines[k]), f"{tag}: quaternion norm {_fmt(s[k] * ns[k])} is too large to be "
-                                              "used unnormalised (SE-Sync-compatible reading)")
-    return quat_to_rot(q)
-
-
-def _check_magnitude(path: str, lines: np.ndarray, tag: str, vals: np.ndarray, limit: float, what: str) -> None:
-    big = np.abs(vals).reshape(vals.shape[0], -1).max(axis=1) > limit
-    if big.any():
-        k = int(np.flatnonzero(big)[0])
-        v = vals[k].ravel()[np.argmax(np.abs(vals[k]).ravel())]
-        raise ParseError(path, int(lines[k]), f"{tag}: {what} {_fmt(v)} exceeds {_fmt(limit)} in magnitude "
-                                              "(quantities built from it would overflow)")
-
-
-def _check_positive_definite(path: str, lines: np.ndarray, tag: str, ends: tuple, name: str,
-                             block: np.ndarray) -> None:
-    """Scale-aware positive-definiteness of each (b, b) block.
-
-    The block is scaled to unit diagonal, D^-1/2 A D^-1/2 (diag(1e12, 1e-3) becomes I), and
-    the smallest eigenvalue of that correlation matrix must exceed its rounding error
-    (b eps per entry, margin 100). An absolute or max-eigenvalue-relative threshold would
-    reject well-defined matrices whose diagonal spans many decades.
-    """
-    b = block.shape[-1]
-    diag = np.diagonal(block, axis1=1, axis2=2)
-    pos = np.all(diag > 0, axis=1)
-    d = np.where(diag > 0, diag, 1.0) ** -0.5
-    corr = block * d[:, :, None] * d[:, None, :]
-    eig = np.linalg.eigvalsh(corr)[:, 0]
-    tol = 100 * b * np.finfo(float).eps
-    bad = np.flatnonzero(~pos | ~(eig > tol))
-    if not bad.size:
-        return
-    k = bad[0]
-    where = f"{tag} {ends[0][k]} {ends[1][k]}: {name} block of the information matrix is not positive definite"
-    if not pos[k]:
-        j = int(np.argmin(diag[k]))
-        reason = f"(diagonal entry {j + 1} is {_fmt(diag[k, j])})"
-    elif eig[k] > -tol:
-        reason = "(singular to working precision)"
-    else:
-        reason = f"(smallest eigenvalue {_fmt(eig[k])} after scaling to unit diagonal)"
-    raise ParseError(path, int(lines[k]), f"{where} {reason}")
-
-
-def _check_precisions(path: str, lines: np.ndarray, tag: str, ends: tuple, info: np.ndarray,
-                      dim: int) -> tuple[np.ndarray, np.ndarray]:
-    """tau, kappa (SE-Sync's rule) and the 3D eq. (59) rotation weight inside PRECISION_RANGE;
-    returns (tau, kappa)."""
-    lo, hi = PRECISION_RANGE
-    with np.errstate(all="ignore"):
-        tau, kappa = isotropic_precisions(info, dim)
-    checks = [("translation precision tau", tau), ("rotation concentration kappa", kappa)]
-    if dim == 3:
-        # w = omega(kappa)/3 <= kappa, and w ~ kappa^2/3 below kappa ~ 1e-3: only small
-        # concentrations can push w under the range; evaluate eq. (59) for those only.
-        w = np.full_like(kappa, hi)
-        small = kappa < 1e-3
-        if small.any():
-            with np.errstate(all="ignore"):
-                w[small] = rotation_weight(np.where(kappa[small] > 0, kappa[small], 1.0), dim)
-        checks.append(("rotation weight omega(kappa)/3 (eq. 59)", w))
-    for what, v in checks:
-        bad = np.flatnonzero(~((v >= lo) & (v <= hi)))
-        if bad.size:
-            k = bad[0]
-            raise ParseError(path, int(lines[k]), f"{tag} {ends[0][k]} {ends[1][k]}: {what} = {_fmt(v[k])} is "
-                                                  f"outside [{_fmt(lo)}, {_fmt(hi)}] (information too "
-                                                  f"{'small' if v[k] < lo else 'large'} to compute with)")
-    return tau, kappa
-
-
-def _decode_edges(path: str, rec: RecordKind, ids: np.ndarray, vals: np.ndarray, lines: np.ndarray,
-                  normalize: bool = True
-                  ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray, tuple[np.ndarray, np.ndarray]]:
-    i, j = ids[:, 0], ids[:, 1]
-    loop = np.flatnonzero(i == j)
-    if loop.size:
-        raise ParseError(path, int(lines[loop[0]]), f"{rec.tag}: self-loop on pose {i[loop[0]]}")
-    d = rec.dim
-    t = vals[:, :d]
-    _check_magnitude(path, lines, rec.tag, t, MAX_TRANSLATION, "translation component")
-    if d == 2:
-        r = so2_exp(vals[:, 2])
-        raw = vals[:, 3:9]
-        if rec.family == "toro":
-            raw = raw[:, np.array([TORO2_INFO_ORDER[(int(a), int(b))] for a, b in zip(*np.triu_indices(3))])]
-    else:
-        if rec.family == "g2o":
-            r = _quaternions(path, vals[:, 3:7], lines, rec.tag, normalize)
-            raw = vals[:, 7:28]
-        else:
-            r = euler_to_rot(vals[:, 3], vals[:, 4], vals[:, 5])
-            raw = vals[:, 6:27]
-    _check_magnitude(path, lines, rec.tag, raw, MAX_INFORMATION, "information entry")
-    info = _upper_to_full(raw, 3 if d == 2 else 6)
-    # The isotropic model needs the translation and rotation blocks to be positive
-    # definite. Real files (cubicle.g2o) carry full matrices whose cross terms make
-    # them indefinite although both blocks are fine; that is counted, not fatal.
-    for name, block in (("translation", info[:, :d, :d]), ("rotation", info[:, d:, d:])):
-        _check_positive_definite(path, lines, rec.tag, (i, j), name, block)
-    precisions = _check_precisions(path, lines, rec.tag, (i, j), info, d)
-    return i, j, r, t, info, precisions
-
-
-def _decode_vertices(path: str, rec: RecordKind, ids: np.ndarray, vals: np.ndarray,
-                     lines: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    vid = ids[:, 0]
-    d = rec.dim
-    trans = vals[:, :d]
-    _check_magnitude(path, lines, rec.tag, trans, MAX_TRANSLATION, "translation component")
-    if d == 2:
-        return vid, so2_exp(vals[:, 2]), trans
-    if rec.family == "g2o":
-        return vid, _quaternions(path, vals[:, 3:7], lines, rec.tag), trans
-    return vid, euler_to_rot(vals[:, 3], vals[:, 4], vals[:, 5]), trans
-
-
-def parse_text(text: str, path: str = "<string>", sha256: str | None = None,
-               quaternions: str = "normalize") -> PoseGraph:
-    """Parse the content of a g2o/TORO file (see ``load``, also for ``quaternions``)."""
-    if quaternions not in QUATERNION_MODES:
-        raise UsageError(f"quaternions must be one of {', '.join(QUATERNION_MODES)}, not {quaternions!r}")
+def split_text(text: str) -> Tokens:
+    """The reference tokeniser (module docstring): every input, every error located."""
     rows = _split_lines(text)
     groups: dict[str, list[int]] = {}
     for k, r in enumerate(rows):
         if r:
             groups.setdefault(r[0], []).append(k)
 
-    skipped: dict[str, int] = {}
-    records: list[RecordKind] = []
-    for tag, idx in groups.items():
-        if tag.startswith("#"):
-            skipped["#"] = skipped.get("#", 0) + len(idx)
-        elif tag in SKIPPED_TAGS:
-            skipped[tag] = len(idx)
-        elif tag in RECORDS:
-            records.append(RECORDS[tag])
+    def numeric(path: str, rec: RecordKind, idx: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        return _numeric_block(path, [rows[k] for k in idx], idx + 1, rec)
+
+    return Tokens(groups={tag: np.asarray(idx, dtype=np.int64) for tag, idx in groups.items()}, numeric=numeric)
+
+
+# --------------------------------------------------------------------------------------------
+# Fast tokeniser: whole-buffer numpy operations, no Python loop per line.
+
+def scan_bytes(data: bytes) -> Tokens:
+    """The fast tokeniser (module docstring); raises ``Fallback`` where it cannot decide.
+
+    Newlines, token starts and ends are found once over the whole buffer; each line's first
+    token (its tag) is compared as a fixed-width byte string, so grouping costs a sort of the
+    tags, not a loop over lines.
+    """
+    if not data.isascii() or data.translate(None, _PRINTABLE):
+        raise Fallback
+    buf = np.frombuffer(data, dtype=np.uint8)
+    nl = np.flatnonzero(buf == 10)
+    word = (buf != 32) & (buf != 9) & (buf != 10)
+    edge = np.diff(word.view(np.int8), prepend=np.int8(0), append=np.int8(0))
+    tok_start = np.flatnonzero(edge == 1)
+    tok_end = np.flatnonzero(edge == -1)      # exclusive
+    line_start = np.concatenate(([0], nl + 1))   # as text.split("\n"): a final newline ends an empty line
+    line_end = np.append(nl, buf.size)
+    first_tok = np.searchsorted(tok_start, line_start)    # index of each line's first token
+    counts = np.diff(first_tok, append=tok_start.size)    # tokens per line
+    used = np.flatnonzero(counts)
+    tag_start, tag_end = tok_start[first_tok[used]], tok_end[first_tok[used]]
+    tag_len = tag_end - tag_start
+
+    # Tags: per length, the bytes as one fixed-width string each; np.unique groups them.
+    tag_of_line: dict[str, np.ndarray] = {}
+    first_seen: dict[str, int] = {}
+    for length in np.unique(tag_len):
+        sel = np.flatnonzero(tag_len == length)
+        raw = buf[tag_start[sel][:, None] + np.arange(length)]
+        names, inverse = np.unique(np.ascontiguousarray(raw).view(f"S{length}").ravel(), return_inverse=True)
+        order = np.argsort(inverse, kind="stable")
+        bounds = np.searchsorted(inverse[order], np.arange(names.size + 1))
+        for u, name in enumerate(names):
+            lines = used[sel[order[bounds[u]: bounds[u + 1]]]]
+            tag = name.decode("ascii")
+            tag_of_line[tag] = lines
+            first_seen[tag] = int(lines[0])
+    groups = {tag: tag_of_line[tag] for tag in sorted(first_seen, key=first_seen.__getitem__)}
+
+    def numeric(path: str, rec: RecordKind, idx: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        fields, nid = rec.fields, rec.n_ids
+        if idx.size == 0 or (counts[idx] != fields + 1).any():
+            raise Fallback
+        ftok = first_tok[idx]
+        # ids: digits only and short enough to be exact in float64
+        id_tok = (ftok[:, None] + np.arange(1, 1 + nid)).ravel()
+        id_len = tok_end[id_tok] - tok_start[id_tok]
+        if id_len.max() > _FAST_ID_DIGITS:
+            raise Fallback
+        pos = tok_start[id_tok][:, None] + np.arange(_FAST_ID_DIGITS)
+        inside = np.arange(_FAST_ID_DIGITS) < id_len[:, None]
+        chars = buf[np.minimum(pos, buf.size - 1)]
+        if (inside & ((chars < 48) | (chars > 57))).any():
+            raise Fallback
+        # The numeric part of each line: from the end of its tag to the end of the line. Runs
+        # of consecutive lines are one slice of the file with the tag removed at every line
+        # start (each line of a run starts with the tag, no leading blank).
+        starts = tok_start[ftok]
+        if (starts != line_start[idx]).any():
+            raise Fallback
+        tag = rec.tag.encode("ascii")
+        cut = np.flatnonzero(np.diff(idx) != 1) + 1
+        run_first = np.concatenate(([0], cut))
+        run_last = np.append(cut - 1, idx.size - 1)
+        if run_first.size > 64:   # interleaved tags: join the lines themselves
+            text_end = tok_end[ftok]
+            blob = b"\n".join([data[a:b] for a, b in zip(text_end.tolist(), line_end[idx].tolist())])
         else:
-            raise ParseError(path, idx[0] + 1, f"unknown record type {tag!r}")
+            parts = [data[tok_end[ftok[a]]: line_end[idx[b]]].replace(b"\n" + tag, b"\n")
+                     for a, b in zip(run_first.tolist(), run_last.tolist())]
+            blob = b"\n".join(parts)
+        if blob.translate(None, _NUMERIC_BYTES):
+            raise Fallback
+        try:
+            flat = np.fromstring(blob, dtype=np.float64, sep=" ")
+        except ValueError:
+            raise Fallback from None
+        if flat.size != idx.size * fields:
+            raise Fallback
+        block = flat.reshape(idx.size, fields)
+        ids = block[:, :nid].astype(np.int64)
+        vals = np.ascontiguousarray(block[:, nid:])
+        _check_finite(path, rec, idx + 1, vals)
+        return ids, vals
 
-    first_line = {rec.tag: groups[rec.tag][0] + 1 for rec in records}
-    for attr in ("dim", "family"):
-        values = {getattr(rec, attr) for rec in records}
-        if len(values) > 1:
-            late = max(records, key=lambda rec: first_line[rec.tag])
-            other = min(records, key=lambda rec: first_line[rec.tag])
-            what = "2D and 3D records" if attr == "dim" else "g2o and TORO records"
-            raise ParseError(path, first_line[late.tag],
-                             f"mixed {what}: {late.tag} after {other.tag} (line {first_line[other.tag]})")
-    edge_recs = [rec for rec in records if rec.kind == "edge"]
-    if not edge_recs:
-        raise ParseError(path, None, "no pose-graph edges found (expected EDGE_SE2, EDGE_SE3:QUAT, EDGE2 or EDGE3)")
-    erec = edge_recs[0]
-    vrec = next((rec for rec in records if rec.kind == "vertex"), None)
-
-    e_idx = np.asarray(groups[erec.tag])
-    e_lines = e_idx + 1
-    eids, evals = _numeric_block(path, [rows[k] for k in e_idx], e_lines, erec)
-    normalize = quaternions == "normalize"
-    ei, ej, erot, etrans, einfo, precisions = _decode_edges(path, erec, eids, evals, e_lines, normalize)
-
-    vertex_rot = vertex_trans = None
-    if vrec is not None:
-        v_idx = np.asarray(groups[vrec.tag])
-        v_lines = v_idx + 1
-        vids, vvals = _numeric_block(path, [rows[k] for k in v_idx], v_lines, vrec)
-        vid, vrot, vtrans = _decode_vertices(path, vrec, vids, vvals, v_lines)
-        order = np.argsort(vid, kind="stable")
-        ids = vid[order]
-        dup = np.flatnonzero(ids[1:] == ids[:-1])
-        if dup.size:
-            later = v_lines[order[dup[0] + 1]]
-            raise ParseError(path, int(later), f"duplicate vertex id {ids[dup[0]]}")
-        vertex_rot, vertex_trans = vrot[order], vtrans[order]
-        for end in (ei, ej):
-            pos = np.minimum(np.searchsorted(ids, end), ids.size - 1)
-            unknown = np.flatnonzero(ids[pos] != end)
-            if unknown.size:
-                k = unknown[0]
-                raise ParseError(path, int(e_lines[k]), f"{erec.tag}: edge to undeclared vertex id {end[k]}")
-    else:
-        ids = np.unique(np.concatenate([ei, ej]))
-
-    if skipped:
-        summary = ", ".join(f"{n} {'comment' if t == '#' else t}" for t, n in sorted(skipped.items()))
-        log.warning("%s: skipped %s line(s)", path, summary)
-    graph = PoseGraph(
-        dim=erec.dim, ids=ids, src=np.searchsorted(ids, ei), dst=np.searchsorted(ids, ej),
-        rot=erot, trans=etrans, info=einfo, vertex_rot=vertex_rot, vertex_trans=vertex_trans,
-        path=path, format=erec.family, skipped=skipped, edge_lines=e_lines, sha256=sha256,
-    )
-    graph.__dict__["_precisions"] = precisions   # seed the cached (tau, kappa): computed and checked above
-    return graph
+    return Tokens(groups=groups, numeric=numeric)
