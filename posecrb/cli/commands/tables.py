@@ -10,7 +10,6 @@ from pathlib import Path
 
 import click
 from rich.console import Console
-from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn
 
 from ...core.errors import PosecrbError
 from ...core.files import write_text
@@ -33,17 +32,12 @@ from ...metrics.tables import (
 from ...report.render import to_csv, to_json, to_markdown, to_rich_table
 from ...sim.generators import builtin_demo
 from ..options import data_dir_option
+from ..progress import progress
 
 log = logging.getLogger("posecrb")
 ROMAN = {1: "I", 2: "II", 3: "III", 4: "IV"}
 OUT_FILES = [f"table{t}.{ext}" for t in ROMAN for ext in ("md", "csv", "json", "tex")] + \
     ["rows.csv", "rows.json", "run.json"]
-
-
-def _progress(total: int):
-
-    return Progress(TextColumn("{task.description}"), BarColumn(), MofNCompleteColumn(), TimeElapsedColumn(),
-                    console=Console(stderr=True), transient=True, disable=not sys.stderr.isatty())
 
 
 def _shown(rows, tables, compare, settings: TableSettings, explicit: bool):
@@ -137,14 +131,13 @@ def command(all_, tables, names, repeat, jobs, fmt, out_dir, compare_paper, rota
         settings = TableSettings(repeat=repeat, rotation_model=rotation_model or "eq59", data_dir=data_dir)
     todo = dataset_names(requested, data_dir)
 
-    with _progress(len(todo)) as progress:
-        task = progress.add_task("tables", total=len(todo))
+    with progress(len(todo), "tables") as advance:
 
         def on_step(name, step):
-            progress.update(task, description=f"{name}: {step}")
+            advance(0, description=f"{name}: {step}")
 
         def on_done(name, row):
-            progress.advance(task)
+            advance(1)
 
         rows = build_rows(todo, settings, jobs, on_done=on_done, on_step=on_step)
 
