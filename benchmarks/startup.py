@@ -17,7 +17,6 @@ Usage: python benchmarks/startup.py [--repeat K] [--file FILE] [--top N] [--pose
 """
 from __future__ import annotations
 
-import argparse
 import subprocess
 import sys
 from collections import defaultdict
@@ -32,6 +31,7 @@ from _common import (
     median_wall,
     posecrb_command,
     print_header,
+    process_parser,
     run_process,
 )
 
@@ -100,14 +100,9 @@ def importtime_report(cmd_python: str, env: dict, module: str, top: int) -> list
 
 
 def main(argv: list[str] | None = None) -> int:
-    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("--repeat", type=int, default=7, help="timed rounds (median) [default: 7]")
+    ap = process_parser(__doc__.splitlines()[0], with_data_dir=True, repeat=7)
     ap.add_argument("--file", default=None, help="file for `posecrb info` [default: smallest g2o in the data dir]")
-    ap.add_argument("--data-dir", default=None)
     ap.add_argument("--top", type=int, default=15)
-    ap.add_argument("--posecrb", default=None, help="command that runs posecrb [default: python -m posecrb "
-                                                     "from this checkout]")
-    ap.add_argument("--threads", type=int, default=1)
     args = ap.parse_args(argv)
 
     env = child_env(args.threads)
