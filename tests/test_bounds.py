@@ -209,6 +209,7 @@ def test_lambda_min_below_double_precision_is_a_status_never_negative(dim):
     assert EPS * abs(l_w).sum(axis=0).max() > lap_w
 
 
+@pytest.mark.slow
 def test_lambda_min_on_the_lanczos_path_matches_dense(shared_datasets):
     """n > 200: shift-invert Lanczos + Rayleigh quotient + inertia check against dense eigvalsh."""
     from posecrb.models.paper.bounds import weighted_laplacians

@@ -310,6 +310,7 @@ def test_quick_mode_of_each_experiment(shared_datasets, args):
         assert [row["extra_edges"] for row in rows] == list(range(22))
 
 
+@pytest.mark.slow
 def test_tinygrid3d_mse_reaches_the_default_bound_not_eq64(shared_datasets):
     """`posecrb experiment crlb tinyGrid3D --kc 20` (100 trials, seed 0): the MSE of the certified
     MLE matches the default CRLB (the model's Fisher information) within 3 standard errors plus 5%

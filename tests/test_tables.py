@@ -205,6 +205,7 @@ def _printed_digits_agree(value: float, printed: float, digits: int = 5) -> bool
     return abs(round(value / unit) - round(printed / unit)) <= 1
 
 
+@pytest.mark.slow
 def test_as_published_reproduces_table_two_fim_and_lb(shared_datasets):
     """`posecrb tables --as-published`: eq. (64) as printed with w = 0.5515 kappa^2 gives the printed
     FIM and lb columns of Table II to one unit of the last printed digit on every 3D dataset of the
