@@ -19,7 +19,7 @@ from posecrb.core.graph import PoseGraph
 from posecrb.core.noise import rotation_weight
 from posecrb.lie import se as L
 from posecrb.lie.so import so2_exp, so3_exp
-from posecrb.sim.generators import uniform_rotations
+from posecrb.sim.generators import random_graph, uniform_rotations
 
 
 def _small_rotations(m: int, dim: int, sigma: float, rng: np.random.Generator) -> np.ndarray:
@@ -69,31 +69,14 @@ def random_spd(rng: np.random.Generator, k: int, q: int, scale: float = 10.0) ->
 
 def make_random_graph(rng: np.random.Generator, n: int = 8, extra: int = 6, dim: int = 2,
                       parallel: int = 2, sparse_ids: bool = True, block_isotropic: bool = False) -> PoseGraph:
-    """A connected random graph: a random spanning tree + random extra edges + parallel copies,
-    anisotropic information (unless block_isotropic), ids with gaps, vertices attached."""
-    src = [int(rng.integers(0, k)) for k in range(1, n)]
-    dst = list(range(1, n))
-    for _ in range(extra):
-        i, j = rng.choice(n, 2, replace=False)
-        src.append(int(i))
-        dst.append(int(j))
-    for _ in range(parallel):
-        k = int(rng.integers(0, len(src)))
-        src.append(src[k])
-        dst.append(dst[k])
-    src, dst = np.array(src), np.array(dst)
-    m, q = src.size, dim + (1 if dim == 2 else 3)
-    info = random_spd(rng, m, q)
-    if block_isotropic:
-        info[:, :dim, dim:] = 0
-        info[:, dim:, :dim] = 0
-    ids = np.sort(rng.choice(10 * n, n, replace=False)) if sparse_ids else np.arange(n)
-    return PoseGraph(
-        dim=dim, ids=ids, src=src, dst=dst, rot=random_rotations(rng, m, dim),
-        trans=rng.normal(size=(m, dim)) * 2.0, info=info,
-        vertex_rot=random_rotations(rng, n, dim), vertex_trans=rng.normal(size=(n, dim)) * 3.0,
-        path=None, format="synthetic",
-    )
+    """A connected random graph from the library's generator (``posecrb.sim.generators.random_graph``):
+    a random spanning tree + ``extra`` random edges + ``parallel`` more (one of them repeating a tree
+    edge), anisotropic information with eigenvalues in [5, 50] (full, or without cross terms with
+    ``block_isotropic``): rotation information weak enough for the curvature terms to matter; ids with
+    gaps unless not ``sparse_ids``, the truth as vertices and exact measurements."""
+    return random_graph(rng, n, n - 1 + extra + parallel, dim, info="block" if block_isotropic else "full",
+                        parallel=parallel > 0, id_gaps=sparse_ids, scale=3.0,
+                        tau_range=(5.0, 50.0), kappa_range=(5.0, 50.0))
 
 
 def _fd_error(jac, weights, r_max, h, f) -> float:
