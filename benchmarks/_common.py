@@ -60,6 +60,25 @@ def dataset_args(description: str, repeat: int) -> tuple[argparse.Namespace, lis
     return args, files
 
 
+def process_parser(description: str, *, with_data_dir: bool = False, repeat: int | None = None,
+                   repeat_help: str = "timed rounds (median)") -> argparse.ArgumentParser:
+    """The arguments every whole-process benchmark takes: --posecrb and --threads, with
+    ``with_data_dir`` --data-dir (``data_dir``), with ``repeat`` --repeat K (default ``repeat``).
+    Each script adds its own arguments to the parser returned."""
+    ap = argparse.ArgumentParser(description=description)
+    ap.add_argument("--posecrb", default=None, help="command that runs posecrb [default: python -m posecrb "
+                                                     "from this checkout]")
+    ap.add_argument("--threads", type=int, default=1,
+                    help="threads of every OpenMP/BLAS/numba pool of the measured programs [default: 1]")
+    if with_data_dir:
+        ap.add_argument("--data-dir", default=None,
+                        help="directory of the g2o files [default: $POSECRB_DATA, else a datasets directory "
+                             "on the search path]")
+    if repeat is not None:
+        ap.add_argument("--repeat", type=int, default=repeat, help=f"{repeat_help} [default: {repeat}]")
+    return ap
+
+
 # ---- the data directory ---------------------------------------------------------------
 
 def data_dir(arg: str | None) -> Path | None:

@@ -35,6 +35,7 @@ from _common import (
     median_wall,
     posecrb_command,
     print_header,
+    process_parser,
     run_process,
     suite_files,
 )
@@ -57,13 +58,9 @@ def goal(t_sesync: float, t_ours: float) -> str:
 
 
 def main(argv: list[str] | None = None) -> int:
-    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap = process_parser(__doc__.splitlines()[0], with_data_dir=True)
     ap.add_argument("names", nargs="*")
     ap.add_argument("--pairs", type=int, default=3, help="timed rounds per dataset (median) [default: 3]")
-    ap.add_argument("--data-dir", default=None)
-    ap.add_argument("--posecrb", default=None, help="command that runs posecrb [default: python -m posecrb "
-                                                     "from this checkout]")
-    ap.add_argument("--threads", type=int, default=1)
     ap.add_argument("--sesync-compat", action=argparse.BooleanOptionalAction, default=True,
                     help="posecrb reads 3D quaternions as SE-Sync does [default: on]")
     ap.add_argument("--timeout", type=float, default=900.0, help="kill a run after this many seconds")

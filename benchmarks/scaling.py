@@ -26,7 +26,6 @@ Usage: python benchmarks/scaling.py [--dims 2,3] [--huge] [--sizes2 N,N] [--size
 """
 from __future__ import annotations
 
-import argparse
 import json
 import math
 import subprocess
@@ -42,6 +41,7 @@ from _common import (
     median_wall,
     posecrb_command,
     print_header,
+    process_parser,
     run_process,
 )
 from _peers import parse_sesync, run_sesync, sesync_binary, sesync_build_info
@@ -108,7 +108,7 @@ def make_grid(dim: int, poses: int, cache_dir: str | None) -> Path:
 
 
 def main(argv: list[str] | None = None) -> int:
-    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap = process_parser(__doc__.splitlines()[0], repeat=1)
     ap.add_argument("--dims", default="2,3")
     ap.add_argument("--huge", action="store_true", help="add 10^6 (2D) and 10^5 (3D) poses")
     ap.add_argument("--sizes2", default=None, help="comma-separated 2D pose counts (overrides the defaults)")
@@ -118,9 +118,6 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--max-mem", type=float, default=8.0, help="GB; skip runs predicted to need more, kill above")
     ap.add_argument("--no-predict", action="store_true",
                     help="run every size (still killed above 2x the budget or the memory cap)")
-    ap.add_argument("--repeat", type=int, default=1)
-    ap.add_argument("--threads", type=int, default=1)
-    ap.add_argument("--posecrb", default=None)
     ap.add_argument("--cache-dir", default=None)
     args = ap.parse_args(argv)
 

@@ -25,7 +25,6 @@ Usage: python benchmarks/startup.py [--repeat K] [--file FILE] [--file3d FILE] [
 """
 from __future__ import annotations
 
-import argparse
 import json
 import subprocess
 import sys
@@ -42,6 +41,7 @@ from _common import (
     median_wall,
     posecrb_command,
     print_header,
+    process_parser,
     run_process,
 )
 
@@ -129,16 +129,11 @@ def _in_process_total(run) -> float | None:
 
 
 def main(argv: list[str] | None = None) -> int:
-    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("--repeat", type=int, default=7, help="timed rounds (median) [default: 7]")
+    ap = process_parser(__doc__.splitlines()[0], with_data_dir=True, repeat=7)
     ap.add_argument("--file", default=None, help="file for `posecrb info` and `solve` [default: CSAIL.g2o in the "
                                                  "data dir, else its smallest g2o]")
-    ap.add_argument("--file3d", default=None, help="small 3D file for `solve` [default: tinyGrid3D.g2o]")
-    ap.add_argument("--data-dir", default=None)
     ap.add_argument("--top", type=int, default=15)
-    ap.add_argument("--posecrb", default=None, help="command that runs posecrb [default: python -m posecrb "
-                                                     "from this checkout]")
-    ap.add_argument("--threads", type=int, default=1)
+    ap.add_argument("--file3d", default=None, help="small 3D file for `solve` [default: tinyGrid3D.g2o]")
     ap.add_argument("--no-importtime", action="store_true", help="skip the -X importtime report")
     args = ap.parse_args(argv)
 

@@ -19,5 +19,14 @@ def shared_datasets() -> Path:
 
 
 @pytest.fixture
+def isolated_cache(tmp_path, monkeypatch) -> Path:
+    """The user cache points into tmp_path and $POSECRB_DATA is unset, so a real
+    ~/.cache/posecrb or data directory cannot change results; returns the cache directory."""
+    monkeypatch.setenv("XDG_CACHE_HOME", str(tmp_path / "xdg"))
+    monkeypatch.delenv("POSECRB_DATA", raising=False)
+    return tmp_path / "xdg" / "posecrb"
+
+
+@pytest.fixture
 def random_graph():
     return make_random_graph

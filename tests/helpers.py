@@ -19,7 +19,7 @@ from posecrb.core.graph import PoseGraph
 from posecrb.core.noise import rotation_weight
 from posecrb.lie import se as L
 from posecrb.lie.so import so2_exp, so3_exp
-from posecrb.sim.generators import uniform_rotations
+from posecrb.sim.generators import random_graph, uniform_rotations
 
 
 def _small_rotations(m: int, dim: int, sigma: float, rng: np.random.Generator) -> np.ndarray:
@@ -69,31 +69,14 @@ def random_spd(rng: np.random.Generator, k: int, q: int, scale: float = 10.0) ->
 
 def make_random_graph(rng: np.random.Generator, n: int = 8, extra: int = 6, dim: int = 2,
                       parallel: int = 2, sparse_ids: bool = True, block_isotropic: bool = False) -> PoseGraph:
-    """A connected random graph: a random spanning tree + random extra edges + parallel copies,
-    anisotropic information (unless block_isotropic), ids with gaps, vertices attached."""
-    src = [int(rng.integers(0, k)) for k in range(1, n)]
-    dst = list(range(1, n))
-    for _ in range(extra):
-        i, j = rng.choice(n, 2, replace=False)
-        src.append(int(i))
-        dst.append(int(j))
-    for _ in range(parallel):
-        k = int(rng.integers(0, len(src)))
-        src.append(src[k])
-        dst.append(dst[k])
-    src, dst = np.array(src), np.array(dst)
-    m, q = src.size, dim + (1 if dim == 2 else 3)
-    info = random_spd(rng, m, q)
-    if block_isotropic:
-        info[:, :dim, dim:] = 0
-        info[:, dim:, :dim] = 0
-    ids = np.sort(rng.choice(10 * n, n, replace=False)) if sparse_ids else np.arange(n)
-    return PoseGraph(
-        dim=dim, ids=ids, src=src, dst=dst, rot=random_rotations(rng, m, dim),
-        trans=rng.normal(size=(m, dim)) * 2.0, info=info,
-        vertex_rot=random_rotations(rng, n, dim), vertex_trans=rng.normal(size=(n, dim)) * 3.0,
-        path=None, format="synthetic",
-    )
+    """A connected random graph from the library's generator (``posecrb.sim.generators.random_graph``):
+    a random spanning tree + ``extra`` random edges + ``parallel`` more (one of them repeating a tree
+    edge), anisotropic information with eigenvalues in [5, 50] (full, or without cross terms with
+    ``block_isotropic``): rotation information weak enough for the curvature terms to matter; ids with
+    gaps unless not ``sparse_ids``, the truth as vertices and exact measurements."""
+    return random_graph(rng, n, n - 1 + extra + parallel, dim, info="block" if block_isotropic else "full",
+                        parallel=parallel > 0, id_gaps=sparse_ids, scale=3.0,
+                        tau_range=(5.0, 50.0), kappa_range=(5.0, 50.0))
 
 
 def _fd_error(jac, weights, r_max, h, f) -> float:
@@ -119,6 +102,30 @@ def _rotation_coords(mat: np.ndarray, dim: int) -> np.ndarray:
     return np.sqrt(2.0) * Rotation.from_matrix(mat).as_rotvec()
 
 
+def central_jacobian(residual, rot: np.ndarray, trans: np.ndarray, free, h: float) -> np.ndarray:
+    """Jacobian of ``residual(rot, trans)`` by central differences of step ``h`` over the poses
+    ``free``: columns [translations x_k + dx; rotations R_k Exp(delta)] (body frame, the FIM's
+    rotation basis: the angle in 2D, E_k = G_k / sqrt 2 in 3D)."""
+    d = rot.shape[-1]
+    dr = 1 if d == 2 else 3
+    cols = []
+    for k in free:
+        for a in range(d):
+            tp, tm = trans.copy(), trans.copy()
+            tp[k, a] += h
+            tm[k, a] -= h
+            cols.append((residual(rot, tp) - residual(rot, tm)) / (2 * h))
+    for k in free:
+        for a in range(dr):
+            delta = np.zeros(dr)
+            delta[a] = h
+            rp, rm = rot.copy(), rot.copy()
+            rp[k] = _body_perturbed(rot[k], d, delta)
+            rm[k] = _body_perturbed(rot[k], d, -delta)
+            cols.append((residual(rp, trans) - residual(rm, trans)) / (2 * h))
+    return np.stack(cols, axis=1)
+
+
 def dense_model_fisher(graph, rot, trans, anchor: int, h: float = 1e-6, with_error: bool = False):
     """Fisher information J^T W J of the model's mean function, from central differences,
     every pose perturbed in its body frame (x_k + dx, R_k Exp(delta)), order [translations;
@@ -142,23 +149,7 @@ def dense_model_fisher(graph, rot, trans, anchor: int, h: float = 1e-6, with_err
             out.append(_rotation_coords(rbar[e].T @ r[i].T @ r[j], d))
         return np.concatenate(out)
 
-    cols = []
-    free = [k for k in range(graph.n) if k != anchor]
-    for k in free:
-        for a in range(d):
-            tp, tm = trans.copy(), trans.copy()
-            tp[k, a] += h
-            tm[k, a] -= h
-            cols.append((residual(rot, tp) - residual(rot, tm)) / (2 * h))
-    for k in free:
-        for a in range(dr):
-            delta = np.zeros(dr)
-            delta[a] = h
-            rp, rm = rot.copy(), rot.copy()
-            rp[k] = _body_perturbed(rot[k], d, delta)
-            rm[k] = _body_perturbed(rot[k], d, -delta)
-            cols.append((residual(rp, trans) - residual(rm, trans)) / (2 * h))
-    jac = np.stack(cols, axis=1)
+    jac = central_jacobian(residual, rot, trans, [k for k in range(graph.n) if k != anchor], h)
     w = rotation_weight(graph.kappa, d)
     weights = np.concatenate([np.concatenate([np.full(d, t), np.full(dr, v)]) for t, v in zip(graph.tau, w)])
     f = jac.T @ (weights[:, None] * jac)
@@ -220,16 +211,37 @@ def body_fim_reference(graph: PoseGraph, rot, trans) -> np.ndarray:
     return f
 
 
-def consistent_graph(dim: int, seed: int, noise: float = 0.1, **kw) -> PoseGraph:
-    """A random graph whose measurements are its vertices' relative poses times Exp(noise):
-    residual angles ~ noise, far from the branch cut of Log where the reference breaks down."""
-    rng = np.random.default_rng(seed)
+def perturbed_graph(rng: np.random.Generator, dim: int, noise: float = 0.3, **kw) -> PoseGraph:
+    """``make_random_graph(rng, dim=dim, **kw)`` whose measurements are its vertices' relative poses
+    times Exp(xi), xi ~ N(0, noise^2 I): residual angles ~ noise, well inside (-pi, pi), far from
+    the branch cut of Log where the dense references break down; anisotropic full information."""
     g = make_random_graph(rng, dim=dim, **kw)
     ri, ti = L.se_inverse(g.vertex_rot[g.src], g.vertex_trans[g.src])
     rz, tz = L.se_compose(ri, ti, g.vertex_rot[g.dst], g.vertex_trans[g.dst])
     re, te = L.se_exp(noise * rng.normal(size=(g.m, g.q)))
     rz, tz = L.se_compose(rz, tz, re, te)
     return replace(g, rot=rz, trans=tz)
+
+
+def consistent_graph(dim: int, seed: int, noise: float = 0.1, **kw) -> PoseGraph:
+    """``perturbed_graph`` from a seed, with small residuals (noise 0.1) by default."""
+    return perturbed_graph(np.random.default_rng(seed), dim, noise, **kw)
+
+
+def drop_edges(graph: PoseGraph, drop: np.ndarray) -> PoseGraph:
+    """The graph without the edges where the boolean mask ``drop`` is true (vertices kept)."""
+    keep = ~np.asarray(drop, dtype=bool)
+    return replace(graph, src=graph.src[keep], dst=graph.dst[keep], rot=graph.rot[keep],
+                   trans=graph.trans[keep], info=graph.info[keep])
+
+
+def component_count(graph: PoseGraph) -> int:
+    """Connected components of the graph's poses, by scipy's union-find (independent of PoseGraph)."""
+    from scipy.sparse import coo_matrix
+    from scipy.sparse.csgraph import connected_components
+
+    adj = coo_matrix((np.ones(graph.m), (graph.src, graph.dst)), shape=(graph.n, graph.n))
+    return int(connected_components(adj, directed=False)[0])
 
 
 def free_dofs(n: int, q: int, anchors) -> np.ndarray:
@@ -294,3 +306,12 @@ def _bridge_graph(dim: int, weak: float):
     return PoseGraph(dim=dim, ids=np.arange(8), src=src, dst=dst, rot=mr, trans=mt,
                      info=isotropic_information(tau, kappa, dim), vertex_rot=rot, vertex_trans=trans,
                      format="synthetic")
+
+
+def run_cli(argv, capsys):
+    """(exit code, stdout, stderr) of ``posecrb ARGV`` through the entry point's error mapping."""
+    from posecrb.cli import main
+
+    code = main(argv)
+    out = capsys.readouterr()
+    return code, out.out, out.err

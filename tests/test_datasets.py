@@ -45,14 +45,6 @@ SOURCES_BLOBS = {"grid3D": "0dee46a9e43e1f51b9d4466ac6119e5bb6966954",
                  "rim": "0c2f783b9d71012a612f09673f5aed87ae65f954"}
 
 
-@pytest.fixture
-def isolated_cache(tmp_path, monkeypatch):
-    """The user cache points into tmp_path so a real ~/.cache/posecrb cannot change results."""
-    monkeypatch.setenv("XDG_CACHE_HOME", str(tmp_path / "xdg"))
-    monkeypatch.delenv("POSECRB_DATA", raising=False)
-    return tmp_path / "xdg" / "posecrb"
-
-
 def shared_files(root: Path) -> list[Path]:
     return sorted(root.glob("*.g2o")) + sorted(p for p in (root / "toro").iterdir() if p.is_file())
 

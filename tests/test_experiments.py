@@ -6,6 +6,7 @@ model, numpy pinv, finite differences of the thesis log-likelihood, the noise-fr
 from __future__ import annotations
 
 import json
+import math
 
 import numpy as np
 import pytest
@@ -224,6 +225,13 @@ def test_octagon_truth_is_the_solver_estimate():
 
 
 # ---------------------------------------------------------------- CLI
+def _png_size(path) -> tuple[int, int]:
+    """(width, height) from the IHDR chunk of a PNG file (whose signature is checked)."""
+    head = path.read_bytes()[:24]
+    assert head[:8] == b"\x89PNG\r\n\x1a\n" and head[12:16] == b"IHDR"
+    return int.from_bytes(head[16:20], "big"), int.from_bytes(head[20:24], "big")
+
+
 def _run(args):
     from posecrb.cli import cli
 
@@ -234,15 +242,30 @@ def test_cli_octagon_and_thesis(tmp_path):
     r = _run(["experiment", "octagon", "--trials", "2", "--format", "json", "--out", str(tmp_path / "o")])
     assert r.exit_code == 0, r.output
     rows = json.loads(r.output)
-    assert len(rows) == 22 and {"extra_edges", "trace_min", "logdet_max", "flagged"} <= set(rows[0])
+    # one row per number of extra edges k = 0..21 on the 8-pose chain (7 edges); at most `trials`
+    # distinct graphs per level, exactly one where there is only one choice (k = 0, 21)
+    assert [row["extra_edges"] for row in rows] == list(range(22))
+    assert [row["m"] for row in rows] == [7 + k for k in range(22)]
+    assert [row["graphs"] for row in rows] == [min(math.comb(21, k), 2) for k in range(22)]
+    assert all(row["trace_min"] <= row["trace_max"] and row["logdet_min"] <= row["logdet_max"] for row in rows)
     run = json.loads((tmp_path / "o" / "run.json").read_text())
-    assert run["settings"]["trials"] == 2 and run["seeds"] and "numpy" in run["versions"]
-    assert (tmp_path / "o" / "octagon.png").stat().st_size > 1000
+    assert run["settings"]["trials"] == 2 and run["settings"]["seed"] == 0
+    # every level draws from its own child of the root seed
+    assert [s["level"] for s in run["seeds"]] == list(range(22))
+    assert {s["entropy"] for s in run["seeds"]} == {0}
+    assert len({tuple(s["spawn_key"]) for s in run["seeds"]}) == 22
+    import numpy
+
+    assert run["versions"]["numpy"] == numpy.__version__
+    assert _png_size(tmp_path / "o" / "octagon.png") > (0, 0)
     r = _run(["experiment", "thesis", "--m", "1,5", "--trials", "10", "--format", "csv",
               "--plot", str(tmp_path / "t.png")])
     assert r.exit_code == 0, r.output
-    assert r.output.splitlines()[0].startswith("m,formulation,trials,frob")
-    assert (tmp_path / "t.png").exists()
+    lines = r.output.splitlines()
+    assert lines[0].startswith("m,formulation,trials,frob")
+    assert [tuple(ln.split(",")[:3]) for ln in lines[1:]] == [(m, f, "10") for m in ("1", "5")
+                                                             for f in ("anchored", "quotient")]
+    assert _png_size(tmp_path / "t.png") > (0, 0)
 
 
 def test_cli_crlb(tmp_path):
@@ -271,16 +294,23 @@ def test_quick_mode_of_each_experiment(shared_datasets, args):
     r = _run(["experiment", *args, "--quick", "--format", "json"])
     assert r.exit_code == 0, r.output
     rows = json.loads(r.output)
-    assert rows
     if args[0] == "crlb":
         assert [row["kc"] for row in rows] == [1.0, 20.0]
         for row in rows:
-            assert row["uncertified"] == 0
-            # 20 trials: the MSE of an (asymptotically) efficient estimator is near the model's bound
+            assert row["uncertified"] == 0 and row["trials"] == 20
             assert row["fim_variant"] == "consistent"
-            assert 0.5 < row["ratio"] < 2.0
+            # the MSE of an (asymptotically) efficient estimator is the model's bound: within 3
+            # standard errors of the 20-trial mean, plus 5% for second-order effects
+            assert row["ratio"] == pytest.approx(row["mse"] / row["mse_bound"], rel=4 * np.finfo(float).eps)
+            assert abs(row["ratio"] - 1) < 3 * row["mse_stderr"] / row["mse_bound"] + 0.05
+    elif args[0] == "thesis":   # --quick: m = 1, 10, 100 measurements per arc, both formulations
+        assert [(row["m"], row["formulation"]) for row in rows] == [(m, f) for m in (1, 10, 100)
+                                                                     for f in ("anchored", "quotient")]
+    else:
+        assert [row["extra_edges"] for row in rows] == list(range(22))
 
 
+@pytest.mark.slow
 def test_tinygrid3d_mse_reaches_the_default_bound_not_eq64(shared_datasets):
     """`posecrb experiment crlb tinyGrid3D --kc 20` (100 trials, seed 0): the MSE of the certified
     MLE matches the default CRLB (the model's Fisher information) within 3 standard errors plus 5%

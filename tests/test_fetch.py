@@ -19,6 +19,8 @@ from posecrb.cli import main
 from posecrb.datasets.fetch import FetchError, fetch, fetch_many, target_path
 from posecrb.datasets.manifest import load_manifest
 
+pytestmark = pytest.mark.usefixtures("isolated_cache")   # every test: no real cache or $POSECRB_DATA
+
 
 class _Handler(http.server.BaseHTTPRequestHandler):
     root: Path
@@ -77,12 +79,6 @@ def server(tmp_path, shared_datasets):
         httpd.shutdown()
         httpd.server_close()
         thread.join(5)
-
-
-@pytest.fixture(autouse=True)
-def isolated_cache(tmp_path, monkeypatch):
-    monkeypatch.setenv("XDG_CACHE_HOME", str(tmp_path / "xdg"))
-    monkeypatch.delenv("POSECRB_DATA", raising=False)
 
 
 def files_in(d: Path) -> list[str]:

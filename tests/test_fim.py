@@ -11,19 +11,19 @@ import pytest
 
 from posecrb.core.errors import DisconnectedGraph, NotPositiveDefinite
 from posecrb.core.noise import rotation_weight
-from posecrb.lie.so import so2_exp, so3_exp
 from posecrb.models.paper.bounds import t_optimality
 from posecrb.models.paper.fim import FIM_VARIANTS, fim_logdet, fim_symbolic, paper_fim, trace_fim
 
-from .helpers import _bridge_graph, _fd_error, dense_model_fisher, make_random_graph
+from .helpers import (
+    _bridge_graph,
+    _fd_error,
+    central_jacobian,
+    dense_model_fisher,
+    drop_edges,
+    make_random_graph,
+    run_cli,
+)
 from .numerics import assert_within, logdet_atol, psd_sum_tolerance, sum_atol
-
-
-def perturbed(rot: np.ndarray, dim: int, delta: np.ndarray) -> np.ndarray:
-    """R Exp(delta) along the paper's basis: angle in 2D, E_k = G_k / sqrt 2 in 3D."""
-    if dim == 2:
-        return rot @ so2_exp(np.array(delta[0]))
-    return rot @ so3_exp(np.asarray(delta) / np.sqrt(2.0))
 
 
 def residuals(graph, rot, trans) -> np.ndarray:
@@ -44,22 +44,7 @@ def dense_reference(graph, rot, trans, anchor: int, h: float = 1e-6, with_error:
     dr = 1 if d == 2 else 3
     free = [k for k in range(graph.n) if k != anchor]
     npf = len(free)
-    cols = []
-    for k in free:  # translation columns
-        for a in range(d):
-            tp, tm = trans.copy(), trans.copy()
-            tp[k, a] += h
-            tm[k, a] -= h
-            cols.append((residuals(graph, rot, tp) - residuals(graph, rot, tm)) / (2 * h))
-    for k in free:  # rotation columns
-        for a in range(dr):
-            delta = np.zeros(dr)
-            delta[a] = h
-            rp, rm = rot.copy(), rot.copy()
-            rp[k] = perturbed(rot[k], d, delta)
-            rm[k] = perturbed(rot[k], d, -delta)
-            cols.append((residuals(graph, rp, trans) - residuals(graph, rm, trans)) / (2 * h))
-    jac = np.stack(cols, axis=1)
+    jac = central_jacobian(lambda r, t: residuals(graph, r, t), rot, trans, free, h)
     wdiag = np.repeat(graph.tau, d)
     f = jac.T @ (wdiag[:, None] * jac)
     rel = _fd_error(jac, wdiag, max(np.abs(residuals(graph, rot, trans)).max(), np.abs(graph.trans).max(),
@@ -226,8 +211,7 @@ def test_intel_table1_logdet(shared_datasets):
 def test_disconnected_graph_is_rejected():
     g = make_random_graph(np.random.default_rng(1), n=6, extra=0, parallel=0, dim=2)
     # drop the spanning-tree edge into pose 5: pose 5 becomes isolated
-    keep = g.dst != 5
-    g2 = replace(g, src=g.src[keep], dst=g.dst[keep], rot=g.rot[keep], trans=g.trans[keep], info=g.info[keep])
+    g2 = drop_edges(g, (g.src == 5) | (g.dst == 5))   # pose 5 isolated
     with pytest.raises(DisconnectedGraph):
         paper_fim(g2, g.vertex_rot, g.vertex_trans)
 
@@ -251,14 +235,6 @@ def test_bad_estimate_shape():
 
 
 # ---------------------------------------------------------------- CLI `posecrb fim`
-def run_cli(argv, capsys):
-    from posecrb.cli import main
-
-    code = main(argv)
-    out = capsys.readouterr()
-    return code, out.out, out.err
-
-
 @pytest.fixture
 def g2o_file(tmp_path):
     from posecrb.io import write_g2o

@@ -31,6 +31,7 @@ from .helpers import (
     body_fim_reference,
     consistent_graph,
     free_dofs,
+    run_cli,
 )
 
 FD_RTOL = 1e-8
@@ -153,14 +154,6 @@ def test_coordinate_names_and_bad_frame():
 
 
 # ------------------------------------------------------------------ CLI
-def run_cli(argv, capsys):
-    from posecrb.cli import main
-
-    code = main(argv)
-    out = capsys.readouterr()
-    return code, out.out, out.err
-
-
 @pytest.mark.parametrize("dim", [2, 3])
 def test_cli_crlb_and_fim_frames(dim, tmp_path, capsys):
     from posecrb.io import load, write_g2o

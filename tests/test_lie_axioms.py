@@ -18,6 +18,7 @@ import numpy as np
 import pytest
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
+from scipy.linalg import expm
 
 from posecrb.lie.se import (
     from_homogeneous,
@@ -37,7 +38,8 @@ from posecrb.lie.se import (
 )
 from posecrb.lie.so import so2_exp, so2_log, so3_exp, so3_jr, so3_jr_inv, so3_log
 
-EPS = np.finfo(float).eps
+from .helpers import hat_ref
+from .numerics import EPS
 
 PROPERTY = settings(derandomize=True, max_examples=50, deadline=None, database=None,
                     suppress_health_check=[HealthCheck.too_slow])
@@ -169,7 +171,42 @@ def test_exp_is_a_one_parameter_subgroup(name, data):
     np.testing.assert_allclose(lhs, g.exp((s + u) * xi), rtol=0, atol=_tol(3 * _norm(xi), 3 * _norm(xi)))
 
 
+def _hat(name: str, xi: np.ndarray) -> np.ndarray:
+    """The Lie algebra element of ``xi``, written out here (rotation first for SE(d), as hat_ref)."""
+    if name == "SO2":
+        return np.array([[0.0, -xi[0]], [xi[0], 0.0]])
+    if name == "SO3":
+        return hat_ref(np.r_[xi, 0.0, 0.0, 0.0])[:3, :3]
+    return hat_ref(xi)
+
+
+@for_each_group
+def test_exp_is_the_matrix_exponential(name, data):
+    """Exp(xi) = expm(hat(xi)): the closed forms against scipy's Pade scaling-and-squaring."""
+    g = GROUPS[name]
+    xi = data.draw(tangents(g))
+    n = _norm(xi)
+    # expm is accurate to a modest multiple of eps ||hat(xi)|| relative to ||expm|| <= e^{|xi|};
+    # on this domain that stays within the closed forms' own bound
+    np.testing.assert_allclose(g.exp(xi), expm(_hat(name, xi)), rtol=0, atol=_tol(n, n))
+
+
 # ---------------------------------------------------------------- group axioms
+@for_each_group
+def test_exp_and_compose_stay_in_the_group(name, data):
+    """Closure: rotation blocks orthonormal with determinant +1, homogeneous last row exactly [0 ... 0 1]."""
+    g = GROUPS[name]
+    a, b = g.exp(data.draw(tangents(g))), g.exp(data.draw(tangents(g)))
+    d = a.shape[0] - (0 if name.startswith("SO") else 1)
+    for x in (a, b, g.compose(a, b), g.inverse(a)):
+        r = x[:d, :d]
+        # orthonormality is preserved by the closed forms to a few ulps (entries of R are <= 1)
+        np.testing.assert_allclose(r.T @ r, np.eye(d), rtol=0, atol=_tol(1.0, 1.0))
+        assert abs(np.linalg.det(r) - 1.0) <= _tol(1.0, 1.0)
+        if d < x.shape[0]:
+            np.testing.assert_array_equal(x[d], np.r_[np.zeros(d), 1.0])
+
+
 @for_each_group
 def test_identity_and_inverse(name, data):
     g = GROUPS[name]

@@ -1,9 +1,11 @@
 """`posecrb regress`: the CI subset holds, and drift or a changed input is caught."""
+import hashlib
 import json
 
 import pytest
 
 from posecrb.cli import main
+from posecrb.core.errors import PosecrbError
 from posecrb.metrics.regress import compare, default_expected_path, load_expected
 
 # The CI subset (well under the 3-minute budget); `make regress` runs every dataset.
@@ -49,8 +51,24 @@ def test_tolerances():
     assert not bad[0].ok
 
 
-def test_default_expected_path_exists():
-    assert default_expected_path().is_file()
+def test_expected_file_checksums_are_the_datasets(shared_datasets, monkeypatch):
+    """The default expected file describes the files on the search path: each stored sha256 is the
+    hash of the dataset's bytes, computed here, and each stored bound pair is ordered (eq. 75, 77)."""
+    from posecrb.datasets.search import resolve
+
+    monkeypatch.setenv("POSECRB_DATA", str(shared_datasets))
+    stored = json.loads(default_expected_path().read_text())["datasets"]
+    assert stored == load_expected()["datasets"]
+    missing = []
+    for name, values in stored.items():
+        try:
+            path = resolve(name)
+        except PosecrbError:
+            missing.append(name)
+            continue
+        assert values["sha256"] == hashlib.sha256(path.read_bytes()).hexdigest(), name
+        assert values["lb"] <= values["ub"] <= values["ub_lambda"], name
+    assert not set(missing) & set(CI_SUBSET)
 
 
 def test_changed_fim_variant_is_reported_not_compared():

@@ -3,6 +3,7 @@ from __future__ import annotations
 
 import logging
 from dataclasses import replace
+from functools import partial
 
 import numpy as np
 import pytest
@@ -16,7 +17,7 @@ from posecrb.models.thesis import example as te
 from posecrb.models.thesis.crb import sed_crb
 from posecrb.models.thesis.fim import edge_residuals, kernel_basis, left_information, sed_fim
 
-from .helpers import hat_ref, make_random_graph
+from .helpers import hat_ref, perturbed_graph
 from .numerics import (
     EPS,
     MARGIN,
@@ -91,15 +92,8 @@ def reference_fim(graph: PoseGraph, rot, trans, omega) -> np.ndarray:
     return f
 
 
-def perturbed_graph(rng, dim, n=6, extra=4, parallel=2, noise=0.3) -> PoseGraph:
-    """Random connected graph whose measurements are the vertices' relative poses times a
-    moderate random error (residual angles well inside (-pi, pi)), anisotropic full information."""
-    g = make_random_graph(rng, n=n, extra=extra, dim=dim, parallel=parallel)
-    xi_inv_r, xi_inv_t = L.se_inverse(g.vertex_rot[g.src], g.vertex_trans[g.src])
-    r0, t0 = L.se_compose(xi_inv_r, xi_inv_t, g.vertex_rot[g.dst], g.vertex_trans[g.dst])
-    er, et = L.se_exp(rng.normal(size=(g.m, g.q)) * noise)
-    r, t = L.se_compose(er, et, r0, t0)
-    return replace(g, rot=r, trans=t)
+# residuals ~0.3 rad: a moderate error, well inside (-pi, pi); six poses, four loop closures
+sed_graph = partial(perturbed_graph, n=6, extra=4)
 
 
 def union(g1: PoseGraph, g2: PoseGraph) -> PoseGraph:
@@ -131,7 +125,7 @@ def dense_blocks(mat, q):
 # ------------------------------------------------------------------ FIM
 @pytest.mark.parametrize("dim", [2, 3])
 def test_left_information_is_the_adjoint_congruence(dim):
-    g = perturbed_graph(np.random.default_rng(dim), dim)
+    g = sed_graph(np.random.default_rng(dim), dim)
     om, n_bad = left_information(g)
     assert n_bad == 0
     np.testing.assert_allclose(om, reference_omega_left(g), rtol=1e-7, atol=1e-7 * np.abs(om).max())
@@ -142,7 +136,7 @@ def test_fim_equals_the_g2o_error_model_at_zero_residual(dim):
     """End to end, no conversion formula: with the g2o error e = Log(z^{-1} X_i^{-1} X_j) and the
     file's matrix on it (reordered rotation first), sum J_e^T I J_e by finite differences in the
     thesis' perturbations T_k Exp(delta) equals sed_fim's F where the residuals vanish."""
-    g = perturbed_graph(np.random.default_rng(40 + dim), dim, n=5, noise=0.0)
+    g = sed_graph(np.random.default_rng(40 + dim), dim, n=5, noise=0.0)
     q, n = g.q, g.n
     perm = [2, 0, 1] if q == 3 else [3, 4, 5, 0, 1, 2]
     ref = np.zeros((n * q, n * q))
@@ -167,7 +161,7 @@ def test_fim_equals_the_g2o_error_model_at_zero_residual(dim):
 @pytest.mark.parametrize("dim,seed", [(2, 0), (2, 1), (3, 0), (3, 1)])
 def test_fim_matches_finite_difference_jacobians(dim, seed):
     rng = np.random.default_rng(100 + seed)
-    g = perturbed_graph(rng, dim, n=6 if dim == 2 else 5, extra=4, parallel=2)
+    g = sed_graph(rng, dim, n=6 if dim == 2 else 5, extra=4, parallel=2)
     assert np.abs(edge_residuals(g, g.vertex_rot, g.vertex_trans)).max() > 0.1  # Jr^{-1} is exercised
     fim = sed_fim(g, g.vertex_rot, g.vertex_trans)
     ref = reference_fim(g, g.vertex_rot, g.vertex_trans, reference_omega_left(g))
@@ -181,8 +175,8 @@ def test_fim_matches_finite_difference_jacobians(dim, seed):
 @pytest.mark.parametrize("dim", [2, 3])
 def test_disconnected_graph_nullity_and_kernel(dim):
     rng = np.random.default_rng(7)
-    g = union(union(perturbed_graph(rng, dim, n=4), perturbed_graph(rng, dim, n=3, extra=1)),
-              perturbed_graph(rng, dim, n=2, extra=0, parallel=1))
+    g = union(union(sed_graph(rng, dim, n=4), sed_graph(rng, dim, n=3, extra=1)),
+              sed_graph(rng, dim, n=2, extra=0, parallel=1))
     assert g.n_components == 3
     fim = sed_fim(g, g.vertex_rot, g.vertex_trans)
     f = fim.matrix.toarray()
@@ -207,7 +201,7 @@ def test_disconnected_graph_nullity_and_kernel(dim):
 def test_rank_deficiency_beyond_gauge_is_detected():
     """A zero information matrix on a bridge edge splits the identifiable structure: nullity 2q."""
     rng = np.random.default_rng(3)
-    g = union(perturbed_graph(rng, 2, n=4), perturbed_graph(rng, 2, n=3, extra=1))
+    g = union(sed_graph(rng, 2, n=4), sed_graph(rng, 2, n=3, extra=1))
     g = replace(g, src=np.r_[g.src, 0], dst=np.r_[g.dst, 5], rot=np.r_[g.rot, g.rot[:1]],
                 trans=np.r_[g.trans, g.trans[:1]], info=np.r_[g.info, g.info[:1]])
     assert g.n_components == 1
@@ -223,7 +217,7 @@ def test_rank_deficiency_beyond_gauge_is_detected():
 @pytest.mark.parametrize("dim", [2, 3])
 def test_anchored_crb_is_the_dense_inverse_on_free_poses(dim):
     rng = np.random.default_rng(11 + dim)
-    g = union(perturbed_graph(rng, dim, n=5), perturbed_graph(rng, dim, n=4, extra=2))
+    g = union(sed_graph(rng, dim, n=5), sed_graph(rng, dim, n=4, extra=2))
     q = g.q
     f = sed_fim(g, g.vertex_rot, g.vertex_trans).matrix.toarray()
     for anchors in (None, [1, 6], [0, 3, 5, 8]):
@@ -250,8 +244,8 @@ def test_anchored_crb_is_the_dense_inverse_on_free_poses(dim):
 @pytest.mark.parametrize("dim", [2, 3])
 def test_quotient_crb_is_the_pseudoinverse(dim):
     rng = np.random.default_rng(21 + dim)
-    g = union(union(perturbed_graph(rng, dim, n=5), perturbed_graph(rng, dim, n=4, extra=2)),
-              perturbed_graph(rng, dim, n=3, extra=1))
+    g = union(union(sed_graph(rng, dim, n=5), sed_graph(rng, dim, n=4, extra=2)),
+              sed_graph(rng, dim, n=3, extra=1))
     q, c = g.q, 3
     f = sed_fim(g, g.vertex_rot, g.vertex_trans).matrix.toarray()
     fp = np.linalg.pinv(f, rcond=1e-10, hermitian=True)                         # (5.5)
@@ -271,7 +265,7 @@ def test_quotient_crb_is_the_pseudoinverse(dim):
 
 def test_unanchored_component_is_a_usage_error():
     rng = np.random.default_rng(5)
-    g = union(perturbed_graph(rng, 2, n=4), perturbed_graph(rng, 2, n=3, extra=1))
+    g = union(sed_graph(rng, 2, n=4), sed_graph(rng, 2, n=3, extra=1))
     with pytest.raises(UsageError, match=r"component #1 \(3 poses"):
         sed_crb(g, g.vertex_rot, g.vertex_trans, anchors=[0, 2])
     with pytest.raises(UsageError, match="out of range"):
@@ -280,7 +274,7 @@ def test_unanchored_component_is_a_usage_error():
 
 # ------------------------------------------------------------------ indefinite information
 def indefinite_graph(rng):
-    g = perturbed_graph(rng, 3, n=5)
+    g = sed_graph(rng, 3, n=5)
     info = g.info.copy()
     info[:3] = np.diag([10.0, 10, 10, 10, 10, 10])
     info[:3, 2, 3] = info[:3, 3, 2] = 500.0     # PD blocks, indefinite whole (like cubicle.g2o)

@@ -1,13 +1,18 @@
 """`posecrb tables`: formats parse back, statuses, run record, paper comparison."""
 import csv
+import hashlib
 import io
 import json
+import re
+from decimal import Decimal
 
 import pytest
 
 from posecrb.cli import main
 from posecrb.metrics.published import PAPER_NAME, TABLE_II
-from posecrb.metrics.tables import _tex_number, failed, published_settings, table_rows
+from posecrb.metrics.tables import HEADERS, _tex_number, failed, published_settings, table_rows
+
+from .numerics import EPS
 
 SUBSET = "CSAIL,tinyGrid3D"
 
@@ -34,40 +39,130 @@ def test_json_and_csv_parse_back(shared_datasets, capfd):
     assert {r["fim_variant"] for r in parsed} == {"consistent"}
 
 
-def test_markdown_and_latex_structure(shared_datasets, capfd):
-    rc, out, _ = _run(capfd, "--format", "markdown", "--table", "1", "--table", "3")
+def _printed(cell: str) -> tuple[float, float]:
+    """A number as printed (plain, 1.2345e-04 or LaTeX $1.2345\\times10^{-4}$) and half a unit of its
+    last printed digit: the rendering's rounding error bound."""
+    m = re.fullmatch(r"\$([-+0-9.]+)\\times10\^\{([-+0-9]+)\}\$", cell)
+    text = f"{m.group(1)}E{m.group(2)}" if m else cell
+    return float(text), 0.5 * 10.0 ** Decimal(text).as_tuple().exponent
+
+
+def _assert_cells_match(cells: list[str], row: dict, columns: list[str]):
+    """Each printed cell is the computed value: strings and integers exactly, floats to the
+    rounding of the printed digits (with the last bit of the value itself)."""
+    assert len(cells) == len(columns)
+    for cell, c in zip(cells, columns):
+        v = row[c]
+        if v is None:
+            assert cell in ("-", "--"), (c, cell)
+        elif isinstance(v, float):
+            got, half_unit = _printed(cell)
+            assert abs(got - v) <= half_unit + EPS * abs(v), (c, cell, v)
+        else:
+            assert cell == str(v), (c, cell, v)
+
+
+def _markdown_tables(text: str) -> list[list[list[str]]]:
+    """Every markdown table of ``text`` as rows of cells (header first, the rule dropped)."""
+    out = []
+    for block in (b for b in text.split("### ") if b.strip()):
+        lines = [ln for ln in block.splitlines() if ln.startswith("|")]
+        assert set(lines[1]) <= set("|-")
+        out.append([[c.strip() for c in ln.strip("|").split("|")] for i, ln in enumerate(lines) if i != 1])
+    return out
+
+
+def _latex_tabular(text: str) -> tuple[str, list[list[str]]]:
+    """(column spec, rows of cells with the header first) of the one tabular in ``text``."""
+    assert text.count(r"\begin{tabular}") == 1
+    spec = re.search(r"\\begin\{tabular\}\{([lrc]+)\}", text).group(1)
+    body = text.split(r"\toprule")[1].split(r"\bottomrule")[0].replace(r"\midrule", "")
+    rows = [ln.strip() for ln in body.splitlines() if ln.strip()]
+    assert all(ln.endswith(r"\\") for ln in rows)
+    return spec, [[c.strip() for c in ln[:-2].split(" & ")] for ln in rows]
+
+
+def test_markdown_cells_are_the_computed_rows(shared_datasets, capfd, tmp_path):
+    rc, out, _ = _run(capfd, "--format", "markdown", "--table", "1", "--table", "3", "--out", str(tmp_path))
     assert rc == 0
-    tables = [blk for blk in out.split("### ") if blk.strip()]
+    tables = _markdown_tables(out)
     assert len(tables) == 2
-    lines = [ln for ln in tables[0].splitlines() if ln.startswith("|")]
-    assert len(lines) == 3  # header, rule, CSAIL
-    assert len({ln.count("|") for ln in lines}) == 1
-    rc, out, _ = _run(capfd, "--format", "latex", "--table", "2")
-    assert out.count(r"\begin{tabular}") == 1 and out.count(r"\\") >= 2
-    assert "tinyGrid3D" in out and "(59)" in out  # Table II footnote
+    for t, cells in zip((1, 3), tables):
+        rows = json.loads((tmp_path / f"table{t}.json").read_text())   # the same run's values
+        columns = list(rows[0])
+        assert cells[0] == [HEADERS.get(c, c) for c in columns]
+        assert [r[0] for r in cells[1:]] == [r["dataset"] for r in rows] == ["CSAIL"]
+        for printed, row in zip(cells[1:], rows):
+            _assert_cells_match(printed, row, columns)
+
+
+def test_latex_cells_are_the_computed_rows(shared_datasets, capfd, tmp_path):
+    rc, out, _ = _run(capfd, "--format", "latex", "--table", "2", "--out", str(tmp_path))
+    assert rc == 0
+    rows = json.loads((tmp_path / "table2.json").read_text())
+    columns = list(rows[0])
+    spec, cells = _latex_tabular(out)
+    assert spec == "l" + "r" * (len(columns) - 1)
+    assert len(cells[0]) == len(columns) and cells[0][:3] == ["dataset", "# Poses", "# Meas."]
+    assert [r[0] for r in cells[1:]] == [r["dataset"] for r in rows] == ["tinyGrid3D"]
+    for printed, row in zip(cells[1:], rows):
+        _assert_cells_match(printed, row, columns)
+    # the derived columns, recomputed from the row's own bounds
+    row = rows[0]
+    assert row["gap_ub_rel"] == pytest.approx((row["ub"] - row["lb"]) / row["lb"], rel=4 * EPS)
+    assert row["gap_fim_rel"] == pytest.approx((row["fim_logdet"] - row["lb"]) / row["lb"], rel=4 * EPS)
+    assert "(59)" in out.split(r"\begin{tabular}")[0]   # the Table II footnote is in the caption
+    assert _latex_tabular((tmp_path / "table2.tex").read_text())[1] == cells   # the file: the same table
 
 
 def test_compare_paper_and_table2_fit_labelled(shared_datasets, capfd):
     rc, out, _ = _run(capfd, "--format", "json", "--compare-paper", "--rotation-weight", "table2")
     data = json.loads(out)
     csail = data["tables"]["I"][0]
-    assert csail["paper_fim_logdet"] == 1.9860e4
-    assert abs(csail["rel_diff_fim_logdet"]) < 1e-4  # FIM at the certified optimum matches Table I
+    printed = 1.9860e4   # the paper's Table I, CSAIL, FIM log-det
+    assert csail["paper_fim_logdet"] == printed
+    assert csail["rel_diff_fim_logdet"] == pytest.approx((csail["fim_logdet"] - printed) / printed, rel=4 * EPS)
+    # FIM at the certified optimum: the printed value to its rounding (+-0.5) plus a margin of 4
+    assert abs(csail["fim_logdet"] - printed) < 4 * 0.5
     tiny = data["tables"]["II"][0]
-    assert abs(tiny["rel_diff_lb"]) < 1e-3  # the empirical fit reproduces Table II's lb
+    printed = 2.4163e2   # Table II, tiny-grid, lb
+    assert tiny["paper_lb"] == printed
+    assert tiny["rel_diff_lb"] == pytest.approx((tiny["lb"] - printed) / printed, rel=4 * EPS)
+    # the empirical fit reproduces Table II's lb; the fit's factor 0.5515 has 4 digits (+-5e-5 relative)
+    assert abs(tiny["rel_diff_lb"]) < 1e-3
     rc, out, _ = _run(capfd, "--format", "markdown", "--table", "2", "--rotation-weight", "table2")
     assert "EMPIRICAL" in out
 
 
 def test_out_dir_has_every_format_and_run_record(shared_datasets, capfd, tmp_path):
-    rc, _, _ = _run(capfd, "--format", "csv", "--out", str(tmp_path))
+    rc, out, _ = _run(capfd, "--format", "csv", "--out", str(tmp_path))
     assert rc == 0
+    rows = {r["dataset"]: r for r in json.loads((tmp_path / "rows.json").read_text())}
+    rows_csv = (tmp_path / "rows.csv").read_text()
+    assert list(csv.DictReader(io.StringIO(out))) == list(csv.DictReader(io.StringIO(rows_csv)))
     for t in (1, 2, 3, 4):
-        for ext in ("md", "csv", "json", "tex"):
-            assert (tmp_path / f"table{t}.{ext}").is_file()
+        trs = json.loads((tmp_path / f"table{t}.json").read_text())
+        assert [r["dataset"] for r in trs] == (["CSAIL"] if t in (1, 3) else ["tinyGrid3D"])
+        parsed = list(csv.DictReader(io.StringIO((tmp_path / f"table{t}.csv").read_text())))
+        assert [list(r) for r in parsed] == [list(r) for r in trs]
+        for p, r in zip(parsed, trs):   # csv holds repr(): floats round-trip exactly
+            assert {k: type(r[k])(p[k]) if r[k] is not None else None for k in r} == r
+        md = _markdown_tables("### \n" + (tmp_path / f"table{t}.md").read_text())[0]
+        for printed, r in zip(md[1:], trs):
+            _assert_cells_match(printed, r, list(r))
+        for printed, r in zip(_latex_tabular((tmp_path / f"table{t}.tex").read_text())[1][1:], trs):
+            _assert_cells_match(printed, r, list(r))
     run = json.loads((tmp_path / "run.json").read_text())
-    assert run["datasets"]["CSAIL"]["sha256"] == "66d99ac857a9849d814d214a9ebd0d4876d5d40f0a37be9330c1ff6e6e9daaa6"
-    assert run["settings"]["repeat"] == 1 and "numpy" in run["versions"]
+    for name, file in (("CSAIL", "CSAIL.g2o"), ("tinyGrid3D", "tinyGrid3D.g2o")):
+        path = shared_datasets / file
+        assert run["datasets"][name] == {"path": str(path), "sha256": hashlib.sha256(path.read_bytes()).hexdigest(),
+                                         "status": "ok"}
+        assert rows[name]["sha256"] == run["datasets"][name]["sha256"]
+    assert run["settings"] == {"repeat": 1, "rotation_model": "eq59", "data_dir": None, "solver": {},
+                               "fim_variant": "consistent"}
+    import numpy
+
+    assert run["versions"]["numpy"] == numpy.__version__
 
 
 def test_requested_missing_dataset_is_a_row_and_exit_one(shared_datasets, capfd):
@@ -110,6 +205,7 @@ def _printed_digits_agree(value: float, printed: float, digits: int = 5) -> bool
     return abs(round(value / unit) - round(printed / unit)) <= 1
 
 
+@pytest.mark.slow
 def test_as_published_reproduces_table_two_fim_and_lb(shared_datasets):
     """`posecrb tables --as-published`: eq. (64) as printed with w = 0.5515 kappa^2 gives the printed
     FIM and lb columns of Table II to one unit of the last printed digit on every 3D dataset of the

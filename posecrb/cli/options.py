@@ -4,8 +4,9 @@ from __future__ import annotations
 import logging
 import math
 import re
+from collections.abc import Callable
 from pathlib import Path
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Any
 
 import click
 
@@ -18,6 +19,9 @@ if TYPE_CHECKING:
     from ..solver.estimate import Estimate
 
 log = logging.getLogger("posecrb")
+
+# What click.option(...) returns: a decorator of command functions.
+OptionDecorator = Callable[[Callable[..., Any]], Callable[..., Any]]
 
 # Option choices, spelled out rather than imported: importing the modules that define them
 # (posecrb.models, posecrb.core.noise, posecrb.report.render) would load numpy, scipy and numba
@@ -81,6 +85,9 @@ def format_option(choices=FORMATS, default="table"):
                         show_default=True, help="Output format (results on stdout).")
 
 
+TABLE_FORMATS = ("table", "markdown", "csv", "json", "latex")   # `tables` adds LaTeX
+
+
 data_dir_option = click.option(
     "--data-dir", type=click.Path(file_okay=False), default=None,
     help="Directory searched first for bare dataset names.")
@@ -128,15 +135,30 @@ model_option = click.option(
          "sed: Bertini's right-invariant model on SE(d)^n with full information matrices.")
 
 
-estimate_option = click.option(
-    "--estimate", "estimate_source", default="solve", show_default=True, metavar="solve|vertices|FILE",
-    help="Where the poses come from: the certified solver (global optimum), the file's own "
-         "VERTEX lines, or another g2o/TORO FILE with the same ids.")
+def make_estimate_option(dest: str = "estimate_source", *, allow_none: bool = False) -> OptionDecorator:
+    """``--estimate``: where the poses come from; ``allow_none`` adds ``none`` (graph-only columns)."""
+    return click.option(
+        "--estimate", dest, default="solve", show_default=True,
+        metavar="solve|vertices|none|FILE" if allow_none else "solve|vertices|FILE",
+        help="Where the poses (at which the FIM is evaluated) come from: the certified solver (global "
+             "optimum), the file's own VERTEX lines, "
+             + ("another g2o/TORO FILE with the same ids, or none (graph-only columns)." if allow_none
+                else "or another g2o/TORO FILE with the same ids."))
 
 
-rotation_weight_option = click.option(
-    "--rotation-weight", "rotation_model", type=click.Choice(ROTATION_WEIGHT_MODELS), default="eq59",
-    show_default=True, help="Paper model, 3D rotation weight: eq. (59), or the empirical Table II fit.")
+estimate_option = make_estimate_option()
+
+
+def make_rotation_weight_option(default: str | None = "eq59") -> OptionDecorator:
+    """``--rotation-weight``; ``default=None`` lets a command tell "not given" from eq59 (shown as the default)."""
+    return click.option(
+        "--rotation-weight", "rotation_model", type=click.Choice(ROTATION_WEIGHT_MODELS), default=default,
+        show_default=default is not None,
+        help="Paper model, 3D rotation weight: eq. (59), or table2 = 0.5515*kappa^2, an EMPIRICAL fit "
+             "reproducing the paper's printed Table II (not eq. 59)." + ("" if default else "  [default: eq59]"))
+
+
+rotation_weight_option = make_rotation_weight_option()
 
 
 fim_variant_option = click.option(
@@ -154,6 +176,18 @@ frame_option = click.option(
          "in GTSAM's order (Pose2 x, y, theta; Pose3 rotation, translation), comparable with "
          "gtsam.Marginals / a GTSAM Hessian. Not for --model paper (its own coordinates, JSON "
          "coordinates_description).  [default: world]")
+
+
+def model_settings_options(command):
+    """--rotation-weight, --fim-variant, --frame (in this order): the model settings of fim and crlb."""
+    for option in (frame_option, fim_variant_option, rotation_weight_option):   # click applies bottom-up
+        command = option(command)
+    return command
+
+
+def resolve_model_settings(model: str, fim_variant: str | None, frame: str | None) -> tuple[str, str]:
+    """(fim_variant, frame) of ``--model`` after the checks of ``resolve_fim_variant`` and ``resolve_frame``."""
+    return resolve_fim_variant(model, fim_variant), resolve_frame(model, frame)
 
 
 def resolve_frame(model: str, frame: str | None) -> str:

@@ -7,12 +7,20 @@ from typing import Any
 import click
 
 from ...core.errors import PosecrbError, status_of
-from ...core.noise import ROTATION_WEIGHT_MODELS
 from ...core.status import log_status, put
 from ...metrics.evaluate import EvaluationSettings, evaluate
 from ...models.paper.fim import trace_fim
 from ...report.render import print_rows
-from ..options import anchor_option, data_dir_option, fim_variant_option, format_option, load_dataset, repeat_option
+from ..options import (
+    anchor_option,
+    data_dir_option,
+    fim_variant_option,
+    format_option,
+    load_dataset,
+    make_estimate_option,
+    repeat_option,
+    rotation_weight_option,
+)
 
 log = logging.getLogger("posecrb")
 
@@ -61,13 +69,8 @@ def bounds_row(name_or_path: str, data_dir: str | None, anchor_id: int | None, r
 @click.argument("files", nargs=-1, required=True)
 @anchor_option
 @repeat_option
-@click.option("--rotation-weight", "rotation_model", type=click.Choice(ROTATION_WEIGHT_MODELS),
-              default="eq59", show_default=True,
-              help="3D rotation weight: eq. (59) (default), or table2 = 0.5515*kappa^2, an EMPIRICAL fit "
-                   "that reproduces the paper's printed Table II (not eq. 59).")
-@click.option("--estimate", default="solve", show_default=True, metavar="solve|vertices|none|FILE",
-              help="Estimate at which the FIM column is evaluated: the certified global optimum (solve), "
-                   "the file's own vertices, another g2o/TORO file's vertices, or none (graph-only columns).")
+@rotation_weight_option
+@make_estimate_option("estimate", allow_none=True)
 @fim_variant_option
 @data_dir_option
 @format_option()

@@ -14,14 +14,11 @@ from ..options import (
     POSE_ID,
     data_dir_option,
     estimate_option,
-    fim_variant_option,
     format_option,
-    frame_option,
     load_with_estimate,
     model_option,
-    resolve_fim_variant,
-    resolve_frame,
-    rotation_weight_option,
+    model_settings_options,
+    resolve_model_settings,
 )
 
 log = logging.getLogger("posecrb")
@@ -57,8 +54,7 @@ def crlb_result(file: str, data_dir: str | None, model: str, source: str, anchor
     ``fim_variant``: None (default: consistent, the model's Fisher information), "eq64" or
     "consistent". ``frame``: sed only, None/"world" or "body" (``posecrb.models.thesis.frames``).
     Doubtful numbers carry a ``<key>_status`` and a warning on stderr."""
-    variant = resolve_fim_variant(model, fim_variant)
-    frame = resolve_frame(model, frame)
+    variant, frame = resolve_model_settings(model, fim_variant, frame)
     graph, est, est_info, times = load_with_estimate(file, data_dir, source)
     row: dict = {"dataset": graph.name, "model": model, "dim": graph.dim, "poses": graph.n,
                  "edges": graph.m, "components": graph.n_components}
@@ -81,9 +77,7 @@ def crlb_result(file: str, data_dir: str | None, model: str, source: str, anchor
 @click.option("--poses", default=None, metavar="IDS",
               help="Also report per-pose covariance blocks: 'all' or ids/ranges, e.g. 0,5,10-12.")
 @estimate_option
-@rotation_weight_option
-@fim_variant_option
-@frame_option
+@model_settings_options
 @data_dir_option
 @format_option()
 def command(file, model, quotient, anchors, poses, estimate_source, rotation_model, fim_variant, frame, data_dir,

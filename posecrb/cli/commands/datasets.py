@@ -2,7 +2,6 @@
 from __future__ import annotations
 
 import logging
-import sys
 from pathlib import Path
 
 import click
@@ -16,6 +15,7 @@ from ...datasets.manifest import load_manifest
 from ...io import check_output_dir, check_output_file, write_g2o
 from ...report.render import print_rows
 from ..options import FiniteFloat, data_dir_option, format_option
+from ..progress import progress_display
 
 log = logging.getLogger("posecrb")
 
@@ -50,22 +50,6 @@ def list_cmd(data_dir: str | None, fmt: str, no_check: bool) -> None:
 def path_cmd(name: str, data_dir: str | None) -> None:
     """Print the file NAME resolves to (exit 1 with a fetch hint if it is not found)."""
     click.echo(str(ds.resolve(name, data_dir).resolve()))
-
-
-def _progress_bar():
-    """Download bars on a terminal; elsewhere (logs, CI) none: each download is logged instead (-v)."""
-    from rich.console import Console  # noqa: PLC0415 -- lazy: start-up time (rich)
-    from rich.progress import (  # noqa: PLC0415 -- lazy: start-up time (rich)
-        BarColumn,
-        DownloadColumn,
-        Progress,
-        TextColumn,
-        TimeRemainingColumn,
-        TransferSpeedColumn,
-    )
-
-    return Progress(TextColumn("{task.description}"), BarColumn(), DownloadColumn(), TransferSpeedColumn(),
-                    TimeRemainingColumn(), console=Console(stderr=True), disable=not sys.stderr.isatty())
 
 
 @command.command("fetch")
@@ -104,7 +88,8 @@ def fetch_cmd(names: tuple[str, ...], all_: bool, dest: str | None, url: str | N
     manifest = load_manifest()
     entries = list(manifest) if all_ else [manifest.get(n) for n in names]
     quiet = log.getEffectiveLevel() >= logging.ERROR
-    bar = None if quiet else _progress_bar()
+    # download bars on a terminal; elsewhere (logs, CI) none: each download is logged instead (-v)
+    bar = None if quiet else progress_display(transfer=True)
 
     def factory(entry):
         if bar is None:

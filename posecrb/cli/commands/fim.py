@@ -16,14 +16,11 @@ from ..options import (
     data_dir_option,
     estimate_inputs,
     estimate_option,
-    fim_variant_option,
     format_option,
-    frame_option,
     load_with_estimate,
     model_option,
-    resolve_fim_variant,
-    resolve_frame,
-    rotation_weight_option,
+    model_settings_options,
+    resolve_model_settings,
 )
 
 log = logging.getLogger("posecrb")
@@ -32,8 +29,7 @@ log = logging.getLogger("posecrb")
 def fim_row(file: str, data_dir: str | None, model: str, source: str, anchor_id: int | None,
             rotation_model: str, save: str | None, fim_variant: str | None = None,
             frame: str | None = None) -> dict:
-    variant = resolve_fim_variant(model, fim_variant)
-    frame = resolve_frame(model, frame)
+    variant, frame = resolve_model_settings(model, fim_variant, frame)
     if save:
 
         save = npz_path(save)   # the file really written (and reported as `saved`)
@@ -63,9 +59,7 @@ def fim_row(file: str, data_dir: str | None, model: str, source: str, anchor_id:
 @estimate_option
 @click.option("--anchor", type=POSE_ID, default=None,
               help="Pose id anchored for the log-det; default: the smallest id (of each component, sed).")
-@rotation_weight_option
-@fim_variant_option
-@frame_option
+@model_settings_options
 @click.option("--save", type=click.Path(dir_okay=False, writable=True), default=None,
               help="Write the FIM as a scipy sparse .npz with its index map "
                    "(row_pose_id, row_coordinate, coordinate_names) and its frame; .npz is appended "

@@ -11,11 +11,9 @@ from pathlib import Path
 
 import click
 from rich.console import Console
-from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn
 
 from ...core.errors import PosecrbError
 from ...core.files import write_text
-from ...core.noise import ROTATION_WEIGHT_MODELS
 from ...io import check_output_dir, write_g2o
 from ...metrics.tables import (
     HEADERS,
@@ -33,18 +31,13 @@ from ...metrics.tables import (
 )
 from ...report.render import to_csv, to_json, to_markdown, to_rich_table
 from ...sim.generators import builtin_demo
-from ..options import data_dir_option
+from ..options import TABLE_FORMATS, data_dir_option, format_option, make_rotation_weight_option, repeat_option
+from ..progress import progress
 
 log = logging.getLogger("posecrb")
 ROMAN = {1: "I", 2: "II", 3: "III", 4: "IV"}
 OUT_FILES = [f"table{t}.{ext}" for t in ROMAN for ext in ("md", "csv", "json", "tex")] + \
     ["rows.csv", "rows.json", "run.json"]
-
-
-def _progress(total: int) -> Progress:
-
-    return Progress(TextColumn("{task.description}"), BarColumn(), MofNCompleteColumn(), TimeElapsedColumn(),
-                    console=Console(stderr=True), transient=True, disable=not sys.stderr.isatty())
 
 
 def _shown(rows: list[dict], tables: Sequence[int], compare: bool, settings: TableSettings,
@@ -88,18 +81,14 @@ def _render(rows: list[dict], tables: Sequence[int], fmt: str, compare: bool, se
               help="Which table(s) to print: 1 (2D metrics), 2 (3D metrics), 3/4 (construction times). "
                    "Repeatable; default all four.")
 @click.option("--datasets", "names", default=None, help="Comma-separated dataset names or paths.")
-@click.option("--repeat", type=click.IntRange(1, 1000), default=3, show_default=True,
-              help="Timing: warm-up once, then the median of K runs.")
+@repeat_option
 @click.option("--jobs", type=click.IntRange(1, 64), default=1, show_default=True,
               help="Datasets computed in parallel processes (timings then include core contention).")
-@click.option("--format", "fmt", type=click.Choice(["table", "markdown", "csv", "json", "latex"]),
-              default="table", show_default=True, help="Output format on stdout.")
+@format_option(TABLE_FORMATS)
 @click.option("--out", "out_dir", type=click.Path(file_okay=False), default=None,
               help="Also write every format and run.json (versions, CPU, sha256, settings) to DIR.")
 @click.option("--compare-paper", is_flag=True, help="Add the paper's printed values and relative differences.")
-@click.option("--rotation-weight", "rotation_model", type=click.Choice(ROTATION_WEIGHT_MODELS), default=None,
-              help="3D rotation weight: eq. (59), or table2 = 0.5515*kappa^2, an EMPIRICAL "
-                   "fit reproducing the published Table II (not eq. 59).  [default: eq59]")
+@make_rotation_weight_option(default=None)   # None: not given (--as-published picks table2)
 @click.option("--as-published", is_flag=True,
               help="Reproduce the printed Table II: eq. (64) exactly as printed (fim_variant=eq64) with the "
                    "empirical rotation weight table2. Without it the 3D rows are the model's quantities "
@@ -141,14 +130,13 @@ def command(all_, tables, names, repeat, jobs, fmt, out_dir, compare_paper, rota
         settings = TableSettings(repeat=repeat, rotation_model=rotation_model or "eq59", data_dir=data_dir)
     todo = dataset_names(requested, data_dir)
 
-    with _progress(len(todo)) as progress:
-        task = progress.add_task("tables", total=len(todo))
+    with progress(len(todo), "tables") as advance:
 
         def on_step(name, step):
-            progress.update(task, description=f"{name}: {step}")
+            advance(0, description=f"{name}: {step}")
 
         def on_done(name, row):
-            progress.advance(task)
+            advance(1)
 
         rows = build_rows(todo, settings, jobs, on_done=on_done, on_step=on_step)
 
