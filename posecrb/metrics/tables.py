@@ -20,8 +20,8 @@ from collections.abc import Callable, Iterable, Sequence
 from concurrent.futures import ProcessPoolExecutor, as_completed
 from dataclasses import asdict, dataclass, field
 
+from ..core import provenance
 from ..core.errors import DatasetNotFound, InternalError, PosecrbError, status_of
-from ..core.provenance import machine, versions
 from ..core.status import put
 from ..core.timing import timed
 from ..datasets import search as datasets
@@ -263,13 +263,13 @@ def to_latex(rows: list[dict], columns: list[str], caption: str, headers: dict[s
 
 # ---- reproducibility record ------------------------------------------------------------
 def run_record(settings: TableSettings, rows: list[dict], argv: Sequence[str] | None = None) -> dict:
-    """Versions, machine, dataset checksums and settings: enough to reproduce and diff a run."""
-    return {
-        "command": list(argv) if argv else None,
-        "versions": versions(),
-        "machine": machine(),
-        "settings": asdict(settings),
-        "seeds": {"solver": settings.solver.get("seed", "default (deterministic)")},
-        "datasets": {r["dataset"]: {"path": r.get("path"), "sha256": r.get("sha256"), "status": r["status"]}
-                     for r in rows},
-    }
+    """The run record of ``tables --out`` (``posecrb.core.provenance.run_record``, one schema for
+    every run.json): versions, machine, settings, the solver's seed and every dataset's sha256."""
+    statuses: dict[str, int] = {}
+    for r in rows:
+        statuses[r["status"]] = statuses.get(r["status"], 0) + 1
+    return provenance.run_record(
+        "tables", settings=asdict(settings),
+        seeds={"solver": settings.solver.get("seed", "default (deterministic)")},
+        datasets={r["dataset"]: provenance.dataset_entry(r.get("path"), r.get("sha256"), r["status"]) for r in rows},
+        results={"rows": len(rows), "statuses": statuses}, argv=argv)

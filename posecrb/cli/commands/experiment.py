@@ -7,22 +7,20 @@ cluster (``--executor dask [--scheduler ADDRESS]``); results are bit-identical f
 """
 from __future__ import annotations
 
-import json
 import logging
-import sys
 import time
 from pathlib import Path
 
 import click
 
 from ...core.errors import UsageError
-from ...core.files import write_text
-from ...core.provenance import machine, versions
+from ...core.provenance import dataset_entry, run_record
 from ...experiments.crlb_sweep import crlb_sweep, parse_levels
 from ...experiments.octagon import octagon_experiment
 from ...experiments.thesis import DEFAULT_M, QUICK_M, thesis_experiment
 from ...io import check_output_dir, check_output_file
-from ...report.render import print_rows, to_csv, to_json
+from ...report.outputs import write_experiment_outputs
+from ...report.render import print_rows
 from ..options import (
     FiniteFloat,
     anchor_option,
@@ -69,21 +67,12 @@ def _run_options(default_trials: str):
 
 
 def _write_out(out_dir: str | None, experiment: str, settings: dict, rows: list[dict], seeds: list[dict],
-               elapsed: float, extra: dict[str, list[dict]] | None = None) -> None:
-    if not out_dir:
-        return
-
-    d = Path(out_dir)
-    d.mkdir(parents=True, exist_ok=True)
-    write_text(d / "rows.csv", to_csv(rows))   # every file atomically (temporary + rename)
-    write_text(d / "rows.json", to_json(rows, single=False) + "\n")
-    for name, data in (extra or {}).items():
-        write_text(d / f"{name}.csv", to_csv(data))
-    run = {"experiment": experiment, "command": " ".join(["posecrb"] + sys.argv[1:]), "settings": settings,
-           "versions": {**versions(), "platform": machine()["platform"]}, "seeds": seeds, "elapsed_seconds": elapsed,
-           "created": time.strftime("%Y-%m-%dT%H:%M:%S%z")}
-    write_text(d / "run.json", json.dumps(run, indent=2, default=str) + "\n")
-    log.info("wrote %s/{rows.csv,rows.json,run.json}", d)
+               elapsed: float, extra: dict[str, list[dict]] | None = None,
+               datasets: dict[str, dict] | None = None) -> None:
+    if out_dir:
+        record = run_record(experiment, settings=settings, seeds=seeds, datasets=datasets,
+                            results={"rows": len(rows)}, elapsed_seconds=elapsed)
+        write_experiment_outputs(out_dir, rows, record, extra)
 
 
 def _check_outputs(plot_path: str | None, out_dir: str | None, name: str, extra: tuple[str, ...] = (),
@@ -188,7 +177,8 @@ def crlb_cmd(file, kc_spec, scale, kappa, tau, anchor, fim_variant, data_dir, tr
                 "seed": seed, "scale": scale, "kappa": kappa, "tau": tau, "quick": quick,
                 "fim_variant": res.fim_variant, **ex,
                 "truth_certified": res.truth_certified, "truth_objective": res.truth_objective}
-    _write_out(out_dir, "crlb", settings, rows, res.seeds, elapsed, {"trials": trial_rows})
+    _write_out(out_dir, "crlb", settings, rows, res.seeds, elapsed, {"trials": trial_rows},
+               {graph.name: dataset_entry(graph.path, graph.sha256)})
 
 
 # ---------------------------------------------------------------- thesis

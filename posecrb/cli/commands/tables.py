@@ -1,7 +1,6 @@
 """`posecrb tables`: the paper's Tables I-IV on every available dataset."""
 from __future__ import annotations
 
-import json
 import logging
 import os
 import sys
@@ -15,6 +14,7 @@ from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, T
 from ...core.errors import PosecrbError
 from ...core.files import write_text
 from ...core.noise import ROTATION_WEIGHT_MODELS
+from ...core.provenance import write_run_record
 from ...io import check_output_dir, write_g2o
 from ...metrics.tables import (
     HEADERS,
@@ -179,7 +179,7 @@ def command(all_, tables, names, repeat, jobs, fmt, out_dir, compare_paper, rota
             write_text(stem.with_suffix(".tex"), to_latex(trs, cols, TITLES[t], HEADERS))
         write_text(out / "rows.csv", to_csv(rows))
         write_text(out / "rows.json", to_json(rows))
-        write_text(out / "run.json", json.dumps(run_record(settings, rows, sys.argv), indent=2) + "\n")
+        write_run_record(out, run_record(settings, rows, sys.argv))
         log.info("wrote %s", os.fspath(out))
 
     if plot_path:
