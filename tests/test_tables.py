@@ -7,7 +7,8 @@ import pytest
 
 from posecrb.cli import main
 from posecrb.metrics.published import PAPER_NAME, TABLE_II
-from posecrb.metrics.tables import _tex_number, failed, published_settings, table_rows
+from posecrb.metrics.tables import failed, published_settings, table_rows
+from posecrb.report.latex import tex_number as _tex_number
 
 SUBSET = "CSAIL,tinyGrid3D"
 

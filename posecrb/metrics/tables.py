@@ -14,7 +14,6 @@ exactly the measured work, warm-up once, median of ``repeat`` runs:
 from __future__ import annotations
 
 import logging
-import math
 import os
 from collections.abc import Callable, Iterable, Sequence
 from concurrent.futures import ProcessPoolExecutor, as_completed
@@ -228,37 +227,6 @@ def failed(rows: Iterable[dict], requested: Sequence[str] | None) -> list[dict]:
     asked = {n.lower() for n in requested or []}
     return [r for r in rows if r["status"] in FAILED_STATUSES
             or (r["status"] == "not found" and r["dataset"].lower() in asked)]
-
-
-# ---- LaTeX --------------------------------------------------------------------------
-def _tex_number(v) -> str:
-    if v is None:
-        return "--"
-    if isinstance(v, bool):
-        return "yes" if v else "no"
-    if isinstance(v, int):
-        return str(v)
-    if isinstance(v, float):
-        if v == 0 or not math.isfinite(v):
-            return str(v)
-        e = int(math.floor(math.log10(abs(v))))
-        m = v / 10 ** e
-        if f"{m:.4f}".startswith("10."):
-            m, e = m / 10, e + 1
-        return f"${m:.4f}\\times10^{{{e}}}$"
-    return str(v).replace("_", r"\_").replace("%", r"\%").replace("&", r"\&")
-
-
-def to_latex(rows: list[dict], columns: list[str], caption: str, headers: dict[str, str]) -> str:
-    def head(c):
-        return _tex_number(headers.get(c, c)).replace("λ∞", r"$\lambda_\infty$")
-
-    lines = [r"\begin{table}[t]", r"\centering", f"\\caption{{{_tex_number(caption)}}}",
-             r"\begin{tabular}{" + "l" + "r" * (len(columns) - 1) + "}", r"\toprule",
-             " & ".join(head(c) for c in columns) + r" \\", r"\midrule"]
-    lines += [" & ".join(_tex_number(r.get(c)) for c in columns) + r" \\" for r in rows]
-    lines += [r"\bottomrule", r"\end{tabular}", r"\end{table}"]
-    return "\n".join(lines) + "\n"
 
 
 # ---- reproducibility record ------------------------------------------------------------

@@ -28,8 +28,8 @@ from ...metrics.tables import (
     published_settings,
     run_record,
     table_rows,
-    to_latex,
 )
+from ...report.latex import to_latex
 from ...report.render import to_csv, to_json, to_markdown, to_rich_table
 from ...sim.generators import builtin_demo
 from ..options import data_dir_option
