@@ -169,6 +169,12 @@ class CrlbSweepResult:
             rows.append(r)
         return rows
 
+    def trial_rows(self) -> list[dict]:
+        """One row per trial (``trials.csv``): level, trial index, squared errors, certificate, objective."""
+        return [{"kc": kc, "trial": t, "sq_trans": float(d["sq_trans"][t]), "sq_rot": float(d["sq_rot"][t]),
+                 "certified": bool(d["certified"][t]), "objective": float(d["objective"][t])}
+                for kc, d in self.trial_data.items() for t in range(len(d["sq_trans"]))]
+
 
 # ---------------------------------------------------------------- the trial
 def _solver_options(options: SolverOptions | Mapping[str, Any] | None, anchor: int) -> SolverOptions:

@@ -975,6 +975,10 @@ class SelectionResult:
             "times": self.times,
         }
 
+    def to_row(self) -> dict:
+        """``to_dict()`` without the per-edge lists (``selected``, ``order``): one row of a table."""
+        return {k: v for k, v in self.to_dict().items() if k not in ("selected", "order")}
+
     def _ids(self, edges: np.ndarray) -> np.ndarray:
         return self.selected_ids[:0] if edges.size == 0 else self._id_pairs[edges]
 

@@ -46,6 +46,13 @@ class SolveResult:
     times: dict = field(default_factory=dict)   # {init, optimize, verify, round, total} seconds
     anchor: int = 0
 
+    def to_row(self) -> dict:
+        """The solver's part of a ``solve`` row (keys and order of the command's JSON; no times)."""
+        return {"objective": self.objective, "relaxation_value": self.relaxation_value,
+                "duality_gap": self.duality_gap, "lambda_min": self.lambda_min, "certified": self.certified,
+                "rank": self.rank, "iterations": self.iterations,
+                "hessian_vector_products": self.hessian_vector_products}
+
 
 # TROptions fields a caller may set through SolverOptions.trust_region (max_iterations is a
 # SolverOptions field of its own).

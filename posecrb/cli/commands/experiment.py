@@ -169,15 +169,12 @@ def crlb_cmd(file, kc_spec, scale, kappa, tau, anchor, fim_variant, data_dir, tr
         from ...report.plots import plot_crlb_sweep  # noqa: PLC0415 -- matplotlib, only for --plot
 
         plot_crlb_sweep(res, target)
-    trial_rows = [{"kc": kc, "trial": t, "sq_trans": float(d["sq_trans"][t]), "sq_rot": float(d["sq_rot"][t]),
-                   "certified": bool(d["certified"][t]), "objective": float(d["objective"][t])}
-                  for kc, d in res.trial_data.items() for t in range(len(d["sq_trans"]))]
     settings = {"file": graph.path, "sha256": graph.sha256, "dataset": graph.name, "dim": graph.dim,
                 "poses": graph.n, "edges": graph.m, "anchor": res.anchor_id, "kc": kcs, "trials": trials,
                 "seed": seed, "scale": scale, "kappa": kappa, "tau": tau, "quick": quick,
                 "fim_variant": res.fim_variant, **ex,
                 "truth_certified": res.truth_certified, "truth_objective": res.truth_objective}
-    _write_out(out_dir, "crlb", settings, rows, res.seeds, elapsed, {"trials": trial_rows},
+    _write_out(out_dir, "crlb", settings, rows, res.seeds, elapsed, {"trials": res.trial_rows()},
                {graph.name: dataset_entry(graph.path, graph.sha256)})
 
 
@@ -218,10 +215,8 @@ def thesis_cmd(m_spec, trials, seed, jobs, executor, scheduler, plot_path, out_d
         from ...report.plots import plot_thesis  # noqa: PLC0415 -- matplotlib, only for --plot
 
         plot_thesis(res, target)
-    eig_rows = [{"m": m, "formulation": f, **{f"eig{k}": float(v) for k, v in enumerate(res.eigenvalues[f][m])}}
-                for f in ("anchored", "quotient") for m in res.ms]
     settings = {"m": ms, "trials": trials, "seed": seed, "quick": quick, **ex}
-    _write_out(out_dir, "thesis", settings, rows, res.seeds, elapsed, {"eigenvalues": eig_rows})
+    _write_out(out_dir, "thesis", settings, rows, res.seeds, elapsed, {"eigenvalues": res.eigenvalue_rows()})
 
 
 # ---------------------------------------------------------------- octagon

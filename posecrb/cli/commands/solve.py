@@ -58,11 +58,8 @@ def command(file, out, fmt, r0, rmax, init, anchor, certificate_tol, sesync_comp
         write_g2o(load(path) if sesync_compat else graph, out, res.rot, res.trans)
     times = {"parse": parse_time, **{k: res.times[k] for k in ("init", "optimize", "verify", "round")},
              "total": parse_time + res.times["total"]}
-    row = {"dataset": graph.name, "dim": graph.dim, "poses": graph.n, "edges": graph.m,
-           "objective": res.objective, "relaxation_value": res.relaxation_value,
-           "duality_gap": res.duality_gap, "lambda_min": res.lambda_min, "certified": res.certified,
-           "rank": res.rank, "iterations": res.iterations,
-           "hessian_vector_products": res.hessian_vector_products, "quaternions": quaternions, "times": times}
+    row = {"dataset": graph.name, "dim": graph.dim, "poses": graph.n, "edges": graph.m, **res.to_row(),
+           "quaternions": quaternions, "times": times}
     human = fmt in ("table", "markdown")
     if human:   # the table formatter keeps 5 digits; the objective deserves all of SE-Sync's
         row = {**row, "objective": f"{res.objective:.11g}"}
