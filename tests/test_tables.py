@@ -10,7 +10,8 @@ import pytest
 
 from posecrb.cli import main
 from posecrb.metrics.published import PAPER_NAME, TABLE_II
-from posecrb.metrics.tables import HEADERS, _tex_number, failed, published_settings, table_rows
+from posecrb.metrics.tables import HEADERS, failed, published_settings, table_rows
+from posecrb.report.latex import tex_number as _tex_number
 
 from .numerics import EPS
 

@@ -54,8 +54,24 @@ def rotation_dimension(dim: int) -> int:
     return 1 if dim == 2 else 3
 
 
+class PoseDimensions:
+    """``rot_dim`` (d_r) and ``q`` (d + d_r) of anything with a ``dim`` (a graph, a FIM)."""
+
+    dim: int
+
+    @property
+    def rot_dim(self) -> int:
+        """d_r: 1 in 2D, 3 in 3D."""
+        return rotation_dimension(self.dim)
+
+    @property
+    def q(self) -> int:
+        """Tangent dimension of one pose: 3 (SE(2)) or 6 (SE(3))."""
+        return self.dim + self.rot_dim
+
+
 @dataclass(frozen=True, eq=False)
-class PoseGraph:
+class PoseGraph(PoseDimensions):
     dim: int                                # d = 2 or 3
     ids: np.ndarray                         # (n,) original vertex ids, increasing; index = internal id
     src: np.ndarray                         # (m,) internal index of i
@@ -79,16 +95,6 @@ class PoseGraph:
     @property
     def m(self) -> int:
         return int(self.src.shape[0])
-
-    @property
-    def rot_dim(self) -> int:
-        """d_r: 1 in 2D, 3 in 3D."""
-        return rotation_dimension(self.dim)
-
-    @property
-    def q(self) -> int:
-        """Tangent dimension of one pose: 3 (SE(2)) or 6 (SE(3))."""
-        return self.dim + self.rot_dim
 
     @property
     def name(self) -> str:

@@ -30,8 +30,8 @@ from __future__ import annotations
 import math
 import re
 import time
-from collections.abc import Callable, Sequence
-from dataclasses import dataclass, field
+from collections.abc import Callable, Mapping, Sequence
+from dataclasses import dataclass, field, replace
 from typing import Any
 
 import numpy as np
@@ -43,7 +43,7 @@ from ..models.paper.crlb import paper_crlb
 from ..models.paper.fim import FIM_VARIANTS
 from ..sim.montecarlo import Task, level_key, make_tasks, mean_and_stderr, run_tasks
 from ..sim.sampling import NOISE_SCALES, noise_model_graph, perturb_measurements
-from ..solver import solve
+from ..solver import SolverOptions, solve
 from ..solver.rounding import anchor_estimate
 
 MAX_LEVELS = 1000
@@ -170,15 +170,28 @@ class CrlbSweepResult:
             rows.append(r)
         return rows
 
+    def trial_rows(self) -> list[dict]:
+        """One row per trial (``trials.csv``): level, trial index, squared errors, certificate, objective."""
+        return [{"kc": kc, "trial": t, "sq_trans": float(d["sq_trans"][t]), "sq_rot": float(d["sq_rot"][t]),
+                 "certified": bool(d["certified"][t]), "objective": float(d["objective"][t])}
+                for kc, d in self.trial_data.items() for t in range(len(d["sq_trans"]))]
+
 
 # ---------------------------------------------------------------- the trial
+def _solver_options(options: SolverOptions | Mapping[str, Any] | None, anchor: int) -> SolverOptions:
+    """The solver's options with the sweep's anchor (a mapping is the keyword form of ``solve``)."""
+    if not isinstance(options, SolverOptions):
+        options = SolverOptions.from_keywords(**(options or {}))
+    return replace(options, anchor=anchor)
+
+
 def _crlb_trial(context: dict, task: Task) -> dict:
 
     rng = task.rng()
     graph = context["graph"]
     noisy = perturb_measurements(graph, context["rot"], context["trans"], rng, kc=context["kc"],
                                  scale=context["scale"], tau=context["tau"], kappa=context["kappa"])
-    res = solve(noisy, anchor=context["anchor"], **context["solver_options"])
+    res = solve(noisy, _solver_options(context["solver_options"], context["anchor"]))
     et, er = pose_errors(context["rot"], context["trans"], res.rot, res.trans, context["anchor"])
     return {"sq_trans": float(np.sum(et * et)), "sq_rot": float(np.sum(er * er)),
             "certified": bool(res.certified), "objective": float(res.objective)}
@@ -206,7 +219,7 @@ def _bounds(graph: PoseGraph, rot: np.ndarray, trans: np.ndarray, anchor: int, k
 def crlb_sweep(graph: PoseGraph, kcs: Sequence[float], trials: int = 100, seed: int = 0, *,
                scale: str = "both", tau: float | None = None, kappa: float | None = None,
                anchor: int | None = None, truth: tuple[np.ndarray, np.ndarray] | None = None,
-               solver_options: dict | None = None, executor: str = "serial", jobs: int = 1,
+               solver_options: SolverOptions | Mapping[str, Any] | None = None, executor: str = "serial", jobs: int = 1,
                scheduler: str | None = None, client: Any = None,
                progress: Callable[[int], None] | None = None, fim_variant: str = "consistent") -> CrlbSweepResult:
     """Fig. 6/7: MSE of the certified MLE vs trace(CRLB)/n_p for each k_c in ``kcs``.
@@ -216,6 +229,7 @@ def crlb_sweep(graph: PoseGraph, kcs: Sequence[float], trials: int = 100, seed: 
     ``SeedSequence(seed, spawn_key=(level_key(k_c),)).spawn(trials)``, so a level's
     numbers do not depend on the other levels requested nor on the executor.
     ``fim_variant``: the FIM the bound inverts (``posecrb.models.paper.fim.FIM_VARIANTS``).
+    ``solver_options``: ``SolverOptions`` (or their keyword form) of every solve; the anchor is the sweep's.
     """
 
     t0 = time.perf_counter()
@@ -227,10 +241,10 @@ def crlb_sweep(graph: PoseGraph, kcs: Sequence[float], trials: int = 100, seed: 
         raise UsageError("--trials must be >= 2 (the MSE needs a standard error)")
     graph.require_connected()
     anchor = 0 if anchor is None else int(anchor)
-    solver_options = dict(solver_options or {})
+    solver_options = _solver_options(solver_options, anchor)
     truth_certified, truth_objective = True, None
     if truth is None:
-        res = solve(graph, anchor=anchor, **solver_options)
+        res = solve(graph, solver_options)
         truth = (res.rot, res.trans)
         truth_certified, truth_objective = bool(res.certified), float(res.objective)
     rot, trans = anchor_estimate(np.asarray(truth[0], float), np.asarray(truth[1], float), anchor)

@@ -109,11 +109,9 @@ def _octagon_level(context: dict, task: Task) -> list[OctagonGraph]:
         if g.vertex_rot is None or g.vertex_trans is None:  # octagon() stores the true poses as vertices
             raise InternalError("octagon graph without its poses")
         fim = paper_fim(g, g.vertex_rot, g.vertex_trans, anchor=0)
-        deg = int(g.degree[1:].sum())
-        # eq. (73): sum over free poses and their edges of (w_ij + d tau_ij); uniform weights here
-        c = float(g.rotation_weight[0] + g.dim * g.tau[0])
-        b = compute_bounds(g, anchor=None)
-        out.append(OctagonGraph(extra, g.m, deg, trace_fim(fim), c * deg, fim_logdet(fim), float(b.lb)))
+        b = compute_bounds(g, anchor=0)   # lb (eq. 75), eq. (73) and the total degree of the free poses
+        out.append(OctagonGraph(extra, g.m, b.total_degree, trace_fim(fim), b.t_opt_graph, fim_logdet(fim),
+                                float(b.lb)))
     return out
 
 

@@ -46,7 +46,7 @@ from ..selection.select import (
     tree_objective,
 )
 from ..sim.montecarlo import Task, make_tasks, run_tasks, seed_record
-from ..solver import solve
+from ..solver import SolverOptions, solve
 from ..solver.estimate import Estimate
 
 DEFAULT_BUDGETS = tuple(f"{p}%" for p in range(10, 101, 10))
@@ -196,7 +196,7 @@ def _sparsify_task(context: dict, task: Task) -> dict:
     keep[res.kept_edges] = True
     ev = _evaluate(context, keep)
     t0 = time.perf_counter()
-    sol = solve(ev.pop("pruned"), anchor=context["anchor"])
+    sol = solve(ev.pop("pruned"), SolverOptions(anchor=context["anchor"]))
     t_solve = time.perf_counter() - t0
     ref = context["reference"]
     err = trajectory_error(sol.rot, sol.trans, ref.rot, ref.trans)
@@ -250,7 +250,7 @@ def sparsify_experiment(graph: PoseGraph, budgets: Sequence[str] = DEFAULT_BUDGE
     split = split_edges(graph, fixed)
     for b in budgets:
         parse_budget(b, split.candidates.size)
-    full = solve(graph, anchor=anchor)
+    full = solve(graph, SolverOptions(anchor=anchor))
     if not full.certified:
         raise SolverError(f"{graph.name}: the full graph's optimum is not certified ({full.reason}); "
                           "it cannot serve as the reference")

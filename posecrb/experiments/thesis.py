@@ -264,6 +264,11 @@ class ThesisResult:
     def rows(self) -> list[dict]:
         return [dict(vars(r)) for r in self.table]
 
+    def eigenvalue_rows(self) -> list[dict]:
+        """``eigenvalues.csv``: per formulation and m, the eigenvalues ``eig0, eig1, ...``."""
+        return [{"m": m, "formulation": f, **{f"eig{k}": float(v) for k, v in enumerate(self.eigenvalues[f][m])}}
+                for f in ("anchored", "quotient") for m in self.ms]
+
 
 def thesis_experiment(ms: Sequence[int] = DEFAULT_M, trials: int = 200, seed: int = 0, *,
                       executor: str = "serial", jobs: int = 1, scheduler: str | None = None,

@@ -14,7 +14,7 @@ from ..core.errors import PosecrbError
 from ..core.graph import PoseGraph
 from ..core.timing import timed
 from ..models.paper.bounds import BoundsResult, compute_bounds
-from ..models.paper.fim import PaperFim, fim_logdet, paper_fim
+from ..models.paper.fim import PaperFim, fim_logdet, paper_fim, trace_fim
 from ..solver.estimate import Estimate, get_estimate
 
 
@@ -44,6 +44,25 @@ class DatasetMetrics:
     fim_logdet: float | None = None
     times: dict[str, float] = field(default_factory=dict)    # fim_build, fim_logdet (median of repeat)
     error: PosecrbError | None = None
+
+    def to_row(self, times: Mapping[str, float] | None = None) -> dict:
+        """The ``bounds`` command's row: the graph, ``BoundsResult.to_row()``, the times (``times``
+        first, e.g. the parse time, then the bounds', the FIM's and the solve's) and, when an
+        estimate was evaluated, the FIM log-det, trace (eq. 69/70) and variant, the estimate's source,
+        certificate and objective; ``status`` is ``"uncertified"`` when the solver did not certify."""
+        g, b = self.graph, self.bounds
+        row: dict = {"dataset": g.name, "path": g.path, "sha256": g.sha256, "dim": g.dim, "poses": g.n,
+                     "edges": g.m, "components": g.n_components, **b.to_row(),
+                     "times": {**(times or {}), **b.times}}
+        if self.estimate is not None and self.fim is not None:
+            est, fim = self.estimate, self.fim
+            row.update(fim_logdet=self.fim_logdet, trace_fim=trace_fim(fim), fim_variant=fim.variant,
+                       estimate={"source": est.source, "certified": est.certified, "objective": est.objective})
+            row["times"].update(fim_build=self.times["fim_build"], fim_logdet=self.times["fim_logdet"],
+                                solve=est.solve_time)
+            if est.certified is False:
+                row["status"] = "uncertified"
+        return row
 
 
 def evaluate(graph: PoseGraph, settings: EvaluationSettings, *, step: Callable[[str], None] | None = None,

@@ -14,7 +14,6 @@ exactly the measured work, warm-up once, median of ``repeat`` runs:
 from __future__ import annotations
 
 import logging
-import math
 import os
 from collections.abc import Callable, Iterable, Sequence
 from concurrent.futures import ProcessPoolExecutor, as_completed
@@ -22,8 +21,8 @@ from dataclasses import asdict, dataclass, field
 from functools import partial
 from typing import Any
 
+from ..core import provenance
 from ..core.errors import DatasetNotFound, InternalError, PosecrbError, status_of
-from ..core.provenance import machine, versions
 from ..core.status import put
 from ..core.timing import timed
 from ..datasets import search as datasets
@@ -232,46 +231,15 @@ def failed(rows: Iterable[dict], requested: Sequence[str] | None) -> list[dict]:
             or (r["status"] == "not found" and r["dataset"].lower() in asked)]
 
 
-# ---- LaTeX --------------------------------------------------------------------------
-def _tex_number(v: object) -> str:
-    if v is None:
-        return "--"
-    if isinstance(v, bool):
-        return "yes" if v else "no"
-    if isinstance(v, int):
-        return str(v)
-    if isinstance(v, float):
-        if v == 0 or not math.isfinite(v):
-            return str(v)
-        e = int(math.floor(math.log10(abs(v))))
-        m = v / 10 ** e
-        if f"{m:.4f}".startswith("10."):
-            m, e = m / 10, e + 1
-        return f"${m:.4f}\\times10^{{{e}}}$"
-    return str(v).replace("_", r"\_").replace("%", r"\%").replace("&", r"\&")
-
-
-def to_latex(rows: list[dict], columns: list[str], caption: str, headers: dict[str, str]) -> str:
-    def head(c):
-        return _tex_number(headers.get(c, c)).replace("λ∞", r"$\lambda_\infty$")
-
-    lines = [r"\begin{table}[t]", r"\centering", f"\\caption{{{_tex_number(caption)}}}",
-             r"\begin{tabular}{" + "l" + "r" * (len(columns) - 1) + "}", r"\toprule",
-             " & ".join(head(c) for c in columns) + r" \\", r"\midrule"]
-    lines += [" & ".join(_tex_number(r.get(c)) for c in columns) + r" \\" for r in rows]
-    lines += [r"\bottomrule", r"\end{tabular}", r"\end{table}"]
-    return "\n".join(lines) + "\n"
-
-
 # ---- reproducibility record ------------------------------------------------------------
 def run_record(settings: TableSettings, rows: list[dict], argv: Sequence[str] | None = None) -> dict:
-    """Versions, machine, dataset checksums and settings: enough to reproduce and diff a run."""
-    return {
-        "command": list(argv) if argv else None,
-        "versions": versions(),
-        "machine": machine(),
-        "settings": asdict(settings),
-        "seeds": {"solver": settings.solver.get("seed", "default (deterministic)")},
-        "datasets": {r["dataset"]: {"path": r.get("path"), "sha256": r.get("sha256"), "status": r["status"]}
-                     for r in rows},
-    }
+    """The run record of ``tables --out`` (``posecrb.core.provenance.run_record``, one schema for
+    every run.json): versions, machine, settings, the solver's seed and every dataset's sha256."""
+    statuses: dict[str, int] = {}
+    for r in rows:
+        statuses[r["status"]] = statuses.get(r["status"], 0) + 1
+    return provenance.run_record(
+        "tables", settings=asdict(settings),
+        seeds={"solver": settings.solver.get("seed", "default (deterministic)")},
+        datasets={r["dataset"]: provenance.dataset_entry(r.get("path"), r.get("sha256"), r["status"]) for r in rows},
+        results={"rows": len(rows), "statuses": statuses}, argv=argv)

@@ -982,6 +982,10 @@ class SelectionResult:
             "times": self.times,
         }
 
+    def to_row(self) -> dict:
+        """``to_dict()`` without the per-edge lists (``selected``, ``order``): one row of a table."""
+        return {k: v for k, v in self.to_dict().items() if k not in ("selected", "order")}
+
     def _ids(self, edges: np.ndarray) -> np.ndarray:
         if edges.size == 0:
             return self.selected_ids[:0]

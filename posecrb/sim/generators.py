@@ -11,7 +11,7 @@ noise model, eq. (3)-(5) and (80):
   proportional to ``exp(kappa tr Z)`` (exact sampler ``posecrb.sim.sampling.sample_langevin``).
 
 Information matrices follow SE-Sync's convention (docs/design.md#noise-model,
-``posecrb.sim.sampling.isotropic_information``): 2D ``diag(tau, tau, kappa)``, 3D
+``posecrb.core.noise.isotropic_information``): 2D ``diag(tau, tau, kappa)``, 3D
 ``diag(tau I3, 2 kappa I3)``, so that ``graph.tau`` and ``graph.kappa`` read back
 exactly the values used to generate the noise.
 
@@ -38,7 +38,7 @@ from ..core.noise import isotropic_information
 from ..io.rotations import quat_to_rot
 from ..lie.se import relative_poses
 from ..lie.so import so2_exp, so3_exp
-from .sampling import sample_isotropic_gaussian, sample_langevin
+from .sampling import isotropic_noise
 
 KINDS = ("grid2d", "grid3d", "sphere", "torus", "octagon", "demo")
 
@@ -68,16 +68,6 @@ def _given(rng: np.random.Generator | None) -> np.random.Generator:
     return rng
 
 
-def _isotropic_noise(rot: np.ndarray, trans: np.ndarray, tau: np.ndarray, kappa: np.ndarray,
-                     dim: int, rng: np.random.Generator) -> tuple[np.ndarray, np.ndarray]:
-    """Eq. (80): right-multiplied Langevin rotation noise, additive isotropic Gaussian translation noise."""
-
-    m = rot.shape[0]
-    z = sample_langevin(kappa, m, dim, rng)
-    y = sample_isotropic_gaussian(tau, m, dim, rng)
-    return rot @ z, trans + y
-
-
 def _assemble(dim: int, rot: np.ndarray, trans: np.ndarray, src: np.ndarray, dst: np.ndarray,
               tau: npt.ArrayLike, kappa: npt.ArrayLike, noise: bool, rng: np.random.Generator | None,
               ids: np.ndarray | None = None, info: np.ndarray | None = None) -> PoseGraph:
@@ -92,7 +82,7 @@ def _assemble(dim: int, rot: np.ndarray, trans: np.ndarray, src: np.ndarray, dst
         raise UsageError("tau and kappa must be > 0")
     mrot, mtrans = relative_poses(rot, trans, src, dst)
     if noise:
-        mrot, mtrans = _isotropic_noise(mrot, mtrans, tau, kappa, dim, _given(rng))
+        mrot, mtrans = isotropic_noise(mrot, mtrans, tau, kappa, dim, _given(rng))
     n = rot.shape[0]
     return PoseGraph(
         dim=dim, ids=np.arange(n, dtype=np.int64) if ids is None else np.asarray(ids, dtype=np.int64),
@@ -408,7 +398,7 @@ def random_graph(rng: np.random.Generator, n: int, m: int, dim: int, *, info: st
         return graph
 
     if noise == "isotropic":
-        mrot, mtrans = _isotropic_noise(graph.rot, graph.trans, graph.tau, graph.kappa, dim, rng)
+        mrot, mtrans = isotropic_noise(graph.rot, graph.trans, graph.tau, graph.kappa, dim, rng)
     elif noise == "gaussian":
         chol = np.linalg.cholesky(inf)
         # xi = L^{-T} z has covariance (L L^T)^{-1} = inv(info).

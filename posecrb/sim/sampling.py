@@ -178,6 +178,20 @@ def noise_model_graph(graph: PoseGraph, kc: float = 1.0, scale: str = "both", ta
     return replace(graph, info=isotropic_information(t, k, graph.dim))
 
 
+def isotropic_noise(rot: np.ndarray, trans: np.ndarray, tau: npt.ArrayLike, kappa: npt.ArrayLike, dim: int,
+                    rng: np.random.Generator) -> tuple[np.ndarray, np.ndarray]:
+    """Eq. (80) applied to noise-free measurements ``(rot, trans)`` ((m, d, d), (m, d)).
+
+    ``R~ = rot Z``, ``Z ~ Lang(I, kappa)`` (right-multiplied, the g2o / SE-Sync model), and
+    ``t~ = trans + y``, ``y ~ N(0, I / tau)``; ``tau``, ``kappa`` scalar or (m,). The Langevin
+    draws come first, then the Gaussian ones, from the one ``rng`` (fixes the stream per seed).
+    """
+    m = rot.shape[0]
+    z = sample_langevin(kappa, m, dim, rng)
+    y = sample_isotropic_gaussian(tau, m, dim, rng)
+    return rot @ z, trans + y
+
+
 def perturb_measurements(graph: PoseGraph, rot_true: np.ndarray, trans_true: np.ndarray, rng: np.random.Generator,
                          kc: float = 1.0, scale: str = "both", tau: npt.ArrayLike | None = None,
                          kappa: npt.ArrayLike | None = None) -> PoseGraph:
@@ -200,10 +214,7 @@ def perturb_measurements(graph: PoseGraph, rot_true: np.ndarray, trans_true: np.
     rot_true = np.asarray(rot_true, dtype=float)
     trans_true = np.asarray(trans_true, dtype=float)
     rel_rot, rel_trans = relative_poses(rot_true, trans_true, graph.src, graph.dst)
-    z = sample_langevin(k, graph.m, graph.dim, rng)
-    y = sample_isotropic_gaussian(t, graph.m, graph.dim, rng)
-    rot = rel_rot @ z                  # (R_i^T R_j) Z, eq. (80)
-    trans = rel_trans + y
+    rot, trans = isotropic_noise(rel_rot, rel_trans, t, k, graph.dim, rng)
     return replace(graph, rot=rot, trans=trans, info=isotropic_information(t, k, graph.dim),
                    vertex_rot=None, vertex_trans=None, format="synthetic", sha256=None, edge_lines=None)
 

@@ -1,4 +1,4 @@
 """Certifiably correct pose-graph optimisation (SE-Sync, Rosen et al. 2019); docs/design.md#solver."""
-from .solve import SolveResult, solve
+from .solve import SolveResult, SolverOptions, solve
 
-__all__ = ["SolveResult", "solve"]
+__all__ = ["SolveResult", "SolverOptions", "solve"]

@@ -10,7 +10,8 @@ from __future__ import annotations
 
 import logging
 import time
-from dataclasses import dataclass, field
+from collections.abc import Mapping
+from dataclasses import dataclass, field, fields, replace
 from typing import Any
 
 import numpy as np
@@ -45,6 +46,73 @@ class SolveResult:
     times: dict = field(default_factory=dict)   # {init, optimize, verify, round, total} seconds
     anchor: int = 0
 
+    def to_row(self) -> dict:
+        """The solver's part of a ``solve`` row (keys and order of the command's JSON; no times)."""
+        return {"objective": self.objective, "relaxation_value": self.relaxation_value,
+                "duality_gap": self.duality_gap, "lambda_min": self.lambda_min, "certified": self.certified,
+                "rank": self.rank, "iterations": self.iterations,
+                "hessian_vector_products": self.hessian_vector_products}
+
+
+# TROptions fields a caller may set through SolverOptions.trust_region (max_iterations is a
+# SolverOptions field of its own).
+_TR_TUNING = frozenset(f.name for f in fields(TROptions)) - {"max_iterations"}
+
+
+@dataclass(frozen=True, kw_only=True)
+class SolverOptions:
+    """Options of :func:`solve` (docs/design.md#solver); the defaults are SE-Sync's settings.
+
+    ``r0`` / ``rmax``: first (default d + 1) and last rank of the Riemannian staircase; ``init``:
+    "chordal", "vertices" (the file's own estimate) or an (n, d, d) array of rotations;
+    ``anchor``: internal index of the pose put at the identity (default 0); ``max_iterations``:
+    trust-region iterations per staircase level; ``certificate_tol``: accept
+    lambda_min(Q - Lambda) >= -tol; ``seed``: of the verification's random start (the solver is
+    deterministic); ``precondition`` / ``precond_max_cond``: the regularised base preconditioner
+    (Q + delta I)^{-1} and the cap on its condition number; ``adaptive_precond``: relative shift of
+    the (Q - Lambda + s I)^{-1} preconditioner (None: off), refactored when the last truncated-CG
+    run needed more than ``refactor_hvps`` Hessian-vector products (None: at every accepted
+    iterate); ``trust_region``: other :class:`TROptions` fields (e.g. ``theta``, ``decrement_tol``).
+    """
+
+    r0: int | None = None
+    rmax: int = 10
+    init: str | np.ndarray = "chordal"
+    anchor: int | None = None
+    max_iterations: int = 500
+    certificate_tol: float = 1e-3
+    verbose: bool = False
+    seed: int = 0
+    precondition: bool = True
+    precond_max_cond: float = 1e6
+    adaptive_precond: float | None = 1e-10
+    refactor_hvps: int | None = 30
+    trust_region: Mapping[str, Any] = field(default_factory=dict)
+
+    def __post_init__(self) -> None:
+        unknown = set(self.trust_region) - _TR_TUNING
+        if unknown:
+            raise UsageError(f"unknown trust-region option(s) {', '.join(sorted(unknown))}; "
+                             f"choose from {', '.join(sorted(_TR_TUNING))}")
+
+    @classmethod
+    def from_keywords(cls, base: SolverOptions | None = None, **keywords: Any) -> SolverOptions:
+        """``base`` (default: the defaults) with ``keywords`` applied: SolverOptions fields by name,
+        TROptions fields into ``trust_region``; any other name is a UsageError."""
+        base = cls() if base is None else base
+        own = {f.name for f in fields(cls)} - {"trust_region"}
+        tuning = {k: v for k, v in keywords.items() if k not in own}
+        unknown = set(tuning) - _TR_TUNING
+        if unknown:
+            raise UsageError(f"unknown solver option(s) {', '.join(sorted(unknown))}")
+        return replace(base, **{k: v for k, v in keywords.items() if k in own},
+                       trust_region={**base.trust_region, **tuning})
+
+    def keywords(self) -> dict[str, Any]:
+        """Every option as a keyword of the staircase (trust-region fields flattened)."""
+        out = {f.name: getattr(self, f.name) for f in fields(self) if f.name != "trust_region"}
+        return {**out, **self.trust_region}
+
 
 _BLAS_CONTROLLER = None
 
@@ -58,17 +126,21 @@ def _blas_controller():
     return _BLAS_CONTROLLER
 
 
-def solve(graph: PoseGraph, **kwargs: Any) -> SolveResult:
+def solve(graph: PoseGraph, options: SolverOptions | None = None, **keywords: Any) -> SolveResult:
     """Certifiably correct maximum-likelihood estimate of a pose graph (see :func:`_solve`).
 
-    BLAS runs single-threaded inside: the work is many small dense products, for which
-    OpenBLAS's thread start-up costs more than it saves (and CHOLMOD does the heavy part).
+    ``solve(graph, SolverOptions(anchor=3, rmax=8))``; the keyword form ``solve(graph, anchor=3)``
+    is the same call (``SolverOptions.from_keywords``: an unknown name is a UsageError) and may
+    refine ``options``. BLAS runs single-threaded inside: the work is many small dense products,
+    for which OpenBLAS's thread start-up costs more than it saves (and CHOLMOD does the heavy part).
     """
+    if keywords or options is None:
+        options = SolverOptions.from_keywords(options, **keywords)
     controller = _blas_controller()
     if not controller:  # pragma: no cover - threadpoolctl missing
-        return _solve(graph, **kwargs)
+        return _solve(graph, **options.keywords())
     with controller.limit(limits=1, user_api="blas"):
-        return _solve(graph, **kwargs)
+        return _solve(graph, **options.keywords())
 
 
 def _solve(graph: PoseGraph, *, r0: int | None = None, rmax: int = 10, init: str | np.ndarray = "chordal",
@@ -87,7 +159,8 @@ def _solve(graph: PoseGraph, *, r0: int | None = None, rmax: int = 10, init: str
     on the (Q - Lambda + s I)^{-1} preconditioner, None disables it; it is refactored at an
     iterate only when the last truncated-CG run needed more than ``refactor_hvps`` Hessian-vector
     products (None: at every accepted iterate).
-    ``tuning`` goes to :class:`TROptions` (e.g. decrement_tol, max_inner). Raises
+    ``tuning`` goes to :class:`TROptions` (e.g. decrement_tol, max_inner); the options are
+    documented on :class:`SolverOptions`, whose defaults must match these. Raises
     DisconnectedGraph for a disconnected graph, UsageError for bad ranks/anchor/init.
     """
     t_start = time.perf_counter()

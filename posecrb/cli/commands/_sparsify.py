@@ -1,16 +1,12 @@
 """`posecrb experiment sparsify FILE`: selection methods vs budget, and the pruned graphs' solutions."""
 from __future__ import annotations
 
-import json
 import logging
-import os
-import sys
 import time
-from pathlib import Path
 
 import click
 
-from ...core.provenance import machine, versions
+from ...core.provenance import dataset_entry, run_record
 from ...experiments.sparsify import (
     DEFAULT_BUDGETS,
     DEFAULT_METHODS,
@@ -18,7 +14,8 @@ from ...experiments.sparsify import (
     plot_sparsify,
     sparsify_experiment,
 )
-from ...report.render import print_rows, to_csv, to_json
+from ...report.outputs import write_experiment_outputs
+from ...report.render import print_rows
 from ..options import anchor_option, data_dir_option, executor_settings, format_option, load_dataset, plot_target
 from ..progress import progress
 
@@ -31,25 +28,6 @@ HEADERS = {"budget_spec": "budget", "budget": "K", "upper_bound": "upper bound",
            "time_select": "time (s)", "tree": "tree lb (75)", "fiedler": "λ2", "fim_logdet": "FIM logdet",
            "crlb_trace": "tr CRLB", "certified": "cert.", "ate_trans": "ATE t", "ate_rot_deg": "ATE R [°]",
            "rpe_trans": "RPE t", "rpe_rot_deg": "RPE R [°]"}
-
-
-def _atomic_write(path: Path, text: str) -> None:
-    tmp = path.with_name(path.name + ".tmp")
-    tmp.write_text(text)
-    os.replace(tmp, path)
-
-
-def _write_out(out_dir: str, settings: dict, rows: list[dict], seeds: list[dict], elapsed: float) -> None:
-    """rows.csv, rows.json and run.json (the run record of the other experiments), each written atomically."""
-    d = Path(out_dir)
-    d.mkdir(parents=True, exist_ok=True)
-    _atomic_write(d / "rows.csv", to_csv(rows))
-    _atomic_write(d / "rows.json", to_json(rows, single=False) + "\n")
-    run = {"experiment": "sparsify", "command": " ".join(["posecrb"] + sys.argv[1:]), "settings": settings,
-           "versions": {**versions(), "platform": machine()["platform"]}, "machine": machine(), "seeds": seeds,
-           "elapsed_seconds": elapsed, "created": time.strftime("%Y-%m-%dT%H:%M:%S%z")}
-    _atomic_write(d / "run.json", json.dumps(run, indent=2, default=str) + "\n")
-    log.info("wrote %s/{rows.csv,rows.json,run.json}", d)
 
 
 @click.command("sparsify", short_help="Selection methods vs budget: bounds, certificates, ATE of the pruned graphs.")
@@ -112,4 +90,7 @@ def sparsify_cmd(file, budgets, methods, objective, fixed, certify, max_iter, se
                     "candidates": res.candidates, "anchor": res.anchor_id, "objective": res.objective,
                     "budgets": res.budgets, "methods": res.methods, "certify": certify, "max_iter": max_iter,
                     "seed": seed, "quick": quick, "reference": res.reference, **ex}
-        _write_out(out_dir, settings, res.rows, res.seeds, elapsed)
+        record = run_record("sparsify", settings=settings, seeds=res.seeds,
+                            datasets={res.dataset: dataset_entry(res.path, res.sha256)},
+                            results={"rows": len(res.rows)}, elapsed_seconds=elapsed)
+        write_experiment_outputs(out_dir, res.rows, record)

@@ -2,14 +2,12 @@
 from __future__ import annotations
 
 import logging
-from typing import Any
 
 import click
 
 from ...core.errors import PosecrbError, status_of
-from ...core.status import log_status, put
+from ...core.status import log_status
 from ...metrics.evaluate import EvaluationSettings, evaluate
-from ...models.paper.fim import trace_fim
 from ...report.render import print_rows
 from ..options import (
     anchor_option,
@@ -39,30 +37,10 @@ def bounds_row(name_or_path: str, data_dir: str | None, anchor_id: int | None, r
                                            fim_variant=fim_variant or "consistent", repeat=repeat, estimate=estimate,
                                            solver={"anchor": anchor} if estimate == "solve" else {}))
     b = m.bounds
-    row: dict[str, Any] = {
-        "dataset": graph.name, "path": graph.path, "sha256": graph.sha256, "dim": graph.dim,
-        "poses": graph.n, "edges": graph.m, "components": graph.n_components,
-        "anchor": b.anchor_id, "rotation_weight": rotation_model,
-        "lb": b.lb,
-    }
-    put(row, "ub", b.ub, b.ub_status)
     log_status(log, f"{graph.name}: ub", b.ub_status)
-    row.update({"ub_lambda": b.ub_lambda, "lambda_inf": b.lambda_inf})
-    put(row, "lambda_min_rot", b.lambda_min_rot, b.lambda_min_rot_status)
-    row["lambda_min_rot_lower"] = b.lambda_min_rot_lower
-    put(row, "gap_bound", b.gap_bound, b.gap_bound_status)
     log_status(log, f"{graph.name}: lambda_min(L_w)", b.lambda_min_rot_status)
     log_status(log, f"{graph.name}: Lemma 4 gap bound", b.gap_bound_status)
-    row.update({"t_opt_graph": b.t_opt_graph, "t_opt_approx": b.t_opt_approx, "total_degree": b.total_degree,
-                "times": {"parse": t_parse, **b.times}})
-    if m.estimate is not None and m.fim is not None:
-        est, fim = m.estimate, m.fim
-        row.update(fim_logdet=m.fim_logdet, trace_fim=trace_fim(fim), fim_variant=fim.variant,
-                   estimate={"source": est.source, "certified": est.certified, "objective": est.objective})
-        row["times"].update(fim_build=m.times["fim_build"], fim_logdet=m.times["fim_logdet"], solve=est.solve_time)
-        if est.certified is False:
-            row["status"] = "uncertified"
-    return row
+    return m.to_row(times={"parse": t_parse})
 
 
 @click.command("bounds")

@@ -61,7 +61,7 @@ def crlb_result(file: str, data_dir: str | None, model: str, source: str, anchor
     crb = cramer_rao_bound(graph, est.rot, est.trans, model=model, anchor_ids=anchor_ids, quotient=quotient,
                            poses=poses, rotation_model=rotation_model, variant=variant, frame=frame)
     times.update(crb.times)
-    row.update(crb.row)
+    row.update(crb.to_row())
     row["estimate"] = est_info
     row["times"] = times
     return row, crb.pose_rows

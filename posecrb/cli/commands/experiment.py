@@ -7,9 +7,7 @@ cluster (``--executor dask [--scheduler ADDRESS]``); results are bit-identical f
 """
 from __future__ import annotations
 
-import json
 import logging
-import sys
 import time
 from collections.abc import Callable
 from pathlib import Path
@@ -18,13 +16,13 @@ from typing import Any
 import click
 
 from ...core.errors import UsageError
-from ...core.files import write_text
-from ...core.provenance import machine, versions
+from ...core.provenance import dataset_entry, run_record
 from ...experiments.crlb_sweep import crlb_sweep, parse_levels
 from ...experiments.octagon import octagon_experiment
 from ...experiments.thesis import DEFAULT_M, QUICK_M, thesis_experiment
 from ...io import check_output_dir, check_output_file
-from ...report.render import print_rows, to_csv, to_json
+from ...report.outputs import write_experiment_outputs
+from ...report.render import print_rows
 from ..options import (
     FiniteFloat,
     anchor_option,
@@ -71,21 +69,12 @@ def _run_options(default_trials: str) -> Callable[[Callable[..., Any]], Callable
 
 
 def _write_out(out_dir: str | None, experiment: str, settings: dict, rows: list[dict], seeds: list[dict],
-               elapsed: float, extra: dict[str, list[dict]] | None = None) -> None:
-    if not out_dir:
-        return
-
-    d = Path(out_dir)
-    d.mkdir(parents=True, exist_ok=True)
-    write_text(d / "rows.csv", to_csv(rows))   # every file atomically (temporary + rename)
-    write_text(d / "rows.json", to_json(rows, single=False) + "\n")
-    for name, data in (extra or {}).items():
-        write_text(d / f"{name}.csv", to_csv(data))
-    run = {"experiment": experiment, "command": " ".join(["posecrb"] + sys.argv[1:]), "settings": settings,
-           "versions": {**versions(), "platform": machine()["platform"]}, "seeds": seeds, "elapsed_seconds": elapsed,
-           "created": time.strftime("%Y-%m-%dT%H:%M:%S%z")}
-    write_text(d / "run.json", json.dumps(run, indent=2, default=str) + "\n")
-    log.info("wrote %s/{rows.csv,rows.json,run.json}", d)
+               elapsed: float, extra: dict[str, list[dict]] | None = None,
+               datasets: dict[str, dict] | None = None) -> None:
+    if out_dir:
+        record = run_record(experiment, settings=settings, seeds=seeds, datasets=datasets,
+                            results={"rows": len(rows)}, elapsed_seconds=elapsed)
+        write_experiment_outputs(out_dir, rows, record, extra)
 
 
 def _check_outputs(plot_path: str | None, out_dir: str | None, name: str, extra: tuple[str, ...] = (),
@@ -182,15 +171,13 @@ def crlb_cmd(file, kc_spec, scale, kappa, tau, anchor, fim_variant, data_dir, tr
         from ...report.plots import plot_crlb_sweep  # noqa: PLC0415 -- matplotlib, only for --plot
 
         plot_crlb_sweep(res, target)
-    trial_rows = [{"kc": kc, "trial": t, "sq_trans": float(d["sq_trans"][t]), "sq_rot": float(d["sq_rot"][t]),
-                   "certified": bool(d["certified"][t]), "objective": float(d["objective"][t])}
-                  for kc, d in res.trial_data.items() for t in range(len(d["sq_trans"]))]
     settings = {"file": graph.path, "sha256": graph.sha256, "dataset": graph.name, "dim": graph.dim,
                 "poses": graph.n, "edges": graph.m, "anchor": res.anchor_id, "kc": kcs, "trials": trials,
                 "seed": seed, "scale": scale, "kappa": kappa, "tau": tau, "quick": quick,
                 "fim_variant": res.fim_variant, **ex,
                 "truth_certified": res.truth_certified, "truth_objective": res.truth_objective}
-    _write_out(out_dir, "crlb", settings, rows, res.seeds, elapsed, {"trials": trial_rows})
+    _write_out(out_dir, "crlb", settings, rows, res.seeds, elapsed, {"trials": res.trial_rows()},
+               {graph.name: dataset_entry(graph.path, graph.sha256)})
 
 
 # ---------------------------------------------------------------- thesis
@@ -230,10 +217,8 @@ def thesis_cmd(m_spec, trials, seed, jobs, executor, scheduler, plot_path, out_d
         from ...report.plots import plot_thesis  # noqa: PLC0415 -- matplotlib, only for --plot
 
         plot_thesis(res, target)
-    eig_rows = [{"m": m, "formulation": f, **{f"eig{k}": float(v) for k, v in enumerate(res.eigenvalues[f][m])}}
-                for f in ("anchored", "quotient") for m in res.ms]
     settings = {"m": ms, "trials": trials, "seed": seed, "quick": quick, **ex}
-    _write_out(out_dir, "thesis", settings, rows, res.seeds, elapsed, {"eigenvalues": eig_rows})
+    _write_out(out_dir, "thesis", settings, rows, res.seeds, elapsed, {"eigenvalues": res.eigenvalue_rows()})
 
 
 # ---------------------------------------------------------------- octagon

@@ -109,5 +109,4 @@ def command(file, budget, objective, method, fixed, certify, max_iter, tol, lazy
         print_rows(_summary(d), fmt, ["quantity", "value"], headers=HEADERS,
                    title=f"{d['dataset']}: {d['budget']} of {d['candidates']} candidate edges")
     else:
-        flat = {k: v for k, v in d.items() if k not in ("selected", "order")}
-        print_rows([flat], fmt)
+        print_rows([res.to_row()], fmt)

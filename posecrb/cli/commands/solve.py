@@ -8,7 +8,7 @@ from ...core.timing import timed
 from ...datasets import search as datasets
 from ...io import check_output_file, load, write_g2o
 from ...report.render import print_rows
-from ...solver import solve
+from ...solver import SolverOptions, solve
 from ..options import POSE_ID, FiniteFloat, data_dir_option, format_option
 
 # Compact column set for the human-readable formats; json/csv carry every key.
@@ -52,17 +52,14 @@ def command(file, out, fmt, r0, rmax, init, anchor, certificate_tol, sesync_comp
         check_output_file(out, [path], option="--out")   # before the work, not after a long solve
     graph, parse_time = timed(lambda: load(path, quaternions=quaternions))
     anchor_idx = graph.anchor_index(anchor)
-    res = solve(graph, r0=r0, rmax=rmax, init=init, anchor=anchor_idx, certificate_tol=certificate_tol)
+    res = solve(graph, SolverOptions(r0=r0, rmax=rmax, init=init, anchor=anchor_idx, certificate_tol=certificate_tol))
     if out:
         # Edges as the normalised reading: a raw, non-orthogonal R~ has no quaternion of its own.
         write_g2o(load(path) if sesync_compat else graph, out, res.rot, res.trans)
     times = {"parse": parse_time, **{k: res.times[k] for k in ("init", "optimize", "verify", "round")},
              "total": parse_time + res.times["total"]}
-    row = {"dataset": graph.name, "dim": graph.dim, "poses": graph.n, "edges": graph.m,
-           "objective": res.objective, "relaxation_value": res.relaxation_value,
-           "duality_gap": res.duality_gap, "lambda_min": res.lambda_min, "certified": res.certified,
-           "rank": res.rank, "iterations": res.iterations,
-           "hessian_vector_products": res.hessian_vector_products, "quaternions": quaternions, "times": times}
+    row = {"dataset": graph.name, "dim": graph.dim, "poses": graph.n, "edges": graph.m, **res.to_row(),
+           "quaternions": quaternions, "times": times}
     human = fmt in ("table", "markdown")
     if human:   # the table formatter keeps 5 digits; the objective deserves all of SE-Sync's
         row = {**row, "objective": f"{res.objective:.11g}"}

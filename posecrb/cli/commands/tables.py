@@ -1,7 +1,6 @@
 """`posecrb tables`: the paper's Tables I-IV on every available dataset."""
 from __future__ import annotations
 
-import json
 import logging
 import os
 import sys
@@ -14,6 +13,7 @@ from rich.console import Console
 
 from ...core.errors import PosecrbError
 from ...core.files import write_text
+from ...core.provenance import write_run_record
 from ...io import check_output_dir, write_g2o
 from ...metrics.tables import (
     HEADERS,
@@ -27,8 +27,8 @@ from ...metrics.tables import (
     published_settings,
     run_record,
     table_rows,
-    to_latex,
 )
+from ...report.latex import to_latex
 from ...report.render import to_csv, to_json, to_markdown, to_rich_table
 from ...sim.generators import builtin_demo
 from ..options import TABLE_FORMATS, data_dir_option, format_option, make_rotation_weight_option, repeat_option
@@ -171,7 +171,7 @@ def command(all_, tables, names, repeat, jobs, fmt, out_dir, compare_paper, rota
             write_text(stem.with_suffix(".tex"), to_latex(trs, cols, TITLES[t], HEADERS))
         write_text(out / "rows.csv", to_csv(rows))
         write_text(out / "rows.json", to_json(rows))
-        write_text(out / "run.json", json.dumps(run_record(settings, rows, sys.argv), indent=2) + "\n")
+        write_run_record(out, run_record(settings, rows, sys.argv))
         log.info("wrote %s", os.fspath(out))
 
     if plot_path:

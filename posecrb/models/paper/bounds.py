@@ -28,7 +28,7 @@ import scipy.sparse as sp
 from ...core.errors import NotPositiveDefinite
 from ...core.graph import PoseGraph
 from ...core.noise import isotropic_precisions, rotation_weight
-from ...core.status import OK, Status
+from ...core.status import OK, Status, put
 from ...core.timing import timed
 from ...linalg.cholesky import Factor, SymbolicCholesky
 from ...linalg.laplacian import kron_identity, reduced_index, reduced_laplacian
@@ -232,6 +232,19 @@ class BoundsResult:
     lambda_min_rot_status: Status = OK
     gap_bound_status: Status = OK
     ub_status: Status = OK
+
+    def to_row(self) -> dict:
+        """The bounds' part of a ``bounds`` row (keys and order of the command's JSON); a number
+        that is not ok carries ``<key>_status`` (``posecrb.core.status.put``). Times are not in it."""
+        row: dict = {"anchor": self.anchor_id, "rotation_weight": self.rotation_model, "lb": self.lb}
+        put(row, "ub", self.ub, self.ub_status)
+        row.update({"ub_lambda": self.ub_lambda, "lambda_inf": self.lambda_inf})
+        put(row, "lambda_min_rot", self.lambda_min_rot, self.lambda_min_rot_status)
+        row["lambda_min_rot_lower"] = self.lambda_min_rot_lower
+        put(row, "gap_bound", self.gap_bound, self.gap_bound_status)
+        row.update({"t_opt_graph": self.t_opt_graph, "t_opt_approx": self.t_opt_approx,
+                    "total_degree": self.total_degree})
+        return row
 
 
 def compute_bounds(graph: PoseGraph, anchor: int | None = None, rotation_model: str = "eq59",

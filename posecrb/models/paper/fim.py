@@ -59,7 +59,7 @@ import numpy as np
 import scipy.sparse as sp
 
 from ...core.errors import UsageError
-from ...core.graph import PoseGraph, rotation_dimension
+from ...core.graph import PoseDimensions, PoseGraph
 from ...core.noise import rotation_weight as _rotation_weight
 from ...linalg.cholesky import SymbolicCholesky
 from ...linalg.laplacian import reduced_index
@@ -70,7 +70,7 @@ FIM_VARIANTS = ("eq64", "consistent")
 
 
 @dataclass(frozen=True, eq=False, kw_only=True)
-class PaperFim:
+class PaperFim(PoseDimensions):
     """The anchored paper FIM.
 
     ``layout == "blocks"`` (eq. 42 / 64): rows ``[x_1; ...; x_np; theta_1; ...; theta_np]``,
@@ -92,14 +92,6 @@ class PaperFim:
     rotation_model: str
     variant: str = "consistent"
     build_time: float = field(default=0.0)
-
-    @property
-    def rot_dim(self) -> int:
-        return rotation_dimension(self.dim)
-
-    @property
-    def q(self) -> int:
-        return self.dim + self.rot_dim
 
     @property
     def n_free(self) -> int:

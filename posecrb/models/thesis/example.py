@@ -18,7 +18,7 @@ import numpy.typing as npt
 
 from ...core.errors import UsageError
 from ...core.graph import PoseGraph
-from ...lie.se import se_compose, se_exp, se_inverse
+from ...lie.se import relative_poses, se_compose, se_exp, se_inverse
 from ...lie.so import so2_exp
 from .fim import right_information_from_left
 
@@ -77,10 +77,8 @@ def left_information() -> np.ndarray:
 
 
 def true_relative() -> tuple[np.ndarray, np.ndarray]:
-    """Noise-free measurements ``T_i T_j^{-1}`` (6, 2, 2), (6, 2) in the order of EDGES."""
-    r, t = true_poses()
-    rj_inv, tj_inv = se_inverse(r[DST], t[DST])
-    return se_compose(r[SRC], t[SRC], rj_inv, tj_inv)
+    """Noise-free measurements ``T_i T_j^{-1} = X_i^{-1} X_j`` (6, 2, 2), (6, 2) in the order of EDGES."""
+    return relative_poses(*true_estimate(), SRC, DST)
 
 
 def _graph(src: np.ndarray, dst: np.ndarray, rot: np.ndarray, trans: np.ndarray,

@@ -1,0 +1,36 @@
+"""An experiment's ``--out`` directory: its rows as CSV and JSON, extra tables, and ``run.json``.
+
+Every file is written atomically (``posecrb.core.files``); the run record follows the one schema
+of ``posecrb.core.provenance.run_record`` (docs/design.md#run-record).
+"""
+from __future__ import annotations
+
+import logging
+import os
+from collections.abc import Mapping, Sequence
+from pathlib import Path
+from typing import Any
+
+from ..core.files import write_text
+from ..core.provenance import write_run_record
+from .render import to_csv, to_json
+
+log = logging.getLogger("posecrb")
+
+
+def write_experiment_outputs(out_dir: str | os.PathLike, rows: Sequence[dict[str, Any]], record: Mapping[str, Any],
+                             extra: Mapping[str, Sequence[dict[str, Any]]] | None = None) -> list[Path]:
+    """``rows.csv``, ``rows.json``, ``<name>.csv`` for every ``extra`` table, then ``run.json``.
+
+    ``record`` comes from ``run_record``; the names of the files written are added to its
+    ``results["files"]``. Returns the paths written."""
+    d = Path(out_dir)
+    d.mkdir(parents=True, exist_ok=True)
+    written = [write_text(d / "rows.csv", to_csv(list(rows))),
+               write_text(d / "rows.json", to_json(list(rows), single=False) + "\n")]
+    for name, data in (extra or {}).items():
+        written.append(write_text(d / f"{name}.csv", to_csv(list(data))))
+    rec = {**record, "results": {**record.get("results", {}), "files": [p.name for p in written] + ["run.json"]}}
+    written.append(write_run_record(d, rec))
+    log.info("wrote %s/{%s}", d, ",".join(p.name for p in written))
+    return written
