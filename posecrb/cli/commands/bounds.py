@@ -11,7 +11,15 @@ from ...core.status import log_status, put
 from ...metrics.evaluate import EvaluationSettings, evaluate
 from ...models.paper.fim import trace_fim
 from ...report.render import print_rows
-from ..options import anchor_option, data_dir_option, fim_variant_option, format_option, load_dataset, repeat_option
+from ..options import (
+    anchor_option,
+    data_dir_option,
+    fim_variant_option,
+    format_option,
+    load_dataset,
+    ordering_option,
+    repeat_option,
+)
 
 log = logging.getLogger("posecrb")
 
@@ -23,12 +31,14 @@ HEADERS = {"times.lb": "lb time [s]", "times.ub": "ub time [s]", "ub_lambda": "u
 
 
 def bounds_row(name_or_path: str, data_dir: str | None, anchor_id: int | None, repeat: int,
-               rotation_model: str, estimate: str = "none", fim_variant: str | None = None) -> dict:
+               rotation_model: str, estimate: str = "none", fim_variant: str | None = None,
+               ordering: str = "auto") -> dict:
     graph, t_parse = load_dataset(name_or_path, data_dir, repeat)
     anchor = graph.anchor_index(anchor_id)
     m = evaluate(graph, EvaluationSettings(anchor=anchor, rotation_model=rotation_model,
                                            fim_variant=fim_variant or "consistent", repeat=repeat, estimate=estimate,
-                                           solver={"anchor": anchor} if estimate == "solve" else {}))
+                                           solver={"anchor": anchor} if estimate == "solve" else {},
+                                           ordering=ordering))
     b = m.bounds
     row = {
         "dataset": graph.name, "path": graph.path, "sha256": graph.sha256, "dim": graph.dim,
@@ -53,6 +63,7 @@ def bounds_row(name_or_path: str, data_dir: str | None, anchor_id: int | None, r
         row["times"].update(fim_build=m.times["fim_build"], fim_logdet=m.times["fim_logdet"], solve=est.solve_time)
         if est.certified is False:
             row["status"] = "uncertified"
+    row["ordering"] = {"requested": ordering, **m.ordering}
     return row
 
 
@@ -68,9 +79,10 @@ def bounds_row(name_or_path: str, data_dir: str | None, anchor_id: int | None, r
               help="Estimate at which the FIM column is evaluated: the certified global optimum (solve), "
                    "the file's own vertices, another g2o/TORO file's vertices, or none (graph-only columns).")
 @fim_variant_option
+@ordering_option
 @data_dir_option
 @format_option()
-def command(files, anchor, repeat, rotation_model, estimate, fim_variant, data_dir, fmt):
+def command(files, anchor, repeat, rotation_model, estimate, fim_variant, ordering, data_dir, fmt):
     """D-optimality of each FILE: FIM log-det at an estimate and its graph-only bounds (one
     Table I/II row per file).
 
@@ -81,12 +93,13 @@ def command(files, anchor, repeat, rotation_model, estimate, fim_variant, data_d
     (fim_variant=consistent) unless --fim-variant eq64 (eq. 64 as printed); same in 2D.
     lambda_min_rot and gap_bound carry a status when double precision cannot resolve them.
     Times are medians of --repeat runs after a warm-up; the lb time covers the
-    ordering and both factorizations, ub/ub_lambda their own extra work.
+    ordering and both factorizations, ub/ub_lambda their own extra work. --ordering changes
+    the cost only; the JSON key "ordering" names the ordering of each factorization.
     """
     rows, failures = [], []
     for f in files:
         try:
-            rows.append(bounds_row(f, data_dir, anchor, repeat, rotation_model, estimate, fim_variant))
+            rows.append(bounds_row(f, data_dir, anchor, repeat, rotation_model, estimate, fim_variant, ordering))
         except PosecrbError as exc:
             if len(files) == 1:
                 raise

@@ -19,6 +19,7 @@ from ..options import (
     frame_option,
     load_with_estimate,
     model_option,
+    ordering_option,
     resolve_fim_variant,
     resolve_frame,
     rotation_weight_option,
@@ -52,7 +53,8 @@ def parse_pose_ids(text: str | None) -> bool | list[int]:
 
 def crlb_result(file: str, data_dir: str | None, model: str, source: str, anchor_ids: tuple[int, ...],
                 quotient: bool, poses: bool | list[int], rotation_model: str,
-                fim_variant: str | None = None, frame: str | None = None) -> tuple[dict, list[dict]]:
+                fim_variant: str | None = None, frame: str | None = None,
+                ordering: str = "auto") -> tuple[dict, list[dict]]:
     """The JSON-ready result and, when per-pose blocks were asked, one row per pose.
     ``fim_variant``: None (default: consistent, the model's Fisher information), "eq64" or
     "consistent". ``frame``: sed only, None/"world" or "body" (``posecrb.models.thesis.frames``).
@@ -63,7 +65,8 @@ def crlb_result(file: str, data_dir: str | None, model: str, source: str, anchor
     row: dict = {"dataset": graph.name, "model": model, "dim": graph.dim, "poses": graph.n,
                  "edges": graph.m, "components": graph.n_components}
     crb = cramer_rao_bound(graph, est.rot, est.trans, model=model, anchor_ids=anchor_ids, quotient=quotient,
-                           poses=poses, rotation_model=rotation_model, variant=variant, frame=frame)
+                           poses=poses, rotation_model=rotation_model, variant=variant, frame=frame,
+                           ordering=ordering)
     times.update(crb.times)
     row.update(crb.row)
     row["estimate"] = est_info
@@ -84,10 +87,11 @@ def crlb_result(file: str, data_dir: str | None, model: str, source: str, anchor
 @rotation_weight_option
 @fim_variant_option
 @frame_option
+@ordering_option
 @data_dir_option
 @format_option()
-def command(file, model, quotient, anchors, poses, estimate_source, rotation_model, fim_variant, frame, data_dir,
-            fmt):
+def command(file, model, quotient, anchors, poses, estimate_source, rotation_model, fim_variant, frame, ordering,
+            data_dir, fmt):
     """Cramér-Rao lower bound of FILE at an estimate: exact trace, MSE bound, per-pose blocks.
 
     paper: C >= F^{-1} (2D, eq. 67); 3D adds the curvature term of eq. (68)
@@ -105,9 +109,10 @@ def command(file, model, quotient, anchors, poses, estimate_source, rotation_mod
     gtsam.Marginals (anchored: the anchor pose known exactly). Traces and MSE bounds are in
     the same frame as the blocks. Per-pose blocks use the coordinates listed in
     `coordinates`; `frame` and `coordinates_description` say what they mean (JSON: full matrices).
+    --ordering: the factorization's fill-reducing ordering (cost only; JSON key ordering).
     """
     row, per_rows = crlb_result(file, data_dir, model, estimate_source, anchors, quotient,
-                                parse_pose_ids(poses), rotation_model, fim_variant, frame)
+                                parse_pose_ids(poses), rotation_model, fim_variant, frame, ordering)
     if fmt == "json":
         print_rows([row], "json")
         return
