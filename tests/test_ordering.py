@@ -183,7 +183,9 @@ def test_auto_rule():
     assert (c.method, c.pose_level, str(c)) == ("nesdis", True, "nesdis (pose graph)")
     c = resolve_ordering("colamd", dim=3, poses=21952, matrix="fim")
     assert (c.method, c.pose_level) == ("colamd", False)
-    with pytest.raises(Exception):
+    from posecrb.core.errors import UsageError
+
+    with pytest.raises(UsageError):
         resolve_ordering("best", dim=2, poses=10, matrix="fim")
 
 
