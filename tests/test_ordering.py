@@ -172,7 +172,7 @@ def test_expand_permutation_for_the_blocks_layout():
 
 # ---------------------------------------------------------------- the rule of ``auto``
 def test_auto_rule():
-    assert AUTO_ND_MIN_POSES == 2000
+    assert AUTO_ND_MIN_POSES == 10000
     for matrix in ("lb", "ub", "fim", "crlb", "solver"):
         assert auto_ordering(2, 10 ** 6, matrix) == "amd"              # 2D: always AMD
         assert auto_ordering(3, AUTO_ND_MIN_POSES - 1, matrix) == "amd"  # small 3D

@@ -21,9 +21,9 @@ the flops) and the rounding, never the value beyond rounding. The choices:
 * ``auto``: ``auto_ordering``, measured with benchmarks/orderings.py: AMD, except nested
   dissection (``nesdis`` on the pose graph) for the block matrices (FIM, ``ub``, CRLB, the
   solver's M_red) of 3D graphs with at least ``AUTO_ND_MIN_POSES`` poses. AMD's fill grows
-  much faster than nested dissection's on 3D graphs (on a 3D grid of 21,952 poses the FIM factor
-  needs 5x the flops of nested dissection's), while on 2D graphs and small 3D ones AMD is as
-  good and its analysis is cheaper. The Laplacians of ``lb`` always use AMD (their factors are
+  faster than nested dissection's on large 3D graphs (on a 3D grid of 21,952 poses the FIM
+  factor takes 1.5x nested dissection's time), while on 2D graphs and 3D graphs up to a few
+  thousand poses AMD is as good and its analysis is cheaper. The Laplacians of ``lb`` always use AMD (their factors are
   cheap whatever the ordering; nested dissection's analysis costs more than it saves).
 """
 from __future__ import annotations
@@ -38,10 +38,12 @@ from ..core.errors import UsageError
 ORDERINGS = ("auto", "amd", "colamd", "metis", "nesdis")
 POSE_LEVEL = ("metis", "nesdis")
 MATRICES = ("lb", "ub", "fim", "crlb", "solver")
-# 3D graphs from this many poses on get nested dissection under ``auto`` (benchmarks/orderings.py:
-# the smallest 3D grid where nested dissection's flops drop below AMD's; thresholds from 2,000 to
-# 10,000 poses gave the same totals on the SE-Sync datasets and grids).
-AUTO_ND_MIN_POSES = 2000
+# 3D graphs from this many poses on get nested dissection under ``auto`` (benchmarks/orderings.py
+# --options): on the SE-Sync 3D datasets (1,661-5,750 poses) and a 3D grid of 5,832 poses AMD's
+# factorization is as fast or faster once nested dissection's extra ordering work is counted
+# (nested dissection 0.94-1.3x of AMD's time), on 3D grids of 10,648 and 21,952 poses nested
+# dissection takes 0.74x and 0.65x of it.
+AUTO_ND_MIN_POSES = 10000
 
 
 @dataclass(frozen=True, kw_only=True)
