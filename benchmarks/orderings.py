@@ -27,8 +27,17 @@ fixed choice over all matrices against the per-matrix best (the data for `--orde
 The natural ordering is skipped above --natural-max rows (its fill is quadratic in the bandwidth)
 and for Mred (translations first, then rotations: its natural order fills almost completely).
 
+--options measures instead posecrb's own ``--ordering`` choices (auto, amd, colamd, metis, nesdis)
+exactly as the library runs them (posecrb.linalg.ordering): per dataset and choice,
+  lb   ordering of L_tau + factorizations of L_tau and L_w with log-dets (compute_bounds' lb);
+  ub   ordering of L_w (x) I_dr + blkdiag(Psi) (pose graph: L_w) + its factorization;
+  FIM  ordering of the anchored paper FIM ("blocks" layout, as bounds/tables) + factorization + log-det;
+with the ordering actually used, the time (median of --repeat after a warm-up), nnz(L), and the spread
+of the log-dets over the choices (they must agree to rounding). This is the README's Orderings table.
+
 Usage: python benchmarks/orderings.py [--repeat K] [--huge] [--grids3 N,N] [--grids2 N,N]
-                                      [--no-real] [--data-dir DIR] [--slow S] [NAME ...]
+                                      [--no-real] [--data-dir DIR] [--slow S] [--options [--markdown]]
+                                      [NAME ...]
 """
 from __future__ import annotations
 
@@ -151,6 +160,115 @@ def estimate_for(graph):
     return odometry_estimate(graph)
 
 
+def _time_choice(run, repeat: int, slow: float):
+    first = run()
+    t = [first[0]]
+    if first[0] <= slow and repeat > 1:
+        t = []
+        for _ in range(repeat):
+            r = run()
+            t.append(r[0])
+            first = r
+    return statistics.median(t), first[1], first[2], first[3]
+
+
+def _nnz(k: int) -> str:
+    return f"{k / 1e6:.2f}M" if k >= 1e6 else f"{k / 1e3:.1f}k"
+
+
+def markdown_tables(results: list[dict], orderings: list[str]) -> None:
+    """The README's Orderings tables: per matrix, time (s) and nnz(L) per explicit choice, and
+    what auto used."""
+    shown = [o for o in orderings if o != "auto"]
+    for matrix in ("lb", "ub", "FIM"):
+        sel = [r for r in results if r["matrix"] == matrix]
+        if not sel:
+            continue
+        print()
+        print(f"{matrix}: time in s / nnz(L)")
+        print()
+        print("| dataset | dim | poses | " + " | ".join(shown) + " | auto uses |")
+        print("|---|---|---|" + "---|" * (len(shown) + 1))
+        for r in sel:
+            cells = [f"{r['res'][o][0]:.3g} / {_nnz(r['res'][o][2])}" if o in r["res"] else "-" for o in shown]
+            auto = r["res"]["auto"][1] if "auto" in r["res"] else "-"
+            print(f"| {r['name']} | {r['dim']} | {r['poses']} | " + " | ".join(cells) + f" | {auto} |")
+
+
+def options_table(items, orderings: list[str], matrices: str, repeat: int, slow: float,
+                  markdown: bool = False) -> None:
+    """posecrb's --ordering choices as the library runs them (module docstring, --options)."""
+    from posecrb import load
+    from posecrb.linalg.laplacian import kron_identity
+    from posecrb.linalg.ordering import ordered_symbolic
+    from posecrb.models.paper.bounds import block_diagonal, source_terms, weighted_laplacians
+    from posecrb.models.paper.fim import fim_symbolic_choice, paper_fim
+
+    print(f"{'dataset':24s} {'dim':>3s} {'poses':>6s} {'matrix':6s} {'rows':>7s} {'--ordering':10s} "
+          f"{'used':20s} {'time s':>8s} {'nnz(L)':>10s} {'vs amd':>6s}")
+    summary: dict[tuple[str, str], float] = {}
+    results: list[dict] = []
+    for name, path in items:
+        g = load(path)
+        if g.n_components != 1:
+            print(f"{name:24s} disconnected, skipped")
+            continue
+        lap = weighted_laplacians(g)
+        d, dr, n_p = g.dim, g.rot_dim, g.n - 1
+        runs = {}
+        if "lb" in matrices:
+            def lb(o):
+                t0 = time.perf_counter()
+                sym, c = ordered_symbolic(lap.l_tau, o, dim=d, poses=g.n, matrix="lb")
+                _, l1 = sym.factor_logdet(lap.l_tau)
+                f, l2 = sym.factor_logdet(lap.l_w)
+                return time.perf_counter() - t0, str(c), f, d * l1 + dr * l2
+            runs["lb"] = (lb, lap.l_tau.shape[0])
+        if "ub" in matrices:
+            psi, _ = source_terms(g, lap.tau, 0)
+            m = (kron_identity(lap.l_w, dr) + block_diagonal(psi)).tocsc()
+
+            def ub(o, m=m):
+                t0 = time.perf_counter()
+                sym, c = ordered_symbolic(m, o, dim=d, poses=g.n, matrix="ub",
+                                          pose_of_row=np.repeat(np.arange(n_p), dr), n_poses=n_p,
+                                          pose_adjacency=lap.l_w)
+                f, ld = sym.factor_logdet(m)
+                return time.perf_counter() - t0, str(c), f, ld
+            runs["ub"] = (ub, m.shape[0])
+        if "FIM" in matrices:
+            rot, trans = estimate_for(g)
+            fim = paper_fim(g, rot, trans)
+
+            def fimrun(o, fim=fim):
+                t0 = time.perf_counter()
+                sym, c = fim_symbolic_choice(fim, o)
+                f, ld = sym.factor_logdet(fim.matrix)
+                return time.perf_counter() - t0, str(c), f, ld
+            runs["FIM"] = (fimrun, fim.size)
+        for matrix, (run, rows) in runs.items():
+            res = {}
+            for o in orderings:
+                t, used, f, ld = _time_choice(lambda o=o: run(o), repeat, slow)
+                res[o] = (t, used, int(f.L().nnz), ld)
+                del f
+            ref = res.get("amd")
+            lds = [r[3] for r in res.values()]
+            for o, (t, used, nnz, _) in res.items():
+                summary[(matrix, o)] = summary.get((matrix, o), 0.0) + t
+                print(f"{name:24s} {d:3d} {g.n:6d} {matrix:6s} {rows:7d} {o:10s} {used:20s} {t:8.4f} {nnz:10d} "
+                      f"{t / ref[0] if ref else float('nan'):6.2f}", flush=True)
+            spread = (max(lds) - min(lds)) / max(1.0, abs(statistics.median(lds)))
+            print(f"{'':24s} -> log-dets agree to {spread:.1e} relative", flush=True)
+            results.append({"name": name, "dim": d, "poses": g.n, "matrix": matrix, "res": res})
+    print()
+    print("summed time per choice over the datasets above:")
+    for (matrix, o), t in summary.items():
+        print(f"  {matrix:4s} {o:10s} {t:9.3f} s")
+    if markdown:
+        markdown_tables(results, orderings)
+
+
 def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("names", nargs="*")
@@ -164,8 +282,28 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--natural-max", type=int, default=20000, help="skip natural above this many rows")
     ap.add_argument("--orderings", default=",".join(CHOLMOD_ORDERINGS + POSE_ORDERINGS))
     ap.add_argument("--matrices", default="lb,FIM,Mred")
+    ap.add_argument("--options", action="store_true",
+                    help="measure posecrb's --ordering choices as the library runs them (lb, ub, FIM)")
+    ap.add_argument("--markdown", action="store_true", help="with --options: also print the tables as markdown")
     args = ap.parse_args(argv)
     logging.getLogger("posecrb").setLevel(logging.ERROR)
+    if args.options:
+        from threadpoolctl import threadpool_limits
+
+        orderings = [o for o in args.orderings.split(",") if o] if args.orderings != ap.get_default("orderings") \
+            else ["auto", "amd", "colamd", "metis", "nesdis"]
+        items = [] if args.no_real else [(p.stem, p) for p in suite_files(data_dir(args.data_dir), args.names)]
+        g3 = [int(x) for x in args.grids3.split(",") if x] + ([100_000] if args.huge else [])
+        g2 = [int(x) for x in args.grids2.split(",") if x]
+        items += [(f"grid3D-{n}", grid_file(3, n)) for n in g3] + [(f"grid2D-{n}", grid_file(2, n)) for n in g2]
+        print_header("posecrb --ordering: lb, ub and FIM log-det (in-process, as the library runs them)", 1, [
+            f"median of {args.repeat} after a warm-up (one run above {args.slow:g} s); BLAS single-threaded; "
+            "time = ordering + analysis + factorizations + log-det"])
+        matrices = args.matrices if args.matrices != ap.get_default("matrices") else "lb,ub,FIM"
+        with threadpool_limits(1):
+            options_table([(n, p) for n, p in items if p.is_file()], orderings, matrices, args.repeat, args.slow,
+                          args.markdown)
+        return 0
 
     from threadpoolctl import threadpool_limits
 

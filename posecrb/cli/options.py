@@ -128,6 +128,18 @@ def plot_target(plot_path: str | None, out_dir: str | None, name: str) -> str | 
 
 
 
+# posecrb.linalg.ordering.ORDERINGS, spelled out so that --help imports no scipy (a test checks both agree).
+ORDERING_CHOICES = ("auto", "amd", "colamd", "metis", "nesdis")
+
+ordering_option = click.option(
+    "--ordering", type=click.Choice(ORDERING_CHOICES), default="auto", show_default=True,
+    help="Fill-reducing ordering of the sparse Cholesky factorizations (cost only: the numbers agree "
+         "to rounding). amd: CHOLMOD's AMD. colamd: true COLAMD (the paper's Algorithm 1; CHOLMOD "
+         "would apply AMD to a symmetric matrix, so COLAMD's permutation of A A^T is computed and passed "
+         "in; more fill than AMD here). metis, nesdis: nested dissection of the pose graph, expanded to "
+         "each pose's rows. auto: amd, but nesdis for the FIM/ub/CRLB of 3D graphs with >= 10000 poses "
+         "(measured, see the README's Performance section). The JSON key 'ordering' says what was used.")
+
 
 model_option = click.option(
     "--model", type=click.Choice(MODELS), default="paper", show_default=True,

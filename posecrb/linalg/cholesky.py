@@ -9,6 +9,7 @@ the matrix and the failed pivot, never a NaN.
 from __future__ import annotations
 
 import logging
+from typing import Any
 
 import numpy as np
 import scipy.sparse as sp
@@ -74,15 +75,52 @@ def _as_csc(a: sp.spmatrix) -> sp.csc_matrix:
 
 class SymbolicCholesky:
     """A CHOLMOD symbolic analysis (fill-reducing ordering + elimination tree) reused across
-    matrices sharing one sparsity pattern."""
+    matrices sharing one sparsity pattern.
 
-    def __init__(self, pattern: sp.spmatrix, mode: str = "auto", ordering_method: str = "default"):
+    ``permutation`` (optional) is a fill-reducing ordering computed elsewhere
+    (``posecrb.linalg.ordering``: COLAMD, or a pose-level ordering expanded to each pose's rows):
+    scikit-sparse cannot hand CHOLMOD a user permutation, so the pattern is permuted here, analysed
+    with the natural ordering, and every factored matrix is permuted the same way; the factor
+    returned (``PermutedFactor``) solves, and reports ``P()``, in the caller's ordering.
+    """
+
+    def __init__(self, pattern: sp.spmatrix, mode: str = "auto", ordering_method: str = "default",
+                 permutation: np.ndarray | None = None):
         self.shape = pattern.shape
-        self._symbolic: Factor = analyze(_as_csc(pattern), mode=mode, ordering_method=ordering_method)
+        self._perm: np.ndarray | None = None
+        if permutation is None:
+            self._symbolic: Factor = analyze(_as_csc(pattern), mode=mode, ordering_method=ordering_method)
+            return
+        perm = np.asarray(permutation, dtype=np.int64)
+        if perm.shape != (self.shape[0],) or not np.array_equal(np.sort(perm), np.arange(self.shape[0])):
+            raise UsageError(f"the ordering is not a permutation of the {self.shape[0]} rows")
+        self._perm = perm
+        pat = _as_csc(pattern)
+        # Gather map of the permuted CSC data: any matrix stored with exactly this pattern is
+        # permuted by one fancy index of its data instead of scipy's two-sided slicing.
+        self._pattern_indptr, self._pattern_indices = pat.indptr.copy(), pat.indices.copy()
+        marker = sp.csc_matrix((np.arange(1, pat.nnz + 1, dtype=float), pat.indices, pat.indptr), shape=pat.shape)
+        marker = marker[perm][:, perm].tocsc()
+        marker.sort_indices()
+        self._gather = marker.data.astype(np.int64) - 1
+        self._permuted_indptr, self._permuted_indices = marker.indptr, marker.indices
+        self._symbolic = analyze(sp.csc_matrix((np.ones(marker.nnz), marker.indices, marker.indptr),
+                                               shape=pat.shape), mode=mode, ordering_method="natural")
 
     @property
     def permutation(self) -> np.ndarray:
-        return self._symbolic.P()
+        p = self._symbolic.P()
+        return p if self._perm is None else self._perm[p]
+
+    def _permuted(self, a: sp.csc_matrix) -> sp.csc_matrix:
+        assert self._perm is not None
+        if (a.nnz == self._gather.size and np.array_equal(a.indptr, self._pattern_indptr)
+                and np.array_equal(a.indices, self._pattern_indices)):
+            return sp.csc_matrix((a.data[self._gather], self._permuted_indices, self._permuted_indptr),
+                                 shape=a.shape)
+        b = a[self._perm][:, self._perm].tocsc()
+        b.sort_indices()
+        return b
 
     def factor(self, a: sp.spmatrix, name: str = "matrix", beta: float = 0.0) -> Factor:
         """Numeric factorization of ``a + beta I`` with this analysis; raises NotPositiveDefinite."""
@@ -93,11 +131,58 @@ class SymbolicCholesky:
         if a.shape != self.shape:
             raise UsageError(f"{name}: shape {a.shape} does not match the analysed pattern {self.shape}")
         a = _as_csc(a)
+        if self._perm is not None:
+            a = self._permuted(a)
         try:
             f = self._symbolic.cholesky(a, beta=beta)
         except CholmodNotPositiveDefiniteError as exc:
             raise NotPositiveDefinite(name, str(exc).split(": ", 1)[-1]) from None
+        if self._perm is not None:
+            f = PermutedFactor(f, self._perm)
         return f, _checked_logdet(f, name)
+
+
+class PermutedFactor:
+    """A CHOLMOD factor of ``A[perm][:, perm]`` presented as a factor of ``A``.
+
+    ``L L^T = A[P()][:, P()]`` with ``P() = perm[inner.P()]``, and ``f(b)``/``solve_A`` solve with
+    ``A`` itself, as for a ``Factor`` whose ordering CHOLMOD computed. The triangular solves
+    (``solve_L``, ...) act in the factor's ordering, as CHOLMOD's do, so ``apply_P`` composes them.
+    """
+
+    def __init__(self, inner: Factor, perm: np.ndarray):
+        self._inner = inner
+        self._perm = perm
+        self._p = perm[inner.P()]
+
+    def P(self) -> np.ndarray:
+        return self._p
+
+    def apply_P(self, b):
+        return b[self._p]
+
+    def apply_Pt(self, b):
+        out = np.empty_like(b)
+        out[self._p] = b
+        return out
+
+    def solve_A(self, b):
+        if sp.issparse(b):
+            b = b.toarray()
+        b = np.asarray(b)
+        out = np.empty(b.shape, dtype=np.result_type(b.dtype, np.float64))
+        out[self._perm] = self._inner.solve_A(b[self._perm])
+        return out
+
+    __call__ = solve_A
+
+    def __getattr__(self, name: str) -> Any:
+        # L, D, LD, L_D, logdet, slogdet, det, solve_L, solve_Lt, solve_D, ...: ordering-free
+        # or in the factor's ordering, as for CHOLMOD's own Factor.
+        if name in ("cholesky", "cholesky_inplace", "cholesky_AAt", "cholesky_AAt_inplace", "update_inplace",
+                    "inv", "copy"):
+            raise AttributeError(f"PermutedFactor does not provide {name}")
+        return getattr(self._inner, name)
 
 
 def _checked_logdet(f: Factor, name: str) -> float:
@@ -147,11 +232,18 @@ def lambda_min(a: sp.spmatrix, factor: Factor | None = None, name: str = "matrix
     return float(vals[0])
 
 
-def anchored_logdet(matrix: sp.spmatrix, q: int, anchors: list[int], name: str) -> float:
-    """log det of a pose-major (q per pose) FIM with the anchored poses' rows/columns removed."""
+def anchored_logdet(matrix: sp.spmatrix, q: int, anchors: list[int], name: str, *, ordering: str = "auto",
+                    dim: int | None = None) -> float:
+    """log det of a pose-major (q per pose) FIM with the anchored poses' rows/columns removed,
+    factored with ``ordering`` (posecrb.linalg.ordering; ``dim`` defaults from q = 3 | 6)."""
+    from .ordering import block_cholesky  # noqa: PLC0415 -- import cycle: ordering builds on this module
 
     n = matrix.shape[0] // q
     keep = np.ones(n, bool)
     keep[anchors] = False
     dofs = (np.flatnonzero(keep)[:, None] * q + np.arange(q)).ravel()
-    return logdet(matrix[dofs][:, dofs].tocsc(), name=name)
+    a = matrix[dofs][:, dofs].tocsc()
+    if a.shape[0] == 0:
+        return 0.0
+    f = block_cholesky(a, ordering, dim=dim or (2 if q == 3 else 3), poses=n, matrix="fim", block=q, name=name)
+    return _checked_logdet(f, name)

@@ -14,7 +14,7 @@ from ..core.errors import PosecrbError
 from ..core.graph import PoseGraph
 from ..core.timing import timed
 from ..models.paper.bounds import BoundsResult, compute_bounds
-from ..models.paper.fim import PaperFim, fim_logdet, paper_fim, trace_fim
+from ..models.paper.fim import PaperFim, fim_symbolic_choice, paper_fim, trace_fim
 from ..solver.estimate import Estimate, get_estimate
 
 
@@ -22,7 +22,9 @@ from ..solver.estimate import Estimate, get_estimate
 class EvaluationSettings:
     """``anchor``: internal index of the anchored pose; ``estimate``: "solve", "vertices", a file,
     or "none" (bounds only); ``solver``: options of the certified solver; ``repeat``: the timing
-    protocol's repeats (1: each step runs once, untimed warm-up skipped)."""
+    protocol's repeats (1: each step runs once, untimed warm-up skipped); ``ordering``: the
+    fill-reducing ordering of every factorization (``posecrb.linalg.ordering.ORDERINGS``; the
+    values never depend on it beyond rounding)."""
 
     anchor: int = 0
     rotation_model: str = "eq59"
@@ -30,6 +32,7 @@ class EvaluationSettings:
     repeat: int = 1
     estimate: str = "solve"
     solver: Mapping[str, Any] = field(default_factory=dict)
+    ordering: str = "auto"
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -44,6 +47,8 @@ class DatasetMetrics:
     fim_logdet: float | None = None
     times: dict[str, float] = field(default_factory=dict)    # fim_build, fim_logdet (median of repeat)
     error: PosecrbError | None = None
+    ordering: dict[str, str] = field(default_factory=dict)   # orderings used: lb, ub (bounds), fim
+
 
     def to_row(self, times: Mapping[str, float] | None = None) -> dict:
         """The ``bounds`` command's row: the graph, ``BoundsResult.to_row()``, the times (``times``
@@ -74,9 +79,11 @@ def evaluate(graph: PoseGraph, settings: EvaluationSettings, *, step: Callable[[
     ``error`` with what was computed so far; ``"raise"`` lets it through."""
     say = step or (lambda s: None)
     say("bounds")
-    b = compute_bounds(graph, settings.anchor, settings.rotation_model, settings.repeat)
+    b = compute_bounds(graph, settings.anchor, settings.rotation_model, settings.repeat,
+                       ordering=settings.ordering)
+    used = dict(b.ordering)
     if settings.estimate == "none":
-        return DatasetMetrics(graph=graph, bounds=b)
+        return DatasetMetrics(graph=graph, bounds=b, ordering=used)
     est: Estimate | None = None
     try:
         say("solve")
@@ -84,10 +91,16 @@ def evaluate(graph: PoseGraph, settings: EvaluationSettings, *, step: Callable[[
         say("fim")
         fim, t_build = timed(lambda: paper_fim(graph, est.rot, est.trans, settings.anchor, settings.rotation_model,
                                                variant=settings.fim_variant), settings.repeat)
-        ld, t_ld = timed(lambda: fim_logdet(fim), settings.repeat)
+
+        def logdet() -> float:
+            sym, choice = fim_symbolic_choice(fim, settings.ordering)
+            used["fim"] = str(choice)
+            return sym.factor_logdet(fim.matrix, name="paper FIM")[1]
+
+        ld, t_ld = timed(logdet, settings.repeat)
     except PosecrbError as exc:
         if errors != "keep":
             raise
-        return DatasetMetrics(graph=graph, bounds=b, estimate=est, error=exc)
+        return DatasetMetrics(graph=graph, bounds=b, estimate=est, error=exc, ordering=used)
     return DatasetMetrics(graph=graph, bounds=b, estimate=est, fim=fim, fim_logdet=ld,
-                          times={"fim_build": t_build, "fim_logdet": t_ld})
+                          times={"fim_build": t_build, "fim_logdet": t_ld}, ordering=used)

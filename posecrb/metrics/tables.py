@@ -22,7 +22,7 @@ from functools import partial
 from typing import Any
 
 from ..core import provenance
-from ..core.errors import DatasetNotFound, InternalError, PosecrbError, status_of
+from ..core.errors import DatasetNotFound, InternalError, PosecrbError, UsageError, status_of
 from ..core.status import put
 from ..core.timing import timed
 from ..datasets import search as datasets
@@ -48,6 +48,7 @@ class TableSettings:
     data_dir: str | None = None
     solver: dict = field(default_factory=dict)
     fim_variant: str = "consistent"
+    ordering: str = "auto"          # fill-reducing ordering (posecrb.linalg.ordering; cost only)
 
     @property
     def as_published(self) -> bool:
@@ -95,7 +96,8 @@ def dataset_row(name: str, settings: TableSettings,
         row.update(path=str(path), sha256=graph.sha256, dim=graph.dim,
                    poses=graph.n, edges=graph.m)
         m = evaluate(graph, EvaluationSettings(rotation_model=settings.rotation_model, fim_variant=settings.fim_variant,
-                                               repeat=settings.repeat, solver=settings.solver),
+                                               repeat=settings.repeat, solver=settings.solver,
+                                               ordering=settings.ordering),
                      step=step, errors="keep")
         b = m.bounds
         row.update(lb=b.lb)
@@ -113,7 +115,7 @@ def dataset_row(name: str, settings: TableSettings,
         row.update(fim_logdet=ld, fim_variant=m.fim.variant, rotation_weight=settings.rotation_model,
                    fim_time=m.times["fim_logdet"], fim_build_time=m.times["fim_build"])
         row.update(gap_ub_rel=None if b.ub is None else (b.ub - b.lb) / b.lb, gap_fim_rel=(ld - b.lb) / b.lb,
-                   parse_time=t_parse)
+                   parse_time=t_parse, ordering=m.ordering)
         if not est.certified:
             row["status"] = "uncertified"
     except PosecrbError as exc:
@@ -127,11 +129,51 @@ def _run_one(args):  # top level: picklable for the process pool
     return dataset_row(name, settings)
 
 
+def _dataset_task(context: tuple[str, TableSettings], task: object) -> dict:
+    """One dataset as a Monte Carlo engine task (posecrb.sim.montecarlo; run single-threaded there)."""
+    name, settings = context
+    row = dataset_row(name, settings)
+    row["timing"] = "single-threaded task"
+    return row
+
+
+EXECUTORS = ("local", "dask")
+
+
 def build_rows(names: Sequence[str], settings: TableSettings, jobs: int = 1,
                on_done: Callable[[str, dict], None] | None = None,
-               on_step: Callable[[str, str], None] | None = None) -> list[dict]:
+               on_step: Callable[[str, str], None] | None = None, *, executor: str = "local",
+               scheduler: str | None = None, client: Any = None) -> list[dict]:
     """Rows in the order of ``names``; with jobs > 1 datasets run in a process pool
-    (timings then include contention for the machine's cores: use --jobs 1 for timing)."""
+    (timings then include contention for the machine's cores: use --jobs 1 for timing).
+
+    ``executor="dask"``: one dataset per task on a Dask cluster through the Monte Carlo engine
+    (posecrb.sim.montecarlo): the cluster at ``scheduler`` (or the given ``client``), otherwise a
+    LocalCluster of ``jobs`` worker processes. Each task runs with BLAS/OpenMP limited to one
+    thread, so its timings are single-threaded (rows carry ``timing``); the workers need posecrb
+    and the datasets at the same paths (give ``data_dir`` / paths valid on the workers)."""
+    if executor not in EXECUTORS:
+        raise UsageError(f"executor must be one of {EXECUTORS}, got {executor!r}")
+    if scheduler and executor != "dask":
+        raise UsageError("--scheduler needs --executor dask")
+    if executor == "dask":
+        import numpy as np  # noqa: PLC0415
+
+        from ..sim.montecarlo import Task, _chunks, _run_dask  # noqa: PLC0415 -- the engine's Dask path
+
+        tasks = [Task(k, 0, np.random.SeedSequence(0)) for k in range(len(names))]
+        dask_rows: list = [None] * len(names)
+
+        def collect(done: Iterable[tuple[int, dict]]) -> None:
+            for pos, row in done:
+                dask_rows[pos] = row
+                if on_done:
+                    on_done(names[pos], row)
+
+        if names:
+            _run_dask(_dataset_task, [(n, settings) for n in names], _chunks(tasks, 1), jobs, scheduler, client,
+                      collect, dask_rows)
+        return dask_rows
     if jobs <= 1:
         rows = []
         for n in names:

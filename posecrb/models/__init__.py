@@ -20,9 +20,10 @@ from ..core.graph import PoseGraph
 from ..core.status import OK, Status, log_status, put
 from ..io.npz import save_npz
 from ..linalg.cholesky import anchored_logdet
+from ..linalg.ordering import resolve_ordering
 from .paper.bounds import t_optimality
 from .paper.crlb import CrlbResult, InverseAccuracy, paper_crlb
-from .paper.fim import fim_logdet, paper_fim, trace_fim
+from .paper.fim import fim_symbolic_choice, paper_fim, trace_fim
 from .thesis.crb import SedCrbResult
 from .thesis.fim import sed_fim
 from .thesis.frames import convert_information, coordinate_names, coordinates_description, sed_crb_in_frame
@@ -54,6 +55,7 @@ class FisherInformation:
     rotation_weight: str | None = None       # paper only
     fim_variant: str | None = None           # paper only
     times: dict[str, float] = field(default_factory=dict)
+    ordering: str = ""                       # the log-det factorization's ordering (posecrb.linalg.ordering)
 
     def to_row(self) -> dict:
         """The model's part of the ``fim`` row (keys and order of the command's JSON)."""
@@ -77,7 +79,7 @@ class FisherInformation:
 
 def fisher_information(graph: PoseGraph, rot: np.ndarray, trans: np.ndarray, *, model: str = "paper",
                        anchor_id: int | None = None, rotation_model: str = "eq59", variant: str = "consistent",
-                       frame: str = "world") -> FisherInformation:
+                       frame: str = "world", ordering: str = "auto") -> FisherInformation:
     """The Fisher information of ``model`` at the estimate (rot, trans).
 
     paper: anchored at ``anchor_id`` (default the smallest id), eq. (42)/(64), log-det and trace
@@ -91,15 +93,17 @@ def fisher_information(graph: PoseGraph, rot: np.ndarray, trans: np.ndarray, *, 
         fim = paper_fim(graph, rot, trans, anchor=anchor, rotation_model=rotation_model, variant=variant)
         times = {"fim_build": fim.build_time}
         t0 = time.perf_counter()
-        ld: float | None = fim_logdet(fim)
+        sym, choice = fim_symbolic_choice(fim, ordering)
+        ld: float | None = sym.factor_logdet(fim.matrix, name="paper FIM")[1]
         times["fim_logdet"] = time.perf_counter() - t0
         ids, coord = fim.index_map()
         return FisherInformation(model="paper", matrix=fim.matrix, row_ids=ids, row_coord=coord,
                                  coordinate_names=fim.coordinate_names(), frame="mixed", anchors=[fim.anchor_id],
                                  layout=fim.layout, logdet=ld, trace=trace_fim(fim), rank=fim.size, nullity=0,
                                  t_opt_approx=t_optimality(graph, anchor, rotation_model)[1],
-                                 rotation_weight=rotation_model, fim_variant=fim.variant, times=times)
-    sfim = sed_fim(graph, rot, trans)
+                                 rotation_weight=rotation_model, fim_variant=fim.variant, times=times,
+                                 ordering=str(choice))
+    sfim = sed_fim(graph, rot, trans, ordering=ordering)
     times = dict(sfim.times)
     # log-det, rank and nullity are the same in both frames (det B_i = +-1, posecrb.models.thesis.frames)
     matrix = sfim.matrix if frame == "world" else convert_information(sfim.matrix, rot, trans, "body")
@@ -109,7 +113,8 @@ def fisher_information(graph: PoseGraph, rot: np.ndarray, trans: np.ndarray, *, 
                              "(`posecrb crlb --anchor` takes one anchor per component)")
         anchors = [graph.anchor_index(anchor_id)]
         t0 = time.perf_counter()
-        ld = anchored_logdet(sfim.matrix, sfim.q, anchors, "SE(d) FIM on the free poses")
+        ld = anchored_logdet(sfim.matrix, sfim.q, anchors, "SE(d) FIM on the free poses",
+                                ordering=ordering, dim=graph.dim)
         times["fim_logdet"] = time.perf_counter() - t0
         status = OK
     else:
@@ -121,7 +126,8 @@ def fisher_information(graph: PoseGraph, rot: np.ndarray, trans: np.ndarray, *, 
                              row_coord=np.tile(np.arange(sfim.q), graph.n), coordinate_names=names, frame=frame,
                              anchors=[int(graph.ids[a]) for a in anchors], layout=layout, logdet=ld,
                              logdet_status=status, trace=float(matrix.diagonal().sum()), rank=sfim.rank,
-                             nullity=sfim.nullity, expected_nullity=sfim.q * sfim.components, times=times)
+                             nullity=sfim.nullity, expected_nullity=sfim.q * sfim.components, times=times,
+                             ordering=str(resolve_ordering(ordering, dim=graph.dim, poses=graph.n, matrix="fim")))
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -140,13 +146,14 @@ class CramerRaoBound:
 def cramer_rao_bound(graph: PoseGraph, rot: np.ndarray, trans: np.ndarray, *, model: str = "paper",
                      anchor_ids: Sequence[int] = (), quotient: bool = False, poses: bool | list[int] = False,
                      rotation_model: str = "eq59", variant: str = "consistent",
-                     frame: str = "mixed") -> CramerRaoBound:
+                     frame: str = "mixed", ordering: str = "auto") -> CramerRaoBound:
     """The Cramér-Rao bound of ``model`` at the estimate (rot, trans).
 
     paper: anchored at one pose (docs/design.md#crlb), with eq. (68)'s curvature correction in 3D;
     sed: anchored (5.1) or ``quotient`` (5.5) in ``frame`` coordinates (docs/design.md#anchored-crb).
     ``poses``: per-pose covariance blocks for every pose (True) or the listed ids. Doubtful numbers
-    carry a ``<key>_status`` and a warning on stderr."""
+    carry a ``<key>_status`` and a warning on stderr. ``ordering``: the factorizations' fill-reducing
+    ordering (posecrb.linalg.ordering; cost only), reported in the row's ``ordering``."""
     if model not in MODELS:
         raise UsageError(f"model must be one of {MODELS}, got {model!r}")
     row: dict = {}
@@ -159,7 +166,7 @@ def cramer_rao_bound(graph: PoseGraph, rot: np.ndarray, trans: np.ndarray, *, mo
             raise UsageError("--model paper takes a single --anchor (its graph must be connected)")
         anchor = graph.anchor_index(anchor_ids[0] if anchor_ids else None)
         res = paper_crlb(graph, rot, trans, anchor=anchor, per_pose=poses, rotation_model=rotation_model,
-                         variant=variant)
+                         variant=variant, ordering=ordering)
         row.update({"kind": "anchored", "fim_variant": res.fim_variant, "rotation_weight": rotation_model,
                     "anchors": [res.anchor_id], "nullity": 0})
         acc = _accuracy(row, res.accuracy, graph.name)
@@ -184,7 +191,8 @@ def cramer_rao_bound(graph: PoseGraph, rot: np.ndarray, trans: np.ndarray, *, mo
             want = [graph.index_of(p) for p in poses]
         else:
             want = False
-        res = sed_crb_in_frame(graph, rot, trans, frame, anchors=anchors, quotient=quotient, per_pose=want)
+        res = sed_crb_in_frame(graph, rot, trans, frame, anchors=anchors, quotient=quotient, per_pose=want,
+                               ordering=ordering)
         row.update({"kind": res.kind, "anchors": [int(graph.ids[a]) for a in res.anchors],
                     "nullity": res.nullity})
         acc = _accuracy(row, res.accuracy, graph.name)
@@ -197,6 +205,7 @@ def cramer_rao_bound(graph: PoseGraph, rot: np.ndarray, trans: np.ndarray, *, mo
             blocks = None
 
     row["frame"] = frame
+    row["ordering"] = str(resolve_ordering(ordering, dim=graph.dim, poses=graph.n, matrix="crlb"))
     row["coordinates_description"] = coordinates_description(graph.dim, frame)
     per_rows: list[dict] = []
     if blocks is not None:

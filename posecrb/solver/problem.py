@@ -48,6 +48,7 @@ from ..core.errors import InternalError
 from ..core.graph import PoseGraph
 from ..linalg.cholesky import SymbolicCholesky, cholesky
 from ..linalg.laplacian import reduced_laplacian
+from ..linalg.ordering import solver_symbolic
 
 # An edge's R~ counts as orthogonal when max |I - R~ R~^T| is at the rounding level of a
 # rotation computed in floating point (normalised quaternions measure up to ~10 eps on the
@@ -231,7 +232,7 @@ class Problem:
         self._full_diag_pos = positions(diag, diag)
         self._full_lam_pos = positions(rr, cc)
         self._full_pattern = pattern
-        self._full_symbolic = SymbolicCholesky(pattern)
+        self._full_symbolic = solver_symbolic(pattern, d, n)   # pose-level nested dissection on large 3D
 
     def full_matrix(self, lam_blocks: np.ndarray | None, shift: float) -> sp.csc_matrix:
         """M_red(s) = [[L_red, V_red], [V_red^T, C - Lambda + s I]] (sparse, (n-1+dn) square)."""

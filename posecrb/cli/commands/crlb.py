@@ -18,6 +18,7 @@ from ..options import (
     load_with_estimate,
     model_option,
     model_settings_options,
+    ordering_option,
     resolve_model_settings,
 )
 
@@ -49,7 +50,8 @@ def parse_pose_ids(text: str | None) -> bool | list[int]:
 
 def crlb_result(file: str, data_dir: str | None, model: str, source: str, anchor_ids: tuple[int, ...],
                 quotient: bool, poses: bool | list[int], rotation_model: str,
-                fim_variant: str | None = None, frame: str | None = None) -> tuple[dict, list[dict]]:
+                fim_variant: str | None = None, frame: str | None = None,
+                ordering: str = "auto") -> tuple[dict, list[dict]]:
     """The JSON-ready result and, when per-pose blocks were asked, one row per pose.
     ``fim_variant``: None (default: consistent, the model's Fisher information), "eq64" or
     "consistent". ``frame``: sed only, None/"world" or "body" (``posecrb.models.thesis.frames``).
@@ -59,7 +61,8 @@ def crlb_result(file: str, data_dir: str | None, model: str, source: str, anchor
     row: dict = {"dataset": graph.name, "model": model, "dim": graph.dim, "poses": graph.n,
                  "edges": graph.m, "components": graph.n_components}
     crb = cramer_rao_bound(graph, est.rot, est.trans, model=model, anchor_ids=anchor_ids, quotient=quotient,
-                           poses=poses, rotation_model=rotation_model, variant=variant, frame=frame)
+                           poses=poses, rotation_model=rotation_model, variant=variant, frame=frame,
+                           ordering=ordering)
     times.update(crb.times)
     row.update(crb.to_row())
     row["estimate"] = est_info
@@ -78,10 +81,11 @@ def crlb_result(file: str, data_dir: str | None, model: str, source: str, anchor
               help="Also report per-pose covariance blocks: 'all' or ids/ranges, e.g. 0,5,10-12.")
 @estimate_option
 @model_settings_options
+@ordering_option
 @data_dir_option
 @format_option()
-def command(file, model, quotient, anchors, poses, estimate_source, rotation_model, fim_variant, frame, data_dir,
-            fmt):
+def command(file, model, quotient, anchors, poses, estimate_source, rotation_model, fim_variant, frame, ordering,
+            data_dir, fmt):
     """Cramér-Rao lower bound of FILE at an estimate: exact trace, MSE bound, per-pose blocks.
 
     paper: C >= F^{-1} (2D, eq. 67); 3D adds the curvature term of eq. (68)
@@ -99,9 +103,10 @@ def command(file, model, quotient, anchors, poses, estimate_source, rotation_mod
     gtsam.Marginals (anchored: the anchor pose known exactly). Traces and MSE bounds are in
     the same frame as the blocks. Per-pose blocks use the coordinates listed in
     `coordinates`; `frame` and `coordinates_description` say what they mean (JSON: full matrices).
+    --ordering: the factorization's fill-reducing ordering (cost only; JSON key ordering).
     """
     row, per_rows = crlb_result(file, data_dir, model, estimate_source, anchors, quotient,
-                                parse_pose_ids(poses), rotation_model, fim_variant, frame)
+                                parse_pose_ids(poses), rotation_model, fim_variant, frame, ordering)
     if fmt == "json":
         print_rows([row], "json")
         return

@@ -20,6 +20,7 @@ from ..options import (
     load_with_estimate,
     model_option,
     model_settings_options,
+    ordering_option,
     resolve_model_settings,
 )
 
@@ -28,7 +29,7 @@ log = logging.getLogger("posecrb")
 
 def fim_row(file: str, data_dir: str | None, model: str, source: str, anchor_id: int | None,
             rotation_model: str, save: str | None, fim_variant: str | None = None,
-            frame: str | None = None) -> dict:
+            frame: str | None = None, ordering: str = "auto") -> dict:
     variant, frame = resolve_model_settings(model, fim_variant, frame)
     if save:
 
@@ -39,9 +40,10 @@ def fim_row(file: str, data_dir: str | None, model: str, source: str, anchor_id:
                  "edges": graph.m, "components": graph.n_components}
     fim = fisher_information(graph, est.rot, est.trans, model=model, anchor_id=anchor_id,
                              rotation_model=rotation_model, variant=variant,
-                             frame=frame if model == "sed" else "world")
+                             frame=frame if model == "sed" else "world", ordering=ordering)
     times.update(fim.times)
     row.update(fim.to_row())
+    row["ordering"] = fim.ordering
     if save:
         fim.save(save)
     row["frame"] = frame
@@ -60,13 +62,14 @@ def fim_row(file: str, data_dir: str | None, model: str, source: str, anchor_id:
 @click.option("--anchor", type=POSE_ID, default=None,
               help="Pose id anchored for the log-det; default: the smallest id (of each component, sed).")
 @model_settings_options
+@ordering_option
 @click.option("--save", type=click.Path(dir_okay=False, writable=True), default=None,
               help="Write the FIM as a scipy sparse .npz with its index map "
                    "(row_pose_id, row_coordinate, coordinate_names) and its frame; .npz is appended "
                    "unless present. With --model sed --frame body it is comparable with a GTSAM Hessian.")
 @data_dir_option
 @format_option()
-def command(file, model, estimate_source, anchor, rotation_model, fim_variant, frame, save, data_dir, fmt):
+def command(file, model, estimate_source, anchor, rotation_model, fim_variant, frame, ordering, save, data_dir, fmt):
     """Fisher information matrix of FILE at an estimate: size, nnz, log-det, trace, rank.
 
     paper: anchored FIM of eq. (42) (2D) / (64) (3D), rows [translations; rotations]
@@ -78,9 +81,11 @@ def command(file, model, estimate_source, anchor, rotation_model, fim_variant, f
     numerically singular FIM has logdet null with a logdet_status and a warning. --frame world
     (default, the thesis' coordinates, rotation first) or body (GTSAM's and g2o's,
     F_body = M^-T F M^-1, M = blkdiag(-P Ad_{X_i^-1})): trace and the saved matrix change,
-    log-det, rank and nullity do not. JSON: frame, coordinates_description.
+    log-det, rank and nullity do not. JSON: frame, coordinates_description, ordering (the
+    log-det factorization's fill-reducing ordering, --ordering: cost only).
     """
-    row = fim_row(file, data_dir, model, estimate_source, anchor, rotation_model, save, fim_variant, frame)
+    row = fim_row(file, data_dir, model, estimate_source, anchor, rotation_model, save, fim_variant, frame,
+                  ordering)
     if fmt != "json":
         row = {k: (",".join(map(str, v)) if isinstance(v, list) else v) for k, v in row.items()}
     if fmt == "table":

@@ -32,6 +32,7 @@ from ...core.status import OK, Status, put
 from ...core.timing import timed
 from ...linalg.cholesky import Factor, SymbolicCholesky
 from ...linalg.laplacian import kron_identity, reduced_index, reduced_laplacian
+from ...linalg.ordering import ordered_symbolic
 
 # lambda_min(L_w) is reported with a warning when its certified interval is wider than this
 # (relative to the estimate).
@@ -232,6 +233,7 @@ class BoundsResult:
     lambda_min_rot_status: Status = OK
     gap_bound_status: Status = OK
     ub_status: Status = OK
+    ordering: dict[str, str] = field(default_factory=dict)   # {"lb": ..., "ub": ...}: the orderings used
 
     def to_row(self) -> dict:
         """The bounds' part of a ``bounds`` row (keys and order of the command's JSON); a number
@@ -248,7 +250,7 @@ class BoundsResult:
 
 
 def compute_bounds(graph: PoseGraph, anchor: int | None = None, rotation_model: str = "eq59",
-                   repeat: int = 1) -> BoundsResult:
+                   repeat: int = 1, *, ordering: str = "auto") -> BoundsResult:
     """All graph-only metrics; ``anchor`` is an internal index (default 0 = smallest id).
 
     Timed regions (median of ``repeat`` after one warm-up): ``laplacians`` = weights from the
@@ -256,25 +258,36 @@ def compute_bounds(graph: PoseGraph, anchor: int | None = None, rotation_model: 
     factorizations (Algorithm 1); ``ub`` = Psi blocks + the augmented rotation matrix + its
     analysis and factorization; ``ub_lambda`` = lambda_inf + one factorization of L_w + lambda_inf I
     reusing lb's ordering. ``d logdet(L_tau)`` is shared by all three and timed in ``lb`` only.
+    ``ordering``: the fill-reducing ordering (``posecrb.linalg.ordering.ORDERINGS``) of lb's
+    Laplacians and of ub's matrix, whose pose graph is L_w's (d_r rows per pose); the choices made
+    are in ``ordering`` of the result.
     """
     graph.require_connected()
     anchor = 0 if anchor is None else int(anchor)
     d, dr = graph.dim, graph.rot_dim
     lap, t_lap = timed(lambda: weighted_laplacians(graph, anchor, rotation_model), repeat)
 
+    n_p = graph.n - 1
+
     def lower_terms():
-        sym = SymbolicCholesky(lap.l_tau)
+        sym, choice = ordered_symbolic(lap.l_tau, ordering, dim=d, poses=graph.n, matrix="lb")
+        used["lb"] = str(choice)
         _, ld_tau = sym.factor_logdet(lap.l_tau, "reduced translation Laplacian L_tau")
         f_w, ld_w = sym.factor_logdet(lap.l_w, "reduced rotation Laplacian L_w")
         return sym, f_w, ld_tau, ld_w
 
+    used: dict[str, str] = {}
     (sym, f_w, ld_tau, ld_w), t_lb = timed(lower_terms, repeat)
 
     def upper():
         psi, _ = source_terms(graph, lap.tau, anchor)
         m = kron_identity(lap.l_w, dr) + block_diagonal(psi)
         try:
-            return SymbolicCholesky(m).factor_logdet(m, "L_w (x) I + blkdiag(Psi)")[1]
+            sym_m, choice = ordered_symbolic(m, ordering, dim=d, poses=graph.n, matrix="ub",
+                                             pose_of_row=np.repeat(np.arange(n_p), dr), n_poses=n_p,
+                                             pose_adjacency=lap.l_w)
+            used["ub"] = str(choice)
+            return sym_m.factor_logdet(m, "L_w (x) I + blkdiag(Psi)")[1]
         except NotPositiveDefinite as exc:
             return exc
 
@@ -298,7 +311,6 @@ def compute_bounds(graph: PoseGraph, anchor: int | None = None, rotation_model: 
     (lam_inf, ld_w_lam), t_ubl = timed(upper_lambda, repeat)
 
     eig = rotation_lambda_min(lap, graph, sym, f_w)
-    n_p = graph.n - 1
     tree = tree_lambda_min_bound(graph.n, graph.src, graph.dst, lap.w, anchor)
     lower = max(eig.lower or 0.0, tree)
     if eig.status.available and eig.lower is not None and eig.lower >= tree:
@@ -325,5 +337,5 @@ def compute_bounds(graph: PoseGraph, anchor: int | None = None, rotation_model: 
         total_degree=total_degree,
         times={"laplacians": t_lap, "lb": t_lb, "ub": t_ub, "ub_lambda": t_ubl},
         lambda_min_rot_lower=lower if lower > 0 else None, lambda_min_rot_status=eig.status,
-        gap_bound_status=gap_status, ub_status=ub_status,
+        gap_bound_status=gap_status, ub_status=ub_status, ordering=used,
     )

@@ -45,7 +45,8 @@ import scipy.sparse as sp
 from ...core.graph import PoseGraph
 from ...core.status import OK, Status
 from ...linalg.cholesky import Factor
-from ...linalg.selinv import _block_pattern_padded, _factor, inverse_block_diagonal
+from ...linalg.ordering import block_cholesky
+from ...linalg.selinv import _block_pattern_padded, inverse_block_diagonal
 from .fim import PaperFim, coordinate_names, paper_fim
 
 # eq. (68): warn when the curvature correction exceeds this fraction of the first-order term
@@ -229,16 +230,19 @@ def _requested_ids(graph: PoseGraph, per_pose: bool | Sequence[int]) -> np.ndarr
     return ids
 
 
-def crlb_from_fim(fim: PaperFim, graph: PoseGraph, per_pose: bool | Sequence[int] = False) -> CrlbResult:
+def crlb_from_fim(fim: PaperFim, graph: PoseGraph, per_pose: bool | Sequence[int] = False, *,
+                  ordering: str = "auto") -> CrlbResult:
     """CRLB (eq. 67 / 68) from an already built paper FIM of ``graph``, with its accuracy
-    estimate and the validity of the curvature term (module docstring)."""
+    estimate and the validity of the curvature term (module docstring). ``ordering``: the FIM
+    factorization's fill-reducing ordering (posecrb.linalg.ordering; cost only)."""
 
     times: dict[str, float] = {}
     d, dr, q = fim.dim, fim.rot_dim, fim.q
     npf = fim.n_free
     t0 = time.perf_counter()
     fp = fim.to_layout("poses")
-    factor = _factor(_block_pattern_padded(fp.matrix, q), "paper FIM") if npf else None
+    factor = block_cholesky(_block_pattern_padded(fp.matrix, q), ordering, dim=d, poses=graph.n, matrix="crlb",
+                            block=q, name="paper FIM") if npf else None
     blocks = inverse_block_diagonal(fp.matrix, q, name="paper FIM", factor=factor)   # (n_p, q, q) of F^{-1}
     times["crlb_blocks"] = time.perf_counter() - t0
     t0 = time.perf_counter()
@@ -290,7 +294,7 @@ def crlb_from_fim(fim: PaperFim, graph: PoseGraph, per_pose: bool | Sequence[int
 
 def paper_crlb(graph: PoseGraph, rot: np.ndarray, trans: np.ndarray, anchor: int = 0,
                per_pose: bool | Sequence[int] = False, rotation_model: str = "eq59",
-               variant: str = "consistent") -> CrlbResult:
+               variant: str = "consistent", *, ordering: str = "auto") -> CrlbResult:
     """CRLB of the paper model at the estimate ``(rot, trans)`` with pose ``anchor``
     (internal index) fixed: 2D eq. (67), 3D eq. (68). ``per_pose``: True for every pose,
     or a sequence of pose ids (as in the file). ``variant``: the FIM it inverts,
@@ -301,6 +305,6 @@ def paper_crlb(graph: PoseGraph, rot: np.ndarray, trans: np.ndarray, anchor: int
     fim = paper_fim(graph, rot, trans, anchor=anchor, rotation_model=rotation_model, layout="blocks",
                     variant=variant)
     t_build = time.perf_counter() - t0
-    res = crlb_from_fim(fim, graph, per_pose)
+    res = crlb_from_fim(fim, graph, per_pose, ordering=ordering)
     res.times["fim_build"] = t_build
     return res

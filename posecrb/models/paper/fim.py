@@ -63,6 +63,7 @@ from ...core.graph import PoseDimensions, PoseGraph
 from ...core.noise import rotation_weight as _rotation_weight
 from ...linalg.cholesky import SymbolicCholesky
 from ...linalg.laplacian import reduced_index
+from ...linalg.ordering import OrderingChoice, ordered_symbolic
 
 _E2 = np.array([[0.0, -1.0], [1.0, 0.0]])
 LAYOUTS = ("blocks", "poses")
@@ -249,17 +250,32 @@ def paper_fim(graph: PoseGraph, rot: np.ndarray, trans: np.ndarray, anchor: int 
     return fim
 
 
-def fim_symbolic(fim: PaperFim) -> SymbolicCholesky:
-    """One CHOLMOD analysis of the FIM's pattern, reusable for every FIM of the same graph,
-    anchor and layout (the pattern does not depend on the estimate)."""
-    return SymbolicCholesky(fim.matrix)
+def pose_of_row(fim: PaperFim) -> np.ndarray:
+    """For each row of ``fim.matrix``: its free pose's number 0..n_p-1 (in ``pose_ids`` order)."""
+    k = np.arange(fim.n_free)
+    if fim.layout == "poses":
+        return np.repeat(k, fim.q)
+    return np.concatenate([np.repeat(k, fim.dim), np.repeat(k, fim.rot_dim)])
 
 
-def fim_logdet(fim: PaperFim, symbolic: SymbolicCholesky | None = None) -> float:
-    """log det F by sparse Cholesky (CHOLMOD), reusing ``symbolic`` when given.
-    Raises NotPositiveDefinite when F is singular or indefinite."""
-    symbolic = symbolic or fim_symbolic(fim)
-    return float(symbolic.factor(fim.matrix, name="paper FIM").logdet())
+def fim_symbolic_choice(fim: PaperFim, ordering: str = "auto") -> tuple[SymbolicCholesky, OrderingChoice]:
+    """One CHOLMOD analysis of the FIM's pattern with ``ordering`` (posecrb.linalg.ordering), reusable
+    for every FIM of the same graph, anchor and layout (the pattern does not depend on the estimate),
+    and the ordering it used; pose-level orderings use the pose graph read from the FIM's pattern."""
+    return ordered_symbolic(fim.matrix, ordering, dim=fim.dim, poses=fim.n_free + 1, matrix="fim",
+                            pose_of_row=pose_of_row(fim), n_poses=fim.n_free)
+
+
+def fim_symbolic(fim: PaperFim, ordering: str = "auto") -> SymbolicCholesky:
+    """``fim_symbolic_choice`` without the choice."""
+    return fim_symbolic_choice(fim, ordering)[0]
+
+
+def fim_logdet(fim: PaperFim, symbolic: SymbolicCholesky | None = None, *, ordering: str = "auto") -> float:
+    """log det F by sparse Cholesky (CHOLMOD), reusing ``symbolic`` when given (otherwise analysed
+    with ``ordering``). Raises NotPositiveDefinite when F is singular or indefinite."""
+    symbolic = symbolic or fim_symbolic(fim, ordering)
+    return symbolic.factor_logdet(fim.matrix, name="paper FIM")[1]
 
 
 def trace_fim(fim: PaperFim) -> float:

@@ -13,7 +13,7 @@ import numpy as np
 from ...core.errors import NotPositiveDefinite, UsageError
 from ...core.graph import PoseGraph
 from ...linalg import selinv
-from ...linalg.cholesky import cholesky
+from ...linalg.ordering import block_cholesky
 from ..paper.crlb import inverse_accuracy
 from .fim import SedFim, _free_matrix, _resolve_anchors, sed_fim
 
@@ -41,7 +41,7 @@ class SedCrbResult:
 def sed_crb(graph: PoseGraph, rot: np.ndarray, trans: np.ndarray, anchors: Sequence[int] | None = None,
             quotient: bool = False, per_pose: bool | Sequence[int] = False, *,
             fim: SedFim | None = None, indefinite: str = "blocks",
-            information: np.ndarray | None = None) -> SedCrbResult:
+            information: np.ndarray | None = None, ordering: str = "auto") -> SedCrbResult:
     """Intrinsic CRB of the SE(d)^n model at an estimate, exact from one sparse factorization.
 
     * anchored (default): ``(Pi F Pi)^+`` (5.1), the inverse of F on the free poses, zero on
@@ -56,11 +56,12 @@ def sed_crb(graph: PoseGraph, rot: np.ndarray, trans: np.ndarray, anchors: Seque
     that carry error: ``n - #anchors`` (anchored) or ``n - components`` (quotient; the quotient
     has dimension ``(n - c) q``, Sec. 5.3). ``per_pose`` (True for all, or a sequence of internal
     indices) returns the (q, q) diagonal blocks of the bound; anchored poses get zero blocks in
-    the anchored bound. ``fim`` reuses a ``sed_fim`` result for the same estimate.
+    the anchored bound. ``fim`` reuses a ``sed_fim`` result for the same estimate. ``ordering``: the
+    factorizations' fill-reducing ordering (posecrb.linalg.ordering; cost only).
     """
     times: dict[str, float] = {}
     if fim is None:
-        fim = sed_fim(graph, rot, trans, indefinite=indefinite, information=information)
+        fim = sed_fim(graph, rot, trans, indefinite=indefinite, information=information, ordering=ordering)
     times.update(fim.times)
     q, n = fim.q, fim.n
     anchors_ = _resolve_anchors(graph, anchors)
@@ -78,7 +79,7 @@ def sed_crb(graph: PoseGraph, rot: np.ndarray, trans: np.ndarray, anchors: Seque
     elif anchors_ == fim.anchors and not fim.logdet_status.available:
         raise NotPositiveDefinite(name, f"{fim.logdet_status.reason}; {fim.logdet_status.hint}")
     elif ff.shape[0]:
-        fac = cholesky(ff, name=name)
+        fac = block_cholesky(ff, ordering, dim=graph.dim, poses=graph.n, matrix="crlb", block=q, name=name)
     else:
         fac = None
     times["crb_factor"] = time.perf_counter() - t0

@@ -79,7 +79,8 @@ from ...core.errors import NotPositiveDefinite, UsageError
 from ...core.graph import PoseGraph
 from ...core.status import OK, Status
 from ...lie.se import se_adjoint, se_inverse, se_jr_inv, se_log
-from ...linalg.cholesky import Factor, cholesky
+from ...linalg.cholesky import Factor
+from ...linalg.ordering import block_cholesky
 
 log = logging.getLogger("posecrb")
 
@@ -261,10 +262,11 @@ def _free_matrix(f: sp.csc_matrix, n: int, q: int, anchors: Sequence[int]) -> tu
     return f[dofs][:, dofs].tocsc(), free
 
 
-def _factor_free(ff: sp.csc_matrix, name: str) -> Factor | None:
-    """Cholesky of F on the free poses, or None if it is (numerically) singular."""
+def _factor_free(ff: sp.csc_matrix, name: str, graph: PoseGraph, ordering: str = "auto") -> Factor | None:
+    """Cholesky of F on the free poses (``ordering``: posecrb.linalg.ordering), or None if it is
+    (numerically) singular."""
     try:
-        fac = cholesky(ff, name=name)
+        fac = block_cholesky(ff, ordering, dim=graph.dim, poses=graph.n, matrix="fim", block=graph.q, name=name)
     except NotPositiveDefinite:
         return None
     piv = fac.D()
@@ -293,7 +295,7 @@ def _dense_rank(f: sp.csc_matrix, labels: np.ndarray, q: int, graph: PoseGraph) 
 
 # ------------------------------------------------------------------ public API
 def sed_fim(graph: PoseGraph, rot: np.ndarray, trans: np.ndarray, *, indefinite: str = "blocks",
-            information: np.ndarray | None = None) -> SedFim:
+            information: np.ndarray | None = None, ordering: str = "auto") -> SedFim:
     """Right-invariant FIM ``F = sum J^T Omega J`` (4.6) at the estimate ``X_i = (rot[i], trans[i])``.
 
     ``rot`` (n, d, d), ``trans`` (n, d) are vertex poses in the file's convention; the thesis'
@@ -304,7 +306,8 @@ def sed_fim(graph: PoseGraph, rot: np.ndarray, trans: np.ndarray, *, indefinite:
     its log-determinant is ``logdet_anchored``). If that factorization fails (nullity above
     ``q c``: singular or extremely ill-conditioned information), the rank is computed per
     component from dense eigenvalues (``rank_method="dense-eig"``, components of at most 3000
-    unknowns); a larger rank-deficient component raises ``NotPositiveDefinite``.
+    unknowns); a larger rank-deficient component raises ``NotPositiveDefinite``. ``ordering``: the
+    factorization's fill-reducing ordering (posecrb.linalg.ordering; cost only).
     """
     t0 = time.perf_counter()
     q = graph.q
@@ -325,7 +328,7 @@ def sed_fim(graph: PoseGraph, rot: np.ndarray, trans: np.ndarray, *, indefinite:
     labels = graph.component_labels
     anchors = default_anchors(graph)
     ff, _ = _free_matrix(mat, graph.n, q, anchors)
-    fac = _factor_free(ff, "SE(d) FIM on the free poses") if ff.shape[0] else None
+    fac = _factor_free(ff, "SE(d) FIM on the free poses", graph, ordering) if ff.shape[0] else None
     status = OK
     if fac is not None or ff.shape[0] == 0:
         rank, method = ff.shape[0], "cholesky"

@@ -1,0 +1,188 @@
+"""Fill-reducing orderings for the sparse Cholesky factorizations (``--ordering``).
+
+docs/design.md#linear-algebra. Every log-determinant and inverse of posecrb is computed from a
+CHOLMOD factor ``L L^T = P A P^T``; the ordering ``P`` changes the cost (the fill nnz(L) and
+the flops) and the rounding, never the value beyond rounding. The choices:
+
+* ``amd``: CHOLMOD's approximate minimum degree on the matrix being factored.
+* ``colamd``: column approximate minimum degree of the matrix, the ordering the paper's
+  Algorithm 1 names (MATLAB's ``colamd(A)``: COLAMD orders the columns of ``A`` for the
+  factorization of ``A^T A``). CHOLMOD applies COLAMD only to unsymmetric problems (its
+  ``colamd`` choice on a symmetric matrix is AMD), so the permutation is computed here by
+  CHOLMOD's COLAMD on ``A A^T`` (``analyze_AAt``; ``A`` is symmetric) and handed to the
+  factorization as a user permutation. It orders for ``A^2``, not ``A``, so its fill is larger
+  than AMD's on these matrices; it is offered to reproduce Algorithm 1, not for speed.
+* ``metis`` / ``nesdis``: nested dissection (METIS's node nested dissection / CHOLMOD's own
+  NESDIS built on METIS's graph partitioner) of the **pose graph** -- the pattern of the
+  reduced Laplacian, one row per pose -- expanded to each pose's block of rows (d_r rows in the
+  ``ub`` matrix, q = d + d_r in the FIM): the partitioner sees n_p vertices instead of q n_p,
+  and the separators cut whole poses. For the Laplacians of ``lb`` (one row per pose) this is
+  CHOLMOD's ordering of the matrix itself.
+* ``auto``: ``auto_ordering``, measured with benchmarks/orderings.py: AMD, except nested
+  dissection (``nesdis`` on the pose graph) for the block matrices (FIM, ``ub``, CRLB, the
+  solver's M_red) of 3D graphs with at least ``AUTO_ND_MIN_POSES`` poses. AMD's fill grows
+  faster than nested dissection's on large 3D graphs (on a 3D grid of 21,952 poses the FIM
+  factor takes 1.5x nested dissection's time), while on 2D graphs and 3D graphs up to a few
+  thousand poses AMD is as good and its analysis is cheaper. The Laplacians of ``lb`` always use AMD (their factors are
+  cheap whatever the ordering; nested dissection's analysis costs more than it saves).
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+import scipy.sparse as sp
+
+from ..core.errors import UsageError
+from .cholesky import Factor, PermutedFactor, SymbolicCholesky
+
+ORDERINGS = ("auto", "amd", "colamd", "metis", "nesdis")
+POSE_LEVEL = ("metis", "nesdis")
+MATRICES = ("lb", "ub", "fim", "crlb", "solver")
+# 3D graphs from this many poses on get nested dissection under ``auto`` (benchmarks/orderings.py
+# --options): on the SE-Sync 3D datasets (1,661-5,750 poses) and a 3D grid of 5,832 poses AMD's
+# factorization is as fast or faster once nested dissection's extra ordering work is counted
+# (nested dissection 0.94-1.3x of AMD's time), on 3D grids of 10,648 and 21,952 poses nested
+# dissection takes 0.74x and 0.65x of it.
+AUTO_ND_MIN_POSES = 10000
+
+
+@dataclass(frozen=True, kw_only=True)
+class OrderingChoice:
+    """The ordering used for one factorization: ``requested`` (what the user asked, possibly
+    ``auto``), ``method`` (amd | colamd | metis | nesdis) and whether it was computed on the pose
+    graph and expanded to each pose's rows (``pose_level``)."""
+
+    requested: str
+    method: str
+    pose_level: bool
+
+    def __str__(self) -> str:
+        return f"{self.method} (pose graph)" if self.pose_level else self.method
+
+
+def check_ordering(ordering: str) -> str:
+    if ordering not in ORDERINGS:
+        raise UsageError(f"ordering must be one of {', '.join(ORDERINGS)}, got {ordering!r}")
+    return ordering
+
+
+def auto_ordering(dim: int, poses: int, matrix: str) -> str:
+    """The method ``auto`` picks for ``matrix`` (one of ``MATRICES``) of a graph with ``poses``
+    poses in dimension ``dim``: ``nesdis`` for the block matrices of 3D graphs with at least
+    ``AUTO_ND_MIN_POSES`` poses, ``amd`` otherwise (module docstring)."""
+    if matrix not in MATRICES:
+        raise UsageError(f"matrix must be one of {MATRICES}, got {matrix!r}")
+    if dim == 3 and matrix != "lb" and poses >= AUTO_ND_MIN_POSES:
+        return "nesdis"
+    return "amd"
+
+
+def resolve_ordering(ordering: str, *, dim: int, poses: int, matrix: str) -> OrderingChoice:
+    """``ordering`` (``ORDERINGS``) made concrete for one matrix of a graph."""
+    check_ordering(ordering)
+    method = auto_ordering(dim, poses, matrix) if ordering == "auto" else ordering
+    return OrderingChoice(requested=ordering, method=method, pose_level=method in POSE_LEVEL)
+
+
+def colamd_permutation(a: sp.spmatrix) -> np.ndarray:
+    """COLAMD column ordering of ``a`` (as MATLAB's ``colamd(a)``), by CHOLMOD's COLAMD on
+    ``a a^T`` (module docstring): a permutation of ``range(a.shape[0])``."""
+    from sksparse.cholmod import analyze_AAt  # noqa: PLC0415 -- CHOLMOD only where it factors
+
+    pat = sp.csc_matrix(a, dtype=np.float64)
+    return np.asarray(analyze_AAt(pat, ordering_method="colamd").P(), dtype=np.int64)
+
+
+def pose_permutation(pose_adjacency: sp.spmatrix, method: str) -> np.ndarray:
+    """CHOLMOD's ``method`` ordering of the pose graph (the pattern of ``pose_adjacency``,
+    e.g. a reduced Laplacian), one entry per pose."""
+    from sksparse.cholmod import analyze  # noqa: PLC0415
+
+    if method == "colamd":
+        return colamd_permutation(pose_adjacency)
+    if method not in ("amd", "metis", "nesdis"):
+        raise UsageError(f"pose-graph ordering must be amd, colamd, metis or nesdis, got {method!r}")
+    pat = sp.csc_matrix(pose_adjacency, dtype=np.float64)
+    pat = sp.csc_matrix((np.ones(pat.nnz), pat.indices, pat.indptr), shape=pat.shape)
+    # the symbolic analysis needs a diagonal; the pattern is all that is analysed
+    pat = (pat + sp.identity(pat.shape[0], format="csc")).tocsc()
+    return np.asarray(analyze(pat, ordering_method=method).P(), dtype=np.int64)
+
+
+def expand_permutation(pose_perm: np.ndarray, pose_of_row: np.ndarray) -> np.ndarray:
+    """Rows ordered pose by pose in the order ``pose_perm`` (rows of one pose keep their
+    relative order). ``pose_of_row[k]`` is the pose (0..n_p-1) that row k belongs to."""
+    rank = np.empty(pose_perm.size, dtype=np.int64)
+    rank[pose_perm] = np.arange(pose_perm.size)
+    return np.argsort(rank[np.asarray(pose_of_row)], kind="stable").astype(np.int64)
+
+
+def pose_block_permutation(pose_adjacency: sp.spmatrix, block_size: int, method: str) -> np.ndarray:
+    """The pose graph's ``method`` ordering expanded to a pose-major matrix with ``block_size``
+    rows per pose (rows ``k * block_size .. k * block_size + block_size - 1`` belong to pose k)."""
+    p = pose_permutation(pose_adjacency, method)
+    return (p[:, None] * block_size + np.arange(block_size)[None, :]).ravel()
+
+
+def pose_adjacency_of(a: sp.spmatrix, pose_of_row: np.ndarray, n_poses: int) -> sp.csc_matrix:
+    """Pattern of the pose graph of a matrix whose rows belong to poses (``pose_of_row``):
+    poses i and j are adjacent when some entry couples a row of i with a row of j."""
+    coo = sp.coo_matrix(a)
+    pr = np.asarray(pose_of_row, dtype=np.int64)
+    m = sp.csc_matrix((np.ones(coo.nnz), (pr[coo.row], pr[coo.col])), shape=(n_poses, n_poses))
+    m.sum_duplicates()
+    return m
+
+
+def ordered_symbolic(a: sp.spmatrix, ordering: str, *, dim: int, poses: int, matrix: str,
+                     pose_of_row: np.ndarray | None = None, n_poses: int | None = None,
+                     pose_adjacency: sp.spmatrix | None = None,
+                     mode: str = "auto") -> tuple[SymbolicCholesky, OrderingChoice]:
+    """A ``SymbolicCholesky`` of ``a`` with ``ordering`` (``ORDERINGS``) and the choice made.
+
+    ``pose_of_row`` (default: one row per pose) maps rows to poses 0..n_poses-1; the pose graph is
+    ``pose_adjacency`` when given (e.g. the reduced Laplacian lb already built), otherwise it is
+    read from ``a``'s own pattern. ``auto`` decides from ``dim``, the graph's pose count ``poses``
+    and ``matrix``."""
+
+    rows = a.shape[0]
+    if pose_of_row is None:
+        pose_of_row = np.arange(rows)
+        n_poses = rows
+    n_poses = int(n_poses if n_poses is not None else (int(np.max(pose_of_row)) + 1 if rows else 0))
+    choice = resolve_ordering(ordering, dim=dim, poses=poses, matrix=matrix)
+    if rows == 0 or choice.method == "amd":
+        return SymbolicCholesky(a, mode=mode, ordering_method="amd"), choice
+    if choice.method == "colamd":
+        return SymbolicCholesky(a, mode=mode, permutation=colamd_permutation(a)), choice
+    if n_poses == rows and pose_adjacency is None:
+        return SymbolicCholesky(a, mode=mode, ordering_method=choice.method), choice
+    adj = pose_adjacency if pose_adjacency is not None else pose_adjacency_of(a, pose_of_row, n_poses)
+    perm = expand_permutation(pose_permutation(adj, choice.method), pose_of_row)
+    return SymbolicCholesky(a, mode=mode, permutation=perm), choice
+
+
+def block_cholesky(a: sp.spmatrix, ordering: str, *, dim: int, poses: int, matrix: str, block: int,
+                   name: str = "matrix") -> Factor | PermutedFactor:
+    """Cholesky factor of a pose-major matrix (``block`` rows per pose) with ``ordering``;
+    raises NotPositiveDefinite as ``posecrb.linalg.cholesky`` does."""
+    nb = a.shape[0] // block
+    sym, _ = ordered_symbolic(a, ordering, dim=dim, poses=poses, matrix=matrix,
+                              pose_of_row=np.repeat(np.arange(nb), block), n_poses=nb)
+    return sym.factor(a, name=name)
+
+
+def solver_symbolic(pattern: sp.spmatrix, dim: int, n: int) -> SymbolicCholesky:
+    """The symbolic analysis of the solver's M_red = [[L_red, V_red], [V_red^T, C + ...]]
+    (posecrb.solver.problem: n - 1 translation rows for poses 1..n-1, then d rotation rows per pose
+    0..n-1). Under ``auto``'s rule for 3D graphs of at least ``AUTO_ND_MIN_POSES`` poses: nested
+    dissection of the pose graph expanded to each pose's rows (benchmarks/orderings.py: M_red's
+    factorization about 0.75x of CHOLMOD's default choice on a 3D grid of 21,952 poses);
+    otherwise CHOLMOD's default ordering, as before."""
+
+    if auto_ordering(dim, n, "solver") == "amd" or n < 2:
+        return SymbolicCholesky(pattern)
+    pose_of_row = np.concatenate([np.arange(1, n), np.repeat(np.arange(n), dim)])
+    return ordered_symbolic(pattern, "nesdis", dim=dim, poses=n, matrix="solver", pose_of_row=pose_of_row,
+                            n_poses=n)[0]
