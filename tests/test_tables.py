@@ -160,7 +160,7 @@ def test_out_dir_has_every_format_and_run_record(shared_datasets, capfd, tmp_pat
                                          "status": "ok"}
         assert rows[name]["sha256"] == run["datasets"][name]["sha256"]
     assert run["settings"] == {"repeat": 1, "rotation_model": "eq59", "data_dir": None, "solver": {},
-                               "fim_variant": "consistent"}
+                               "fim_variant": "consistent", "ordering": "auto"}
     import numpy
 
     assert run["versions"]["numpy"] == numpy.__version__
