@@ -918,12 +918,14 @@ def polish_fiedler(obj: FiedlerObjective, base: np.ndarray, cand: np.ndarray, pi
     edge with the fixed ones at 1. With ``v`` the unit Fiedler vector of the current set S and
     ``g_e = w_e (v_i - v_j)^2``, any set S' satisfies ``lambda_2(S') <= v^T L(S') v = R(v) + sum_{S'
     minus S} g - sum_{S minus S'} g`` (``lambda_2`` is a minimum of Rayleigh quotients): exchanging
-    removals R for additions A can raise ``lambda_2`` above ``R(v)`` only if ``g(A) > g(R)``, and
-    the search stops when no such exchange exists among the ``width`` best-ranked additions and
-    removals ("no-ascent"). Trial moves per round, each costing one eigensolve warm-started
-    at v: the ``p`` largest additions paired with the ``p`` smallest removals for p = block,
-    block/2, ..., 2 (block doubles after an accepted block move), then single swaps in decreasing
-    order of ``g_a - g_r`` (at most ``width``). The first trial that raises ``lambda_2`` is
+    removals R for additions A can raise ``lambda_2`` above ``R(v)`` only if ``g(A) > g(R)``. The
+    search stops when even the best single swap (largest g outside S against smallest g inside)
+    has ``g_a <= g_r`` ("no-ascent"): then no K-subset exceeds ``R(v)``, S is optimal up to the
+    eigensolver's accuracy (its Frank-Wolfe duality gap is zero). Trial moves per round, each
+    costing one eigensolve warm-started at v: the ``p`` largest additions paired with the ``p``
+    smallest removals for p = block, block/2, ..., 2 (block doubles after an accepted block move),
+    then single swaps in decreasing order of ``g_a - g_r`` (at most ``width`` of them; additions and
+    removals among the ``width`` best-ranked each). The first trial that raises ``lambda_2`` is
     accepted; the search stops when a round has none ("no-improving-trial") or after
     ``max_solves`` eigensolves. Never returns a set worse than ``pick`` as evaluated; the
     budget (K) and the fixed edges are unchanged by construction.
@@ -944,12 +946,12 @@ def polish_fiedler(obj: FiedlerObjective, base: np.ndarray, cand: np.ndarray, pi
             stopped = "no-ascent"
             break
         g = obj.gradient(state, cand)
-        w = min(width, ins.size, outs.size)
-        add = outs[np.argsort(-g[outs], kind="stable")[:w]]
-        rem = ins[np.argsort(g[ins], kind="stable")[:w]]
+        add = outs[np.argsort(-g[outs], kind="stable")[:width]]
+        rem = ins[np.argsort(g[ins], kind="stable")[:width]]
         # an exchange must beat R(v) by more than the rounding of the values themselves
         eps = 1e-12 * abs(state.value)
-        paired = g[add] - g[rem]            # decreasing: rank-i addition with rank-i removal
+        w = min(add.size, rem.size)
+        paired = g[add[:w]] - g[rem[:w]]    # decreasing: rank-i addition with rank-i removal
         p_max = int(np.count_nonzero(paired > eps))
         if p_max == 0:
             stopped = "no-ascent"
@@ -960,8 +962,8 @@ def polish_fiedler(obj: FiedlerObjective, base: np.ndarray, cand: np.ndarray, pi
             trials.append((add[:p], rem[:p]))
             p //= 2
         est = g[add][:, None] - g[rem][None, :]
-        for f in np.argsort(-est, axis=None, kind="stable")[:w]:
-            i, j = divmod(int(f), w)
+        for f in np.argsort(-est, axis=None, kind="stable")[:width]:
+            i, j = divmod(int(f), rem.size)
             if est[i, j] <= eps:
                 break
             trials.append((add[i:i + 1], rem[j:j + 1]))
@@ -998,7 +1000,8 @@ class Certificate:
     """Upper bounds on the best K-subset's objective (each valid on its own)."""
 
     upper_bound: float | None           # the smallest of the bounds below
-    relaxation_bound: float | None      # Frank-Wolfe: min_t f(x_t) + gap_t (>= relaxation optimum)
+    relaxation_bound: float | None      # Frank-Wolfe: min_t f(x_t) + gap_t (>= relaxation optimum); for
+    #                                     lambda_2 also f + gap at the returned set
     submodular_bound: float | None      # f(S) + sum of the K largest marginal gains at S (log-det only)
     relaxed_value: float | None         # f at the last Frank-Wolfe iterate
     iterations: int = 0
@@ -1256,7 +1259,8 @@ def select_edges(graph: PoseGraph, budget: str | int, *, objective: str = "tree"
         if stats.get("online_bound") is not None:
             sub_bound = min(sub_bound, stats["online_bound"])
     else:
-        value = obj.value(xs)
+        final = obj.evaluate(xs)
+        value = final.value
     times["value"] = time.perf_counter() - t0
 
     t0 = time.perf_counter()
@@ -1268,11 +1272,18 @@ def select_edges(graph: PoseGraph, budget: str | int, *, objective: str = "tree"
     if relax is not None:
         times["certify" if method != "relax" else "relax"] = time.perf_counter() - t0 + (
             times.pop("select") if method == "relax" else 0.0)
-    bounds = [b for b in (relax.bound if relax else None, sub_bound) if b is not None]
+    relax_bound = relax.bound if relax else None
+    if relax is not None and obj.kind == "fiedler" and k < cand.size:
+        # the same supergradient bound at the returned set itself: R(v) + Frank-Wolfe gap there
+        g = obj.gradient(final, cand)
+        own = value + float(np.sort(g)[::-1][:k].sum() - g[xs[cand] == 1.0].sum())
+        relax_bound = min(relax_bound, own)
+        stats["bound_at_selection"] = own
+    bounds = [b for b in (relax_bound, sub_bound) if b is not None]
     if k == cand.size:
         bounds.append(value)
     upper = min(bounds) if bounds else None
-    cert = Certificate(upper_bound=upper, relaxation_bound=relax.bound if relax else None,
+    cert = Certificate(upper_bound=upper, relaxation_bound=relax_bound,
                        submodular_bound=sub_bound, relaxed_value=relax.value if relax else None,
                        iterations=relax.iterations if relax else 0,
                        converged=relax.converged if relax else None, step=relax.step if relax else None)
