@@ -97,6 +97,10 @@ _INCREMENTAL_WORK = 2e9
 STRATEGIES = ("auto", "incremental", "lazy")
 # The relaxation is rounded by top-K and by this many seeded Madow draws; the best is kept.
 MADOW_DRAWS = 8
+# fiedler-relax polishes its rounded set by swaps: at most this many eigensolves, trials among the
+# this-many best-ranked additions and removals per round.
+POLISH_SOLVES = 60
+POLISH_WIDTH = 16
 # Dense eigensolver for lambda_2 up to this many poses.
 _DENSE_EIG_UP_TO = 300
 
@@ -900,13 +904,111 @@ def madow(weights: np.ndarray, k: int, rng: np.random.Generator) -> np.ndarray:
     return pos
 
 
+@dataclass(frozen=True)
+class PolishStats:
+    """What the swap search after rounding did (``polish_fiedler``)."""
+
+    solves: int            # eigenproblems solved for trial sets
+    swaps: int             # candidates exchanged in accepted moves
+    moves: int             # accepted moves (one or a block of paired swaps each)
+    value_before: float    # lambda_2 of the rounded set
+    value_after: float     # lambda_2 of the polished set (as computed during the search)
+    stopped: str           # "no-ascent" | "no-improving-trial" | "solves"
+
+
+def polish_fiedler(obj: FiedlerObjective, base: np.ndarray, cand: np.ndarray, pick: np.ndarray, *,
+                   max_solves: int = POLISH_SOLVES, width: int = POLISH_WIDTH,
+                   state: _State | None = None) -> tuple[np.ndarray, _State, PolishStats]:
+    """Swap search on a K-subset of the candidates for a larger ``lambda_2``.
+
+    ``pick``: positions in ``cand`` of the K selected candidates; ``base``: the weights of every
+    edge with the fixed ones at 1. With ``v`` the unit Fiedler vector of the current set S and
+    ``g_e = w_e (v_i - v_j)^2``, any set S' satisfies ``lambda_2(S') <= v^T L(S') v = R(v) + sum_{S'
+    minus S} g - sum_{S minus S'} g`` (``lambda_2`` is a minimum of Rayleigh quotients): exchanging
+    removals R for additions A can raise ``lambda_2`` above ``R(v)`` only if ``g(A) > g(R)``. The
+    search stops when even the best single swap (largest g outside S against smallest g inside)
+    has ``g_a <= g_r`` ("no-ascent"): then no K-subset exceeds ``R(v)``, S is optimal up to the
+    eigensolver's accuracy (its Frank-Wolfe duality gap is zero). Trial moves per round, each
+    costing one eigensolve warm-started at v: the ``p`` largest additions paired with the ``p``
+    smallest removals for p = block, block/2, ..., 2 (block doubles after an accepted block move),
+    then single swaps in decreasing order of ``g_a - g_r`` (at most ``width`` of them; additions and
+    removals among the ``width`` best-ranked each). The first trial that raises ``lambda_2`` is
+    accepted; the search stops when a round has none ("no-improving-trial") or after
+    ``max_solves`` eigensolves. Never returns a set worse than ``pick`` as evaluated; the
+    budget (K) and the fixed edges are unchanged by construction.
+    """
+    sel = np.zeros(cand.size, dtype=bool)
+    sel[pick] = True
+    x = base.copy()
+    x[cand[sel]] = 1.0
+    if state is None:
+        state = obj.evaluate(x)
+    before = state.value
+    solves = swaps = moves = 0
+    block = 2
+    stopped = "solves"
+    while solves < max_solves:
+        ins, outs = np.flatnonzero(sel), np.flatnonzero(~sel)
+        if ins.size == 0 or outs.size == 0:
+            stopped = "no-ascent"
+            break
+        g = obj.gradient(state, cand)
+        add = outs[np.argsort(-g[outs], kind="stable")[:width]]
+        rem = ins[np.argsort(g[ins], kind="stable")[:width]]
+        # an exchange must beat R(v) by more than the rounding of the values themselves
+        eps = 1e-12 * abs(state.value)
+        w = min(add.size, rem.size)
+        paired = g[add[:w]] - g[rem[:w]]    # decreasing: rank-i addition with rank-i removal
+        p_max = int(np.count_nonzero(paired > eps))
+        if p_max == 0:
+            stopped = "no-ascent"
+            break
+        trials = []
+        p = min(block, p_max)
+        while p >= 2:
+            trials.append((add[:p], rem[:p]))
+            p //= 2
+        est = g[add][:, None] - g[rem][None, :]
+        for f in np.argsort(-est, axis=None, kind="stable")[:width]:
+            i, j = divmod(int(f), rem.size)
+            if est[i, j] <= eps:
+                break
+            trials.append((add[i:i + 1], rem[j:j + 1]))
+        accepted = False
+        for a, r in trials:
+            if solves >= max_solves:
+                break
+            x[cand[a]] = 1.0
+            x[cand[r]] = 0.0
+            trial = obj.evaluate(x, v0=state.data)
+            solves += 1
+            if trial.value > state.value + eps:
+                sel[a], sel[r] = True, False
+                state = trial
+                swaps += a.size
+                moves += 1
+                block = max(2, 2 * a.size)
+                accepted = True
+                break
+            x[cand[a]] = 0.0
+            x[cand[r]] = 1.0
+        if not accepted:
+            if solves < max_solves:
+                stopped = "no-improving-trial"
+            break
+    stats = PolishStats(solves=solves, swaps=swaps, moves=moves, value_before=float(before),
+                        value_after=float(state.value), stopped=stopped)
+    return np.flatnonzero(sel), state, stats
+
+
 # ======================================================================= driver
 @dataclass(frozen=True)
 class Certificate:
     """Upper bounds on the best K-subset's objective (each valid on its own)."""
 
     upper_bound: float | None           # the smallest of the bounds below
-    relaxation_bound: float | None      # Frank-Wolfe: min_t f(x_t) + gap_t (>= relaxation optimum)
+    relaxation_bound: float | None      # Frank-Wolfe: min_t f(x_t) + gap_t (>= relaxation optimum); for
+    #                                     lambda_2 also f + gap at the returned set
     submodular_bound: float | None      # f(S) + sum of the K largest marginal gains at S (log-det only)
     relaxed_value: float | None         # f at the last Frank-Wolfe iterate
     iterations: int = 0
@@ -1031,7 +1133,8 @@ def select_edges(graph: PoseGraph, budget: str | int, *, objective: str = "tree"
                  fixed: str = "odometry", certify: bool = False, seed: int = 0, anchor: int | None = None,
                  estimate: str = "solve", gains: str = "auto", max_iter: int | None = None,
                  tol: float = 1e-3, fiedler_weight: str = "w", split: EdgeSplit | None = None,
-                 reference: Estimate | None = None, engine: str = "path", strategy: str = "auto") -> SelectionResult:
+                 reference: Estimate | None = None, engine: str = "path", strategy: str = "auto",
+                 polish: int | None = None) -> SelectionResult:
     """Choose ``budget`` candidate edges maximising ``objective`` (module docstring).
 
     ``budget``: K or "P%" of the candidates. ``method``: ``greedy`` (exact greedy; MAC's
@@ -1046,7 +1149,9 @@ def select_edges(graph: PoseGraph, budget: str | int, *, objective: str = "tree"
     (incremental unless candidates x budget is huge). ``gains`` (lazy only): "exact" (selected
     inversion), "jl" (random projections seed the queue) or "auto" (jl above 50000 candidates).
     ``engine``: "path" (posecrb.linalg.pathchol) or "cholmod" (CHOLMOD update_inplace and whole-factor
-    solves, for comparison). ``max_iter``/``tol``: Frank-Wolfe limits (default 100 for the
+    solves, for comparison). ``polish`` (fiedler relax): at most this many eigensolves of swap search
+    after the rounding (``polish_fiedler``; default POLISH_SOLVES, 0 = none); the polished set is
+    kept only if its recomputed lambda_2 is larger. ``max_iter``/``tol``: Frank-Wolfe limits (default 100 for the
     log-dets, 20 for fiedler as MAC). ``split``: precomputed fixed/candidate edges.
     """
     t_total = time.perf_counter()
@@ -1147,6 +1252,17 @@ def select_edges(graph: PoseGraph, budget: str | int, *, objective: str = "tree"
         rounding = max(vals, key=lambda n: (vals[n][0], n == "top-k"))   # first best; top-k wins ties
         chosen = np.sort(cand[vals[rounding][1]])
         stats["rounding_values"] = {n: v for n, (v, _) in vals.items()}
+        n_polish = POLISH_SOLVES if polish is None else int(polish)
+        if obj.kind == "fiedler" and n_polish > 0:
+            pos, _, pstats = polish_fiedler(obj, base, cand, vals[rounding][1], max_solves=n_polish)
+            xx = base.copy()
+            xx[cand[pos]] = 1.0
+            polished = obj.value(xx)   # recomputed from a cold start, as every reported value
+            # keep the rounded set unless the recomputed value confirms the search's improvement
+            if polished > vals[rounding][0]:
+                chosen = np.sort(cand[pos])
+                rounding += "+polish"
+            stats["polish"] = {**vars(pstats), "recomputed": polished}
     times["select"] = time.perf_counter() - t0
 
     t0 = time.perf_counter()
@@ -1158,7 +1274,8 @@ def select_edges(graph: PoseGraph, budget: str | int, *, objective: str = "tree"
         if stats.get("online_bound") is not None:
             sub_bound = min(sub_bound, stats["online_bound"])
     else:
-        value = obj.value(xs)
+        final = obj.evaluate(xs)
+        value = final.value
     times["value"] = time.perf_counter() - t0
 
     t0 = time.perf_counter()
@@ -1170,11 +1287,18 @@ def select_edges(graph: PoseGraph, budget: str | int, *, objective: str = "tree"
     if relax is not None:
         times["certify" if method != "relax" else "relax"] = time.perf_counter() - t0 + (
             times.pop("select") if method == "relax" else 0.0)
-    bounds = [b for b in (relax.bound if relax else None, sub_bound) if b is not None]
+    relax_bound = relax.bound if relax else None
+    if relax is not None and relax_bound is not None and obj.kind == "fiedler" and k < cand.size:
+        # the same supergradient bound at the returned set itself: R(v) + Frank-Wolfe gap there
+        g = obj.gradient(final, cand)
+        own = value + float(np.sort(g)[::-1][:k].sum() - g[xs[cand] == 1.0].sum())
+        relax_bound = min(relax_bound, own)
+        stats["bound_at_selection"] = own
+    bounds = [b for b in (relax_bound, sub_bound) if b is not None]
     if k == cand.size:
         bounds.append(value)
     upper = min(bounds) if bounds else None
-    cert = Certificate(upper_bound=upper, relaxation_bound=relax.bound if relax else None,
+    cert = Certificate(upper_bound=upper, relaxation_bound=relax_bound,
                        submodular_bound=sub_bound, relaxed_value=relax.value if relax else None,
                        iterations=relax.iterations if relax else 0,
                        converged=relax.converged if relax else None, step=relax.step if relax else None)
