@@ -32,6 +32,7 @@ from dataclasses import dataclass
 
 import numpy as np
 import scipy.sparse as sp
+from sksparse.cholmod import analyze
 
 from ..core.errors import UsageError
 from .cholesky import Factor, PermutedFactor, SymbolicCholesky
@@ -97,8 +98,6 @@ def colamd_permutation(a: sp.spmatrix) -> np.ndarray:
 def pose_permutation(pose_adjacency: sp.spmatrix, method: str) -> np.ndarray:
     """CHOLMOD's ``method`` ordering of the pose graph (the pattern of ``pose_adjacency``,
     e.g. a reduced Laplacian), one entry per pose."""
-    from sksparse.cholmod import analyze  # noqa: PLC0415
-
     if method == "colamd":
         return colamd_permutation(pose_adjacency)
     if method not in ("amd", "metis", "nesdis"):

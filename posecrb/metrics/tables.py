@@ -21,6 +21,8 @@ from dataclasses import asdict, dataclass, field
 from functools import partial
 from typing import Any
 
+import numpy as np
+
 from ..core import provenance
 from ..core.errors import DatasetNotFound, InternalError, PosecrbError, UsageError, status_of
 from ..core.status import put
@@ -28,6 +30,7 @@ from ..core.timing import timed
 from ..datasets import search as datasets
 from ..datasets.manifest import load_manifest
 from ..io import load
+from ..sim.montecarlo import Task, run_dask, task_chunks
 from .evaluate import EvaluationSettings, evaluate
 from .published import TABLE_II_FIT_FOOTNOTE, TABLE_II_FOOTNOTE, TABLE_II_PUBLISHED_FOOTNOTE, paper_row
 
@@ -157,10 +160,6 @@ def build_rows(names: Sequence[str], settings: TableSettings, jobs: int = 1,
     if scheduler and executor != "dask":
         raise UsageError("--scheduler needs --executor dask")
     if executor == "dask":
-        import numpy as np  # noqa: PLC0415
-
-        from ..sim.montecarlo import Task, _chunks, _run_dask  # noqa: PLC0415 -- the engine's Dask path
-
         tasks = [Task(k, 0, np.random.SeedSequence(0)) for k in range(len(names))]
         dask_rows: list = [None] * len(names)
 
@@ -171,7 +170,7 @@ def build_rows(names: Sequence[str], settings: TableSettings, jobs: int = 1,
                     on_done(names[pos], row)
 
         if names:
-            _run_dask(_dataset_task, [(n, settings) for n in names], _chunks(tasks, 1), jobs, scheduler, client,
+            run_dask(_dataset_task, [(n, settings) for n in names], task_chunks(tasks, 1), jobs, scheduler, client,
                       collect, dask_rows)
         return dask_rows
     if jobs <= 1:

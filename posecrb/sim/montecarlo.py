@@ -112,7 +112,7 @@ def _run_chunk_dask(payload, chunk):
     return _run_chunk(fn, contexts, chunk)
 
 
-def _chunks(tasks: Sequence[Task], size: int) -> list[list[tuple[int, Task]]]:
+def task_chunks(tasks: Sequence[Task], size: int) -> list[list[tuple[int, Task]]]:
     items = list(enumerate(tasks))
     return [items[k:k + size] for k in range(0, len(items), size)]
 
@@ -141,7 +141,7 @@ def run_tasks(fn: Callable[[Any, Task], Any], contexts: Sequence[Any], tasks: Se
     if executor == "local" and jobs == 1:
         executor = "serial"
     size = chunksize or (1 if executor == "serial" else default_chunksize(len(tasks), jobs))
-    chunks = _chunks(tasks, size)
+    chunks = task_chunks(tasks, size)
 
     def collect(done: list[tuple[int, Any]]) -> None:
         for pos, value in done:
@@ -161,10 +161,10 @@ def run_tasks(fn: Callable[[Any, Task], Any], contexts: Sequence[Any], tasks: Se
             for fut in as_completed(futures):
                 collect(fut.result())
         return out
-    return _run_dask(fn, contexts, chunks, jobs, scheduler, client, collect, out)
+    return run_dask(fn, contexts, chunks, jobs, scheduler, client, collect, out)
 
 
-def _run_dask(fn, contexts, chunks, jobs, scheduler, client, collect, out):
+def run_dask(fn, contexts, chunks, jobs, scheduler, client, collect, out):
     try:
         from dask.distributed import Client, LocalCluster  # noqa: PLC0415 -- optional dependency (dask extra)
         from dask.distributed import as_completed as dask_as_completed  # noqa: PLC0415 -- optional (dask extra)
