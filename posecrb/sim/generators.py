@@ -187,6 +187,17 @@ def grid(dim: int, side: int, *, poses: int | None = None, spacing: float = 1.0,
 
 # ---- surfaces of revolution -------------------------------------------------------
 
+def _ring_walk(rings: int, per_ring: int, poses: int | None, min_rings: int, noise: bool,
+               rng: np.random.Generator | int | None) -> tuple[int, np.ndarray, np.random.Generator | None]:
+    """(n, pose indices 0..n-1, generator) of a walk ring by ring over ``rings x per_ring`` poses,
+    truncated to ``poses``; the sizes are checked here for every surface of revolution."""
+    total = rings * per_ring
+    n = total if poses is None else int(poses)
+    if rings < min_rings or per_ring < 3 or not 2 <= n <= total:
+        raise UsageError(f"need rings >= {min_rings}, per_ring >= 3 and 2 <= poses <= {total}")
+    return n, np.arange(n), _rng(rng, noise)
+
+
 def _ring_edges(n: int, per_ring: int, wrap: bool) -> tuple[np.ndarray, np.ndarray]:
     """Odometry chain plus a loop closure from each pose to the one a ring earlier (and wrap-around)."""
     k = np.arange(per_ring, n)
@@ -210,12 +221,7 @@ def sphere(rings: int = 50, per_ring: int = 50, *, poses: int | None = None, rad
     odometry chain and one loop closure to the pose one ring below
     (50 x 50 gives 2500 poses and 4949 edges, as sphere2500).
     """
-    total = rings * per_ring
-    n = total if poses is None else int(poses)
-    if rings < 1 or per_ring < 3 or not 2 <= n <= total:
-        raise UsageError(f"need rings >= 1, per_ring >= 3 and 2 <= poses <= {total}")
-    rng = _rng(rng, noise)
-    k = np.arange(n)
+    n, k, rng = _ring_walk(rings, per_ring, poses, 1, noise, rng)
     phi = np.pi * (k // per_ring + 1) / (rings + 1)
     theta = 2 * np.pi * (k % per_ring) / per_ring
     normal = np.column_stack([np.sin(phi) * np.cos(theta), np.sin(phi) * np.sin(theta), np.cos(phi)])
@@ -234,19 +240,14 @@ def torus(rings: int = 100, per_ring: int = 50, *, poses: int | None = None, maj
     normal. Edges: odometry chain, a loop closure to the pose one ring back, and,
     when the torus is complete, from the last ring back to the first.
     """
-    total = rings * per_ring
-    n = total if poses is None else int(poses)
-    if rings < 3 or per_ring < 3 or not 2 <= n <= total:
-        raise UsageError(f"need rings >= 3, per_ring >= 3 and 2 <= poses <= {total}")
-    rng = _rng(rng, noise)
-    k = np.arange(n)
+    n, k, rng = _ring_walk(rings, per_ring, poses, 3, noise, rng)
     u = 2 * np.pi * (k // per_ring) / rings
     v = 2 * np.pi * (k % per_ring) / per_ring
     cu, su, cv, sv = np.cos(u), np.sin(u), np.cos(v), np.sin(v)
     trans = np.column_stack([(major + minor * cv) * cu, (major + minor * cv) * su, minor * sv])
     normal = np.column_stack([cv * cu, cv * su, sv])
     tangent = np.column_stack([-sv * cu, -sv * su, cv])
-    src, dst = _ring_edges(n, per_ring, wrap=n == total)
+    src, dst = _ring_edges(n, per_ring, wrap=n == rings * per_ring)
     return _assemble(3, _frames(tangent, normal), trans, src, dst, tau, kappa, noise, rng)
 
 
