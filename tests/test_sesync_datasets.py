@@ -5,7 +5,7 @@ Eigen's ``Quaternion(qw, qx, qy, qz).toRotationMatrix()`` WITHOUT normalising th
 so its R~ is slightly non-orthogonal (files print 6-9 digits), and its data matrix puts
 ``kappa I`` on the rotation diagonal blocks and ``-kappa R~`` off the diagonal. Its objective
 is therefore ``sum kappa (2d - 2 tr(R_j^T R_i R~)) + tau ||t_j - t_i - R_i t~||^2``, which is not
-``kappa ||R_j - R_i R~||_F^2`` when R~ is not orthogonal. The issue's reference values were
+``kappa ||R_j - R_i R~||_F^2`` when R~ is not orthogonal. The reference values (SE-Sync C++'s optima) were
 computed that way. posecrb normalises quaternions by default (docs/design.md#sesync-quaternions), so:
 
 - ``load(path, quaternions="raw")`` (SE-Sync's reading) reproduces the references: every
