@@ -16,7 +16,7 @@ baseline variant. Variants (keyword arguments of posecrb.solver.solve):
   no-precond    precondition=False (the unpreconditioned trust region, for scale)
   no-cert-stop  certified_rel_decrease=None: never stop a level early when the preconditioner's
                 factorization at an accepted iterate already certifies it
-  dec=1e-11     decrement_tol=1e-11 (default 1e-9): stop at a 100x smaller Newton decrement
+  dec=1e-9      decrement_tol=1e-9 (default 1e-11): stop at a 100x larger Newton decrement
   dec=1e-10     decrement_tol=1e-10
 BLAS is single-threaded (the solver limits it itself). Usage:
   python benchmarks/solver_variants.py [--repeat K] [--variants base,fixed-precond,r0=5] [--sesync-compat] [NAME ...]
@@ -41,7 +41,7 @@ VARIANTS = {
     "theta=1": {"theta": 1.0},
     "no-precond": {"precondition": False},
     "no-cert-stop": {"certified_rel_decrease": None},
-    "dec=1e-11": {"decrement_tol": 1e-11},
+    "dec=1e-9": {"decrement_tol": 1e-9},
     "dec=1e-10": {"decrement_tol": 1e-10},
 }
 DEFAULT_NAMES = ["city10000", "ais2klinik", "parking-garage", "sphere2500", "sphere_bignoise_vertex3",
