@@ -14,6 +14,10 @@ baseline variant. Variants (keyword arguments of posecrb.solver.solve):
   theta=1       truncated CG stops at ||r|| <= ||r0|| min(kappa, ||r0||^1) (Manopt; default exponent 0.5)
   r0=5          start the staircase at rank 5 (SE-Sync's default) instead of d + 1
   no-precond    precondition=False (the unpreconditioned trust region, for scale)
+  no-cert-stop  certified_rel_decrease=None: never stop a level early when the preconditioner's
+                factorization at an accepted iterate already certifies it
+  dec=1e-9      decrement_tol=1e-9 (default 1e-11): stop at a 100x larger Newton decrement
+  dec=1e-10     decrement_tol=1e-10
 BLAS is single-threaded (the solver limits it itself). Usage:
   python benchmarks/solver_variants.py [--repeat K] [--variants base,fixed-precond,r0=5] [--sesync-compat] [NAME ...]
 """
@@ -36,6 +40,9 @@ VARIANTS = {
     "r0=5": {"r0": 5},
     "theta=1": {"theta": 1.0},
     "no-precond": {"precondition": False},
+    "no-cert-stop": {"certified_rel_decrease": None},
+    "dec=1e-9": {"decrement_tol": 1e-9},
+    "dec=1e-10": {"decrement_tol": 1e-10},
 }
 DEFAULT_NAMES = ["city10000", "ais2klinik", "parking-garage", "sphere2500", "sphere_bignoise_vertex3",
                  "torus3D", "cubicle"]

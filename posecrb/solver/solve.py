@@ -199,6 +199,7 @@ def _solve(graph: PoseGraph, *, r0: int | None = None, rmax: int = 10, init: str
     model = RelaxedModel(problem, precond,
                          None if adaptive_precond is None else adaptive_precond * problem.gershgorin_max(),
                          refactor_hvps=refactor_hvps)
+    model.certificate_tol = certificate_tol
     Z = lift(np.ascontiguousarray(np.swapaxes(rot0, 1, 2)), r0)
     times = {"init": time.perf_counter() - t0, "optimize": 0.0, "verify": 0.0}
 
@@ -218,7 +219,9 @@ def _solve(graph: PoseGraph, *, r0: int | None = None, rmax: int = 10, init: str
                  res.iterations, res.status, model.hvps)
         t0 = time.perf_counter()
         try:
-            cert = verify(problem, state, certificate_tol, rng)
+            # A preconditioner factored at this point with a shift <= eta already decides the test.
+            cert = verify(problem, state, certificate_tol, rng,
+                          factor=model.certificate_factor(state, certificate_tol))
         except NotPositiveDefinite as exc:
             times["verify"] += time.perf_counter() - t0
             reason = f"verification failed: {exc}"

@@ -68,6 +68,8 @@ class RelaxedModel:
         self.hvps = 0
         self.factorizations = 0
         self._factored_at: np.ndarray | None = None     # Z of the iterate the adaptive factor was built at
+        self.factor_shift: float | None = None          # its shift s (None: not PD there, base factor in use)
+        self.certificate_tol: float | None = None       # eta, when the trust region may stop once certified
         self._gram: tuple[np.ndarray, tuple[np.ndarray, np.ndarray]] | None = None   # (Z, gram_eigh(Z))
         self._comp: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None   # (Z, Z, Lambda) component-major
 
@@ -107,12 +109,16 @@ class RelaxedModel:
         if (self.refactor_hvps is not None and not self.refactor_next
                 and (last_hvps is None or last_hvps <= self.refactor_hvps)):
             return
-        self.refactor_next = False
         s = self.adaptive_shift
         shifts = [s]
         if self.lambda_hint < 0:
-            shifts += [s + 2.0 * abs(self.lambda_hint), s + 20.0 * abs(self.lambda_hint)]
+            # Right after an escape the iterate is still next to the saddle, where S + s I is
+            # indefinite: a factorization at s alone would fail (at full cost), so start past it.
+            shifts = ([] if self.refactor_next else [s]) + [s + 2.0 * abs(self.lambda_hint),
+                                                            s + 20.0 * abs(self.lambda_hint)]
+        self.refactor_next = False
         self._factored_at = state.Z
+        self.factor_shift = None
         for shift in shifts:
             self.factorizations += 1
             try:
@@ -120,10 +126,26 @@ class RelaxedModel:
                                                                name="preconditioner M_red(Lambda, s)")
             except NotPositiveDefinite:
                 continue
+            self.factor_shift = shift
             log.debug("preconditioner: (Q - Lambda + %.3e I)^-1", shift)
             return
         self.precond_factor = self.base_factor
         log.debug("preconditioner: Q - Lambda + s I not PD, using (Q + delta I)^-1")
+
+    def certificate_factor(self, state: State, tol: float):
+        """(factor, s) when the preconditioner was factored at ``state``'s point as
+        M_red(Lambda, s) with 0 <= s <= ``tol``: that successful Cholesky already proves
+        ``Q - Lambda + s I > 0``, i.e. lambda_min(Q - Lambda) > -s >= -tol, the certificate
+        test of :func:`verify` (the same matrix, a smaller or equal shift). Else None."""
+        if (self._factored_at is state.Z and self.factor_shift is not None
+                and 0.0 <= self.factor_shift <= tol):
+            return self.precond_factor, self.factor_shift
+        return None
+
+    def certified(self, state: State) -> bool:
+        """Whether ``state`` is already certified by the preconditioner's factorization
+        (``certificate_tol`` set by the staircase; see :meth:`certificate_factor`)."""
+        return self.certificate_tol is not None and self.certificate_factor(state, self.certificate_tol) is not None
 
     def evaluate(self, Z: np.ndarray) -> State:
         p = self.problem
@@ -192,29 +214,37 @@ def _largest_inverse_eig(problem: Problem, factor: Factor, dn: int, rng: np.rand
 
 
 def verify(problem: Problem, state: State, tol: float, rng: np.random.Generator,
-           estimate_lambda: bool = True) -> Certificate:
+           estimate_lambda: bool = True, factor: tuple | None = None) -> Certificate:
     """Decide lambda_min(Q - Lambda) >= -tol by sparse Cholesky; return the eigenpair if not.
 
     ``tol`` must be finite and >= 0 (a NaN made the shift search below loop forever); a
-    non-finite certificate matrix is a SolverError, never an endless search.
+    non-finite certificate matrix is a SolverError, never an endless search. ``factor`` is an
+    optional ``(Cholesky factor of M_red(Lambda, s), s)`` at this very point with 0 <= s <= tol
+    (RelaxedModel.certificate_factor): it already decides the test, so no factorization is done.
     """
     if not (math.isfinite(tol) and tol >= 0):
         raise SolverError(f"certificate tolerance must be a finite number >= 0, got {float(tol)}")
     n, d = problem.n, problem.d
     dn = n * d
     lam = state.lam
-    try:
-        fac = problem.factor_full(lam, tol, name="certificate matrix Q - Lambda + eta I")
-    except NotPositiveDefinite:
-        fac = None
+    facs = 0
+    if factor is not None and 0.0 <= factor[1] <= tol:
+        fac, shift = factor
+    else:
+        shift = tol
+        facs = 1
+        try:
+            fac = problem.factor_full(lam, tol, name="certificate matrix Q - Lambda + eta I")
+        except NotPositiveDefinite:
+            fac = None
     if fac is not None:
         lm = 0.0
         solves = 0
         if estimate_lambda:
             mu, _, solves = _largest_inverse_eig(problem, fac, dn, rng, maxiter=50, tol=1e-10)
-            lm = 1.0 / mu - tol if mu > 0 else -tol
-            lm = max(lm, -tol)   # the factorization proved lambda_min > -tol
-        return Certificate(True, lm, None, 1, solves)
+            lm = 1.0 / mu - shift if mu > 0 else -shift
+            lm = max(lm, -shift)   # the factorization proved lambda_min > -shift >= -tol
+        return Certificate(True, lm, None, facs, solves)
     # Not PSD within tol: find a positive-definite shift, then shift-invert at it.
     scale = problem.gershgorin_max() + float(np.max(np.abs(lam)))
     if not math.isfinite(scale):
