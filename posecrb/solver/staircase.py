@@ -132,7 +132,7 @@ class RelaxedModel:
         self.precond_factor = self.base_factor
         log.debug("preconditioner: Q - Lambda + s I not PD, using (Q + delta I)^-1")
 
-    def certificate_factor(self, state: State, tol: float):
+    def certificate_factor(self, state: State, tol: float) -> tuple[Factor, float] | None:
         """(factor, s) when the preconditioner was factored at ``state``'s point as
         M_red(Lambda, s) with 0 <= s <= ``tol``: that successful Cholesky already proves
         ``Q - Lambda + s I > 0``, i.e. lambda_min(Q - Lambda) > -s >= -tol, the certificate
