@@ -123,16 +123,22 @@ def _clean_numbers(case: Case, command: str, tmp_path_factory, capsys) -> dict[s
     return _clean_cache[key]
 
 
+def _run_case(case, command: str, tmp_path, capsys):
+    """Write ``case`` to a file, run ``command`` on it with an empty output folder: (file, folder,
+    files the command may leave there, (exit code, stdout, stderr))."""
+    f = write(case, tmp_path)
+    odir = tmp_path / "out"
+    odir.mkdir()
+    build, allowed = COMMANDS[command]
+    return f, odir, allowed, run_cli(build(str(f), odir), capsys)
+
+
 @pytest.mark.parametrize("command", sorted(COMMANDS))
 @pytest.mark.parametrize("name", ACCEPTED)
 def test_accepted_hostile_input_gives_the_numbers_of_the_clean_graph(tmp_path, tmp_path_factory, capsys,
                                                                      name, command):
     case = CASES[name]
-    f = write(case, tmp_path)
-    odir = tmp_path / "out"
-    odir.mkdir()
-    build, allowed = COMMANDS[command]
-    rc, out, err = run_cli(build(str(f), odir), capsys)
+    f, odir, allowed, (rc, out, err) = _run_case(case, command, tmp_path, capsys)
     if (name, command) in NUMERICALLY_UNAVAILABLE:
         # The reader accepts the file; the quantity itself is beyond double precision, which is an
         # error with the reason and the offending edge's line, never a number.
@@ -163,11 +169,7 @@ def test_accepted_hostile_input_gives_the_numbers_of_the_clean_graph(tmp_path, t
 @pytest.mark.parametrize("name", REJECTED)
 def test_rejected_hostile_input_exits_1_with_file_line_and_reason(tmp_path, capsys, name, command):
     case = CASES[name]
-    f = write(case, tmp_path)
-    odir = tmp_path / "out"
-    odir.mkdir()
-    build, allowed = COMMANDS[command]
-    rc, out, err = run_cli(build(str(f), odir), capsys)
+    f, odir, allowed, (rc, out, err) = _run_case(case, command, tmp_path, capsys)
     assert rc == 1
     where = f"{f}:{case.line}:" if case.line is not None else f"{f}:"
     assert where in err and case.reason in err, err
