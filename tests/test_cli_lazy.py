@@ -138,6 +138,33 @@ def test_solve_json_imports_only_what_it_needs(solvable_g2o):
     assert row["certified"] is True and row["poses"] == 12
     assert _loaded(modules, "numba", "rich", "pandas", "matplotlib", "dask") == []
     assert _loaded(modules, "numpy", "scipy.sparse", "sksparse") == ["numpy", "scipy.sparse", "sksparse"]
+    # The certificate's eigenvalue estimate is numpy-only: ARPACK would load scipy.linalg (~45 ms).
+    assert _loaded(modules, "scipy.sparse.linalg", "scipy.linalg") == []
+
+
+def test_cli_defers_numpy_modules_it_never_uses_and_they_still_work(solvable_g2o):
+    """scipy's array-API layer touches every name in numpy.__all__; the CLI defers the unused
+    submodules, which stay unexecuted through a whole solve and load normally on first use."""
+    code = ("import sys, importlib.util; from posecrb.cli import main; "
+            f"rc = main(['solve', {str(solvable_g2o)!r}, '--format', 'json']); "
+            "names = ('numpy.f2py', 'numpy.testing', 'numpy.polynomial'); "
+            "lazy = [type(sys.modules[n]).__name__ for n in names]; "
+            "import numpy as np; np.testing.assert_allclose(np.sqrt(2.0) ** 2, 2.0); "
+            "coef = np.polynomial.polynomial.polyfit([0.0, 1.0, 2.0], [1.0, 3.0, 5.0], 1); "
+            "f2py = callable(np.f2py.run_main); ok = [type(sys.modules[n]).__name__ for n in names]; "
+            "print(rc, lazy, ok, [round(float(c), 9) for c in coef], f2py, file=sys.stderr)")
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True, timeout=300)
+    rc, rest = out.stderr.strip().splitlines()[-1].split(" ", 1)
+    assert rc == "0"
+    assert rest == "['_LazyModule', '_LazyModule', '_LazyModule'] ['module', 'module', 'module'] [1.0, 2.0] True"
+
+
+def test_library_import_changes_no_import_machinery():
+    """Only the CLI's main() defers modules; importing posecrb as a library leaves sys.meta_path alone."""
+    code = ("import sys; before = [type(f).__name__ for f in sys.meta_path]; import posecrb, posecrb.solver, "
+            "posecrb.cli; print(before == [type(f).__name__ for f in sys.meta_path], file=sys.stderr)")
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True, timeout=300)
+    assert out.stderr.strip().splitlines()[-1] == "True"
 
 
 def test_option_choices_are_the_librarys():

@@ -213,23 +213,21 @@ def logdet(a: sp.spmatrix, name: str = "matrix", beta: float = 0.0,
 
 
 def lambda_min(a: sp.spmatrix, factor: Factor | None = None, name: str = "matrix") -> float:
-    """Smallest eigenvalue of a sparse SPD matrix by shift-invert Lanczos at 0.
+    """Smallest eigenvalue of a sparse SPD matrix: 1 / the largest eigenvalue of its inverse
+    (Lanczos, posecrb.linalg.lanczos), applied through a Cholesky factor.
 
     Reuses ``factor`` (a Cholesky factor of ``a``) as the inverse operator, so no
     extra factorization happens when the caller already has one.
     """
+    from .lanczos import largest_eigenpair  # noqa: PLC0415 -- import cycle: lanczos is a leaf, keep it one
 
     a = _as_csc(a)
     n = a.shape[0]
     if n <= 200:
         return float(np.linalg.eigvalsh(a.toarray())[0])
-    from scipy.sparse.linalg import LinearOperator, eigsh  # noqa: PLC0415 -- lazy: start-up time (scipy.linalg)
-
     factor = factor or cholesky(a, name=name)
-    op_inv = LinearOperator((n, n), matvec=lambda x: factor(np.asarray(x, float)), dtype=float)
-    vals = eigsh(a, k=1, sigma=0.0, which="LM", OPinv=op_inv, return_eigenvectors=False,
-                 v0=np.ones(n), tol=1e-12)
-    return float(vals[0])
+    ritz = largest_eigenpair(lambda x: factor(x), np.ones(n), tol=1e-12, max_restarts=10 * n)
+    return 1.0 / ritz.value
 
 
 def anchored_logdet(matrix: sp.spmatrix, q: int, anchors: list[int], name: str, *, ordering: str = "auto",

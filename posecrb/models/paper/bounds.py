@@ -141,7 +141,7 @@ def rotation_lambda_min(lap: WeightedLaplacians, graph: PoseGraph, symbolic: Sym
     """Smallest eigenvalue of the reduced L_w with a certified interval, or a status.
 
     1. eigenvector of the smallest eigenvalue: dense ``eigh`` up to 200 rows, otherwise
-       shift-invert Lanczos at 0 with the Cholesky ``factor`` as inverse operator;
+       Lanczos on the inverse (posecrb.linalg.lanczos) applied through the Cholesky ``factor``;
     2. ``rho`` = its Rayleigh quotient summed edge by edge, ``r = ||L v - rho v||``;
        some eigenvalue lies in ``rho -+ (r + delta)``, ``delta`` the rounding level of the
        products (``_ROUNDING_MARGIN`` x eps x ||L_w||_1 x entries per column);
@@ -150,8 +150,7 @@ def rotation_lambda_min(lap: WeightedLaplacians, graph: PoseGraph, symbolic: Sym
        ``lower = s - delta`` is a lower bound of lambda_min. When ``lower <= 0`` the eigenvalue is
        below what double precision resolves for this matrix: unavailable, with the reason.
     """
-    # lazy: start-up time (scipy.sparse.linalg loads scipy.linalg; `posecrb fim` never needs it)
-    from scipy.sparse.linalg import ArpackError, ArpackNoConvergence, LinearOperator, eigsh  # noqa: PLC0415
+    from ...linalg.lanczos import largest_eigenpair  # noqa: PLC0415 -- `posecrb fim` never needs it
 
     a = sp.csc_matrix(lap.l_w)
     n = a.shape[0]
@@ -165,10 +164,14 @@ def rotation_lambda_min(lap: WeightedLaplacians, graph: PoseGraph, symbolic: Sym
         else:
             if factor is None:
                 factor = symbolic.factor(a, name=name)
-            op = LinearOperator((n, n), matvec=lambda x: factor(np.asarray(x, float)), dtype=float)
-            _, vecs = eigsh(a, k=1, sigma=0.0, which="LM", OPinv=op, v0=np.ones(n), tol=1e-12)
-            v = vecs[:, 0]
-    except (ArpackNoConvergence, ArpackError, np.linalg.LinAlgError) as exc:
+            inverse = factor
+            ritz = largest_eigenpair(lambda x: inverse(x), np.ones(n), tol=1e-12, max_restarts=300)
+            if not ritz.converged:
+                return EigenEstimate(None, None, Status.unavailable(
+                    f"the eigenvalue solver did not converge on {name} (residual {ritz.residual:.2g} after "
+                    f"{ritz.matvecs} products)"))
+            v = ritz.vector
+    except np.linalg.LinAlgError as exc:
         return EigenEstimate(None, None, Status.unavailable(
             f"the eigenvalue solver did not converge on {name} ({exc})"))
     v = v / np.linalg.norm(v)
