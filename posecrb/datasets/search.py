@@ -14,10 +14,13 @@ from __future__ import annotations
 
 import os
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 from ..core.errors import DatasetNotFound, ParseError
 from ..core.files import path_kind
-from .manifest import DatasetEntry, Manifest, load_manifest
+
+if TYPE_CHECKING:
+    from .manifest import DatasetEntry, Manifest
 
 EXTENSIONS = (".g2o", ".graph", ".toro")
 
@@ -108,6 +111,8 @@ def resolve(name_or_path: str | os.PathLike, data_dir: str | os.PathLike | None 
     try:
         return _resolve_on_path(name_or_path, data_dir)
     except DatasetNotFound as exc:
+        from .manifest import load_manifest  # noqa: PLC0415 -- start-up: a path argument never needs the manifest
+
         entry = (manifest or load_manifest()).find(str(name_or_path))
         found = locate(entry, data_dir) if entry is not None else None
         if found is None:
