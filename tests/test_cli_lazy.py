@@ -142,6 +142,15 @@ def test_solve_json_imports_only_what_it_needs(solvable_g2o):
     assert _loaded(modules, "scipy.sparse.linalg", "scipy.linalg") == []
 
 
+def test_tables_json_off_a_terminal_loads_no_rich(solvable_g2o):
+    out, modules = _run(["tables", "--datasets", str(solvable_g2o), "--table", "2", "--format", "json",
+                         "--repeat", "1"], listing=True)
+    assert out.returncode == 0, out.stderr
+    rows = json.loads(out.stdout)["rows"]
+    assert [(r["dataset"], r["status"], r["poses"]) for r in rows] == [("solvable", "ok", 12)]
+    assert _loaded(modules, "rich", "pandas", "matplotlib", "dask") == []
+
+
 def test_cli_defers_numpy_modules_it_never_uses_and_they_still_work(solvable_g2o):
     """scipy's array-API layer touches every name in numpy.__all__; the CLI defers the unused
     submodules, which stay unexecuted through a whole solve and load normally on first use."""

@@ -7,21 +7,12 @@ Off a terminal (logs, CI, pipes) the display is disabled and nothing reaches std
 from __future__ import annotations
 
 import contextlib
+import sys
 from collections.abc import Iterator
-from typing import Protocol
+from typing import TYPE_CHECKING, Protocol
 
-from rich.console import Console
-from rich.progress import (
-    BarColumn,
-    DownloadColumn,
-    MofNCompleteColumn,
-    Progress,
-    ProgressColumn,
-    TextColumn,
-    TimeElapsedColumn,
-    TimeRemainingColumn,
-    TransferSpeedColumn,
-)
+if TYPE_CHECKING:
+    from rich.progress import Progress
 
 
 class Advance(Protocol):
@@ -35,6 +26,20 @@ def progress_display(*, transfer: bool = False) -> Progress:
 
     ``transfer=False``: counted units (done/total, elapsed, remaining), transient.
     ``transfer=True``: bytes (size, speed, remaining), one persistent bar per task."""
+    # lazy: rich costs ~40 ms of start-up and is not needed off a terminal (see ``progress``)
+    from rich.console import Console  # noqa: PLC0415
+    from rich.progress import (  # noqa: PLC0415
+        BarColumn,
+        DownloadColumn,
+        MofNCompleteColumn,
+        Progress,
+        ProgressColumn,
+        TextColumn,
+        TimeElapsedColumn,
+        TimeRemainingColumn,
+        TransferSpeedColumn,
+    )
+
     console = Console(stderr=True)
     columns: tuple[ProgressColumn, ...]
     if transfer:
@@ -47,7 +52,15 @@ def progress_display(*, transfer: bool = False) -> Progress:
 
 @contextlib.contextmanager
 def progress(total: int, label: str) -> Iterator[Advance]:
-    """One counted bar of ``total`` units; yields the engines' callback ``advance(k, description=None)``."""
+    """One counted bar of ``total`` units; yields the engines' callback ``advance(k, description=None)``.
+
+    Off a terminal the callback does nothing and rich is not even imported."""
+    if not sys.stderr.isatty():
+        def ignore(k: int = 1, description: str | None = None) -> None:
+            return None
+
+        yield ignore
+        return
     display = progress_display()
     with display:
         task = display.add_task(label, total=total)

@@ -9,7 +9,6 @@ from collections.abc import Sequence
 from pathlib import Path
 
 import click
-from rich.console import Console
 
 from ...core.errors import PosecrbError
 from ...core.files import write_text
@@ -172,7 +171,7 @@ def command(all_, tables, names, repeat, jobs, fmt, out_dir, compare_paper, rota
         rows = [dataset_row(str(tmp), settings)]
 
     if fmt == "table":
-
+        from rich.console import Console  # noqa: PLC0415 -- rich only for table output (start-up time)
 
         console = Console(width=None if sys.stdout.isatty() else 250)
         for t, trs, cols, note in _shown(rows, tables, compare_paper, settings, explicit):
