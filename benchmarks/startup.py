@@ -7,7 +7,9 @@ pyenv/virtualenv shim in front):
   python -c "import numpy"                           the floor of anything that reads a file (info)
   python -c "import numpy, scipy.sparse, sksparse.cholmod"
                                                      the floor of solve: what it genuinely needs
-  ... + scipy.sparse.linalg                          the same with eigsh (solve's lambda_min estimate)
+  ... deferred                                       the same after the CLI's deferral of numpy modules
+                                                     it never uses (numpy.f2py, numpy.testing, ...), which
+                                                     scipy's array-API layer would otherwise import
   posecrb --help
   posecrb --version
   posecrb info FILE                                  a small file (default CSAIL, else the smallest g2o)
@@ -148,7 +150,8 @@ def main(argv: list[str] | None = None) -> int:
         "python -c pass": [py, "-c", "pass"],
         "python -c 'import numpy'": [py, "-c", "import numpy"],
         f"python -c 'import {floor}'": [py, "-c", f"import {floor}"],
-        f"python -c 'import {floor}, scipy.sparse.linalg'": [py, "-c", f"import {floor}, scipy.sparse.linalg"],
+        f"python -c 'import {floor}' deferred": [
+            py, "-c", f"from posecrb.cli import _defer_unused_imports; _defer_unused_imports(); import {floor}"],
         "posecrb --help": [*cmd, "--help"],
         "posecrb --version": [*cmd, "--version"],
     }
