@@ -27,6 +27,7 @@ them with explicit zeros before the analysis.
 from __future__ import annotations
 
 import logging
+from types import ModuleType
 
 import numpy as np
 import scipy.sparse as sp
@@ -60,7 +61,8 @@ def _one_blas_thread():
 _WIDE = 32
 
 
-def _wide_supernode(k, indptr, indices, val, bounds, col2sn, sn: int, posbuf) -> str | None:
+def _wide_supernode(k: ModuleType, indptr: np.ndarray, indices: np.ndarray, val: np.ndarray, bounds: np.ndarray,
+                    col2sn: np.ndarray, sn: int, posbuf: np.ndarray) -> str | None:
     """The block Takahashi step of supernode ``sn`` through LAPACK/BLAS, in place on ``val``
     (see ``_selinv_kernels._takahashi_range``): ``Y = L_SJ L_JJ^{-1}`` (dtrsm),
     ``(L_JJ L_JJ^T)^{-1}`` (dpotri, a third of the flops of an explicit inverse and product),
