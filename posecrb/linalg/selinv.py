@@ -15,11 +15,17 @@ recurrence only reads ``Z`` inside that pattern because a Cholesky pattern is cl
 ``i, k in S, i > k`` implies ``(i, k)`` is in the pattern. The kernel checks this and
 raises instead of returning a wrong number when a factor's pattern is not closed.
 
-The kernel runs the block form of the recurrences supernode by supernode (dense
-``Z_SS`` gathered from ancestor supernodes, products through BLAS with one thread), and
-is compiled with numba (``cache=True``; the first call in a process imports numba and loads the
-cached machine code, ~0.3 s; the kernels live in ``posecrb.linalg._selinv_kernels``, imported
-only then). Without numba the same code runs as plain Python, correct but slow.
+The block form of the recurrences runs supernode by supernode from the root down, in place:
+supernode ``J`` reads only its own columns of ``L`` and ``Z`` of its ancestors, so ``Z`` overwrites
+a copy of ``L``'s values and the memory is that of the factor's nonzeros (its pattern, int32
+rows, and one value each; CHOLMOD's own copy of the factor is the caller's) plus the dense
+blocks of one supernode (``Z_SS`` gathered from the ancestors, at most the factor's size).
+Supernodes at least ``_WIDE`` columns wide, the separators near the root that carry nearly all
+the flops, go through LAPACK/BLAS (dtrsm, dpotri, dsymm, dgemm: about twice the flops of the
+factorization); the narrow ones run in a loop compiled with numba (``cache=True``; the first call
+in a process imports numba and loads the cached machine code, ~0.3 s; the kernels live in
+``posecrb.linalg._selinv_kernels``, imported only then). Without numba the same code runs as
+plain Python, correct but slow. BLAS runs with one thread (many small calls).
 Per-pose blocks of the inverse are only guaranteed in the factor's pattern when the
 matrix's own diagonal blocks are structurally full, so ``inverse_block_diagonal`` pads
 them with explicit zeros before the analysis.
