@@ -13,7 +13,7 @@ import numpy as np
 import pytest
 import scipy.sparse as sp
 
-from posecrb.core.errors import NotPositiveDefinite
+from posecrb.core.errors import NotPositiveDefinite, NumericalError
 from posecrb.linalg import selinv
 from posecrb.linalg.cholesky import SymbolicCholesky
 from posecrb.linalg.selinv import SelectedInverse, inverse_block_diagonal, trace_inverse
@@ -174,3 +174,39 @@ def test_ill_conditioned_matrix_status_follows_its_condition(anchor):
         assert sel.status.state == "warning"
     ref = pattern_reference(sel, np.linalg.inv(dense))
     assert_within(sel.zval, ref, inverse_entry_atol(dense), "inverse")
+
+
+class _GivenFactor:
+    """A stand-in for a CHOLMOD factor with a given lower-triangular ``L`` and identity ordering."""
+
+    def __init__(self, lower: np.ndarray):
+        self._lower = sp.csc_matrix(lower)
+
+    def L(self) -> sp.csc_matrix:
+        return self._lower.copy()
+
+    def P(self) -> np.ndarray:
+        return np.arange(self._lower.shape[0])
+
+
+def test_factor_pattern_not_closed_is_an_error():
+    # column 0 reaches rows 1 and 2, but column 1 lacks row 2: no Cholesky factor has this pattern
+    lower = np.array([[2.0, 0, 0], [0.5, 1.0, 0], [0.5, 0, 1.0]])
+    with pytest.raises(NumericalError, match="not closed"):
+        SelectedInverse(_GivenFactor(lower), "test matrix")
+
+
+@pytest.mark.parametrize("wide", [1, 10**9], ids=["lapack", "loop"])
+def test_non_finite_factor_is_an_error(wide, monkeypatch):
+    monkeypatch.setattr(selinv, "_WIDE", wide)
+    lower = np.linalg.cholesky(np.array([[4.0, 1, 0], [1, 3, 1], [0, 1, 2]]))
+    lower[2, 1] = np.inf
+    with pytest.raises(NumericalError, match="not finite"):
+        SelectedInverse(_GivenFactor(lower), "test matrix")
+
+
+def test_given_factor_matches_dense_inverse():
+    """The stand-in itself: with a true factor the entries are those of the dense inverse."""
+    a = np.array([[4.0, 1, 0], [1, 3, 1], [0, 1, 2]])
+    sel = SelectedInverse(_GivenFactor(np.linalg.cholesky(a)), "test matrix")
+    assert_within(sel.zval, pattern_reference(sel, np.linalg.inv(a)), inverse_entry_atol(a), "inverse")

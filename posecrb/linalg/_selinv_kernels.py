@@ -61,6 +61,16 @@ def _row_squares(indptr, indices, val, n):  # pragma: no cover - compiled
 
 
 @njit(cache=True, nogil=True)
+def _count_nonfinite(val):  # pragma: no cover - compiled
+    """How many entries are NaN or infinite (without numpy's temporaries of the factor's size)."""
+    bad = 0
+    for p in range(val.shape[0]):
+        if not np.isfinite(val[p]):
+            bad += 1
+    return bad
+
+
+@njit(cache=True, nogil=True)
 def _gather_l(indptr, val, j0, w, s, ljj, lsj):  # pragma: no cover - compiled
     """Dense copies of the supernode's diagonal block ``L_JJ`` (lower triangle; the caller
     zeroes the rest) and of its rows below, ``L_SJ`` (``s`` rows)."""

@@ -177,9 +177,9 @@ class SelectedInverse:
         a_diag = _kernels()._row_squares(self.indptr, self.indices, zval, self.perm.size)   # diag(L L^T)
         why = _takahashi_inplace(self.indptr, self.indices, zval)
         if why is None:
-            bad = ~np.isfinite(zval)
-            if bad.any():
-                why = f"{int(bad.sum())} entries of the selected inverse are not finite"
+            bad = int(_kernels()._count_nonfinite(zval))
+            if bad:
+                why = f"{bad} entries of the selected inverse are not finite"
             else:
                 d = zval[self.indptr[:-1]]
                 if not (d > 0).all():
