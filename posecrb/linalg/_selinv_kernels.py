@@ -94,10 +94,11 @@ def _scatter(indptr, val, j0, w, s, zjj, zsj):  # pragma: no cover - compiled
 
 
 @njit(cache=True, nogil=True)
-def _gather_zss(indptr, indices, val, bounds, col2sn, j0, w, s, zss, posbuf):  # pragma: no cover - compiled
-    """``Z_SS`` (lower triangle and its mirror), ``S`` the rows below supernode ``J`` (first
-    column ``j0``, width ``w``, ``s`` rows), read from the already inverted ancestor supernodes.
-    Returns 0, or ``j0 + 1`` when an entry of ``S x S`` is missing (pattern not closed)."""
+def _gather_zss(indptr, indices, val, bounds, col2sn, j0, w, s, zss, posbuf, mirror):  # pragma: no cover - compiled
+    """``Z_SS`` (its lower triangle, and the upper when ``mirror``), ``S`` the rows below
+    supernode ``J`` (first column ``j0``, width ``w``, ``s`` rows), read from the already inverted
+    ancestor supernodes. Returns 0, or ``j0 + 1`` when an entry of ``S x S`` is missing (pattern
+    not closed)."""
     t = indptr[j0] + w  # S = indices[t: t + s]
     a = 0
     while a < s:
@@ -122,9 +123,10 @@ def _gather_zss(indptr, indices, val, bounds, col2sn, j0, w, s, zss, posbuf):  #
             kk = indices[t + b]
             base = indptr[kk] - (kk - k0)
             for u in range(b, s):
-                v = val[base + posbuf[u]]
-                zss[u, b] = v
-                zss[b, u] = v
+                zss[u, b] = val[base + posbuf[u]]
+            if mirror:
+                for u in range(b + 1, s):
+                    zss[b, u] = zss[u, b]
         a = a2
     return 0
 
@@ -161,7 +163,7 @@ def _takahashi_range(indptr, indices, val, bounds, col2sn, hi, lo, posbuf):  # p
         if s > 0:
             y = np.dot(lsj, linv)
             zss = np.empty((s, s))
-            status = _gather_zss(indptr, indices, val, bounds, col2sn, j0, w, s, zss, posbuf)
+            status = _gather_zss(indptr, indices, val, bounds, col2sn, j0, w, s, zss, posbuf, True)
             if status:
                 return status
             zsj = -np.dot(zss, y)

@@ -87,8 +87,8 @@ def _wide_supernode(k: ModuleType, indptr: np.ndarray, indices: np.ndarray, val:
     if info:
         return f"zero pivot in the diagonal block of columns {j0}..{j0 + w - 1}"
     if s:
-        zss = np.empty((s, s), order="F")
-        if k._gather_zss(indptr, indices, val, bounds, col2sn, j0, w, s, zss, posbuf):
+        zss = np.empty((s, s), order="F")   # lower half only: dsymm reads no other
+        if k._gather_zss(indptr, indices, val, bounds, col2sn, j0, w, s, zss, posbuf, False):
             return f"Cholesky pattern not closed at column {j0}"
         zsj = dsymm(-1.0, zss, y, side=0, lower=1)
         del zss
