@@ -42,94 +42,134 @@ def _supernodes(indptr, indices):  # pragma: no cover - compiled
 
 
 @njit(cache=True, nogil=True)
-def _takahashi(indptr, indices, lval):  # pragma: no cover - compiled
-    """Selected inverse ``Z = (L L^T)^{-1}`` on the pattern of ``L`` (CSC, rows sorted,
-    diagonal first in each column), supernode by supernode from the root down:
+def _column_supernodes(bounds, n):  # pragma: no cover - compiled
+    """The supernode of each column."""
+    col2sn = np.empty(n, np.int64)
+    for sidx in range(bounds.shape[0] - 1):
+        col2sn[bounds[sidx]:bounds[sidx + 1]] = sidx
+    return col2sn
+
+
+@njit(cache=True, nogil=True)
+def _row_squares(indptr, indices, val, n):  # pragma: no cover - compiled
+    """``sum_k L[j, k]^2`` per row ``j``: the diagonal of ``L L^T``."""
+    out = np.zeros(n)
+    for j in range(n):
+        for p in range(indptr[j], indptr[j + 1]):
+            out[indices[p]] += val[p] * val[p]
+    return out
+
+
+@njit(cache=True, nogil=True)
+def _count_nonfinite(val):  # pragma: no cover - compiled
+    """How many entries are NaN or infinite (without numpy's temporaries of the factor's size)."""
+    bad = 0
+    for p in range(val.shape[0]):
+        if not np.isfinite(val[p]):
+            bad += 1
+    return bad
+
+
+@njit(cache=True, nogil=True)
+def _gather_l(indptr, val, j0, w, s, ljj, lsj):  # pragma: no cover - compiled
+    """Dense copies of the supernode's diagonal block ``L_JJ`` (lower triangle; the caller
+    zeroes the rest) and of its rows below, ``L_SJ`` (``s`` rows)."""
+    for c in range(w):
+        q = indptr[j0 + c] - c
+        for r in range(c, w):
+            ljj[r, c] = val[q + r]
+        for r in range(s):
+            lsj[r, c] = val[q + w + r]
+
+
+@njit(cache=True, nogil=True)
+def _scatter(indptr, val, j0, w, s, zjj, zsj):  # pragma: no cover - compiled
+    """Store ``Z_JJ`` (lower triangle) and ``Z_SJ`` over the supernode's entries of ``val``."""
+    for c in range(w):
+        q = indptr[j0 + c] - c
+        for r in range(c, w):
+            val[q + r] = zjj[r, c]
+        for r in range(s):
+            val[q + w + r] = zsj[r, c]
+
+
+@njit(cache=True, nogil=True)
+def _gather_zss(indptr, indices, val, bounds, col2sn, j0, w, s, zss, posbuf, mirror):  # pragma: no cover - compiled
+    """``Z_SS`` (its lower triangle, and the upper when ``mirror``), ``S`` the rows below
+    supernode ``J`` (first column ``j0``, width ``w``, ``s`` rows), read from the already inverted
+    ancestor supernodes. Returns 0, or ``j0 + 1`` when an entry of ``S x S`` is missing (pattern
+    not closed)."""
+    t = indptr[j0] + w  # S = indices[t: t + s]
+    a = 0
+    while a < s:
+        k = indices[t + a]
+        anc = col2sn[k]
+        k0 = bounds[anc]
+        k1 = bounds[anc + 1]
+        r0 = indptr[k0]
+        r1 = indptr[k0 + 1]
+        ptr = r0
+        for u in range(a, s):  # positions of S[a:] in the ancestor's row list
+            target = indices[t + u]
+            while ptr < r1 and indices[ptr] < target:
+                ptr += 1
+            if ptr == r1 or indices[ptr] != target:
+                return j0 + 1
+            posbuf[u] = ptr - r0
+        a2 = a
+        while a2 < s and indices[t + a2] < k1:
+            a2 += 1
+        for b in range(a, a2):
+            kk = indices[t + b]
+            base = indptr[kk] - (kk - k0)
+            for u in range(b, s):
+                zss[u, b] = val[base + posbuf[u]]
+            if mirror:
+                for u in range(b + 1, s):
+                    zss[b, u] = zss[u, b]
+        a = a2
+    return 0
+
+
+@njit(cache=True, nogil=True)
+def _takahashi_range(indptr, indices, val, bounds, col2sn, hi, lo, posbuf):  # pragma: no cover - compiled
+    """The block Takahashi recurrences on supernodes ``hi - 1`` down to ``lo``, in place: on
+    entry ``val`` holds ``L`` on these supernodes and ``Z = (L L^T)^{-1}`` on every later one;
+    on return ``Z`` on these as well. For each supernode ``J`` (columns ``J``, rows ``S`` below):
 
         Y = L_SJ L_JJ^{-1},  Z_SJ = -Z_SS Y,  Z_JJ = L_JJ^{-T} L_JJ^{-1} - Y^T Z_SJ
 
-    (the block form of the Takahashi recurrences; ``Z_SS`` is gathered from ancestor
-    supernodes, the products go to BLAS). Returns (zval, status): status 0 = ok,
-    otherwise 1 + a column whose pattern is not closed."""
-    n = indptr.shape[0] - 1
-    bounds = _supernodes(indptr, indices)
-    nsn = bounds.shape[0] - 1
-    col2sn = np.empty(n, np.int64)
-    for sidx in range(nsn):
-        col2sn[bounds[sidx]:bounds[sidx + 1]] = sidx
-    zval = np.zeros(lval.shape[0])
-    posbuf = np.empty(n, np.int64)
-    for sn in range(nsn - 1, -1, -1):
+    with ``L_JJ^{-1}`` by forward substitution (meant for narrow supernodes; the wide ones near
+    the root go through LAPACK, ``posecrb.linalg.selinv``). Only ``L`` of ``J`` itself and ``Z``
+    of its ancestors are read, so ``Z_J`` may overwrite ``L_J``. Returns 0, or ``1 + a column``
+    whose pattern is not closed."""
+    for sn in range(hi - 1, lo - 1, -1):
         j0 = bounds[sn]
         w = bounds[sn + 1] - j0
-        p0 = indptr[j0]
-        s = indptr[j0 + 1] - p0 - w
+        s = indptr[j0 + 1] - indptr[j0] - w
         ljj = np.zeros((w, w))
         lsj = np.empty((s, w))
-        for c in range(w):
-            q = indptr[j0 + c] - c
-            for r in range(c, w):
-                ljj[r, c] = lval[q + r]
-            for r in range(s):
-                lsj[r, c] = lval[q + w + r]
-        # inverse of the lower-triangular diagonal block: forward substitution for small
-        # blocks, LAPACK for the large separator blocks near the root
+        _gather_l(indptr, val, j0, w, s, ljj, lsj)
         linv = np.zeros((w, w))
-        if w > 48:
-            full = np.linalg.inv(ljj)
-            for c in range(w):
-                for r in range(c, w):
-                    linv[r, c] = full[r, c]
-        else:
-            for c in range(w):
-                linv[c, c] = 1.0 / ljj[c, c]
-                for r in range(c + 1, w):
-                    acc = 0.0
-                    for k in range(c, r):
-                        acc += ljj[r, k] * linv[k, c]
-                    linv[r, c] = -acc / ljj[r, r]
+        for c in range(w):
+            linv[c, c] = 1.0 / ljj[c, c]
+            for r in range(c + 1, w):
+                acc = 0.0
+                for k in range(c, r):
+                    acc += ljj[r, k] * linv[k, c]
+                linv[r, c] = -acc / ljj[r, r]
         zjj = np.dot(np.ascontiguousarray(linv.T), linv)
         zsj = np.empty((s, w))
         if s > 0:
             y = np.dot(lsj, linv)
             zss = np.empty((s, s))
-            t = p0 + w  # S = indices[p0 + w: p0 + w + s]
-            a = 0
-            while a < s:
-                k = indices[t + a]
-                anc = col2sn[k]
-                k0 = bounds[anc]
-                k1 = bounds[anc + 1]
-                r0 = indptr[k0]
-                r1 = indptr[k0 + 1]
-                ptr = r0
-                for u in range(a, s):  # positions of S[a:] in the ancestor's row list
-                    target = indices[t + u]
-                    while ptr < r1 and indices[ptr] < target:
-                        ptr += 1
-                    if ptr == r1 or indices[ptr] != target:
-                        return zval, j0 + 1
-                    posbuf[u] = ptr - r0
-                a2 = a
-                while a2 < s and indices[t + a2] < k1:
-                    a2 += 1
-                for b in range(a, a2):
-                    kk = indices[t + b]
-                    base = indptr[kk] - (kk - k0)
-                    for u in range(b, s):
-                        v = zval[base + posbuf[u]]
-                        zss[u, b] = v
-                        zss[b, u] = v
-                a = a2
+            status = _gather_zss(indptr, indices, val, bounds, col2sn, j0, w, s, zss, posbuf, True)
+            if status:
+                return status
             zsj = -np.dot(zss, y)
             zjj -= np.dot(np.ascontiguousarray(y.T), zsj)
-        for c in range(w):
-            q = indptr[j0 + c] - c
-            for r in range(c, w):
-                zval[q + r] = zjj[r, c]
-            for r in range(s):
-                zval[q + w + r] = zsj[r, c]
-    return zval, 0
+        _scatter(indptr, val, j0, w, s, zjj, zsj)
+    return 0
 
 
 @njit(cache=True, nogil=True)

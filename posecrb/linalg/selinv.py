@@ -15,11 +15,17 @@ recurrence only reads ``Z`` inside that pattern because a Cholesky pattern is cl
 ``i, k in S, i > k`` implies ``(i, k)`` is in the pattern. The kernel checks this and
 raises instead of returning a wrong number when a factor's pattern is not closed.
 
-The kernel runs the block form of the recurrences supernode by supernode (dense
-``Z_SS`` gathered from ancestor supernodes, products through BLAS with one thread), and
-is compiled with numba (``cache=True``; the first call in a process imports numba and loads the
-cached machine code, ~0.3 s; the kernels live in ``posecrb.linalg._selinv_kernels``, imported
-only then). Without numba the same code runs as plain Python, correct but slow.
+The block form of the recurrences runs supernode by supernode from the root down, in place:
+supernode ``J`` reads only its own columns of ``L`` and ``Z`` of its ancestors, so ``Z`` overwrites
+a copy of ``L``'s values and the memory is that of the factor's nonzeros (its pattern, int32
+rows, and one value each; CHOLMOD's own copy of the factor is the caller's) plus the dense
+blocks of one supernode (``Z_SS`` gathered from the ancestors, at most the factor's size).
+Supernodes at least ``_WIDE`` columns wide, the separators near the root that carry nearly all
+the flops, go through LAPACK/BLAS (dtrsm, dpotri, dsymm, dgemm: about twice the flops of the
+factorization); the narrow ones run in a loop compiled with numba (``cache=True``; the first call
+in a process imports numba and loads the cached machine code, ~0.3 s; the kernels live in
+``posecrb.linalg._selinv_kernels``, imported only then). Without numba the same code runs as
+plain Python, correct but slow. BLAS runs with one thread (many small calls).
 Per-pose blocks of the inverse are only guaranteed in the factor's pattern when the
 matrix's own diagonal blocks are structurally full, so ``inverse_block_diagonal`` pads
 them with explicit zeros before the analysis.
@@ -27,15 +33,19 @@ them with explicit zeros before the analysis.
 from __future__ import annotations
 
 import logging
+from types import ModuleType
 
 import numpy as np
 import scipy.sparse as sp
 from threadpoolctl import threadpool_limits
 
 from ..core.errors import NumericalError, UsageError
+from ..core.status import OK, Status
 from .cholesky import Factor, SymbolicCholesky
 
 log = logging.getLogger("posecrb")
+
+EPS = float(np.finfo(float).eps)
 
 def _kernels():
     """The compiled kernels (``posecrb.linalg._selinv_kernels``), imported on first use: numba's
@@ -49,27 +59,138 @@ def _one_blas_thread():
     return threadpool_limits(limits=1, user_api="blas")
 
 
+# Supernodes at least this wide go through LAPACK/BLAS from Python (triangular solve, dpotri,
+# symmetric product), one call each; narrower ones run inside one compiled loop. On nested-
+# dissection orderings of pose graphs the wide ones are the few hundred separators near the root
+# that carry nearly all the flops (3D grid of 21,952 poses: 344 of 11,239 supernodes, 99% of the
+# Z_SS Y products), so the Python loop over them costs milliseconds.
+_WIDE = 32
+
+
+def _wide_supernode(k: ModuleType, indptr: np.ndarray, indices: np.ndarray, val: np.ndarray, bounds: np.ndarray,
+                    col2sn: np.ndarray, sn: int, posbuf: np.ndarray) -> str | None:
+    """The block Takahashi step of supernode ``sn`` through LAPACK/BLAS, in place on ``val``
+    (see ``_selinv_kernels._takahashi_range``): ``Y = L_SJ L_JJ^{-1}`` (dtrsm),
+    ``(L_JJ L_JJ^T)^{-1}`` (dpotri, a third of the flops of an explicit inverse and product),
+    ``Z_SJ = -Z_SS Y`` (dsymm), ``Z_JJ -= Y^T Z_SJ`` (dgemm). Returns None or why it failed."""
+    from scipy.linalg.blas import dgemm, dsymm, dtrsm  # noqa: PLC0415 -- lazy, like the kernels
+    from scipy.linalg.lapack import dpotri  # noqa: PLC0415
+
+    j0 = int(bounds[sn])
+    w = int(bounds[sn + 1]) - j0
+    s = int(indptr[j0 + 1] - indptr[j0]) - w
+    ljj = np.zeros((w, w), order="F")
+    lsj = np.empty((s, w), order="F")
+    k._gather_l(indptr, val, j0, w, s, ljj, lsj)
+    y = dtrsm(1.0, ljj, lsj, side=1, lower=1, overwrite_b=1) if s else lsj
+    zjj, info = dpotri(ljj, lower=1, overwrite_c=1)
+    if info:
+        return f"zero pivot in the diagonal block of columns {j0}..{j0 + w - 1}"
+    if s:
+        zss = np.empty((s, s), order="F")   # lower half only: dsymm reads no other
+        if k._gather_zss(indptr, indices, val, bounds, col2sn, j0, w, s, zss, posbuf, False):
+            return f"Cholesky pattern not closed at column {j0}"
+        zsj = dsymm(-1.0, zss, y, side=0, lower=1)
+        del zss
+        zjj = dgemm(-1.0, y, zsj, beta=1.0, c=zjj, trans_a=1, overwrite_c=1)
+    else:
+        zsj = y
+    k._scatter(indptr, val, j0, w, s, zjj, zsj)
+    return None
+
+
+def _takahashi_inplace(indptr: np.ndarray, indices: np.ndarray, val: np.ndarray) -> str | None:
+    """Overwrite ``val`` (the values of ``L``, CSC with sorted rows, diagonal first) with
+    ``Z = (L L^T)^{-1}`` on the same pattern: supernode by supernode from the root down, the
+    wide ones through LAPACK (``_wide_supernode``), runs of narrow ones in one compiled call.
+    In place because supernode ``J`` reads only its own ``L`` and its ancestors' ``Z``: no
+    second array of the factor's size. Returns None or why it failed."""
+    k = _kernels()
+    n = indptr.size - 1
+    bounds = k._supernodes(indptr, indices)
+    col2sn = k._column_supernodes(bounds, n)
+    posbuf = np.empty(n, np.int64)
+    wide = np.flatnonzero(np.diff(bounds) >= _WIDE)
+    hi = bounds.size - 1
+    # One BLAS thread: the calls are many and mostly small, where OpenBLAS threads only add
+    # synchronisation, and they collapse when another process holds the other core (2D grid of
+    # 10^4 poses on a loaded 2-core machine: the wide supernodes' calls take 0.66 s with two
+    # threads, 0.03 s with one).
+    with _one_blas_thread():
+        for sn in [*wide[::-1].tolist(), -1]:
+            status = k._takahashi_range(indptr, indices, val, bounds, col2sn, hi, sn + 1, posbuf)
+            if status:
+                return f"Cholesky pattern not closed at column {status - 1}"
+            if sn >= 0:
+                why = _wide_supernode(k, indptr, indices, val, bounds, col2sn, sn, posbuf)
+                if why:
+                    return why
+            hi = sn
+    return None
+
+
+# Above this lower bound on the scaled condition number, ``SelectedInverse.status`` warns: fewer
+# than about six correct digits in the largest entries of the inverse.
+WARN_CONDITION = 1e-6 / EPS
+
+
+def _condition_status(bound: float, name: str) -> Status:
+    if bound * EPS >= 1.0:
+        return Status.unavailable(
+            f"the {name} is numerically singular: its diagonally scaled condition number is at least "
+            f"{bound:.2g}, so the computed inverse has no correct digit",
+            "some unknowns are (nearly) unobservable")
+    if bound > WARN_CONDITION:
+        return Status.warning(
+            f"the {name} is ill-conditioned (diagonally scaled condition number at least {bound:.2g}): "
+            f"entries of its inverse may carry relative errors up to about {bound * EPS:.1g}")
+    return OK
+
+
 class SelectedInverse:
-    """Entries of ``A^{-1}`` on the (permuted) pattern of the Cholesky factor of ``A``."""
+    """Entries of ``A^{-1}`` on the (permuted) pattern of the Cholesky factor of ``A``.
+
+    Memory: the factor's pattern (int32 rows) and one value per nonzero, ``Z`` computed over a
+    copy of ``L``'s values, plus dense blocks of the widest supernode.
+
+    ``condition_lower_bound = max_j A_jj (A^{-1})_jj`` is a lower bound on the 2-norm condition
+    number of the diagonally scaled ``D^{-1/2} A D^{-1/2}`` (its inverse's diagonal entries are
+    at most its largest eigenvalue's inverse, and its largest eigenvalue is at least 1), the
+    number that governs the accuracy of a Cholesky-based inverse (van der Sluis). ``status`` is
+    *unavailable* when it reaches ``1 / eps`` (the inverse has no correct digit) and a *warning*
+    above ``WARN_CONDITION``: a cheap necessary check; callers that report an accuracy estimate
+    (``posecrb.models.paper.crlb.inverse_accuracy``) keep theirs.
+"""
 
     def __init__(self, factor: Factor, name: str = "matrix") -> None:
         lower = factor.L()
-        lower = sp.csc_matrix(lower)
-        lower.sort_indices()
+        if not sp.isspmatrix_csc(lower):  # pragma: no cover - CHOLMOD returns CSC
+            lower = sp.csc_matrix(lower)
+        lower.sort_indices()  # CHOLMOD's are sorted: a check only
         self.perm = np.asarray(factor.P(), dtype=np.int64)
         self.iperm = np.empty_like(self.perm)
         self.iperm[self.perm] = np.arange(self.perm.size)
         self.indptr = lower.indptr.astype(np.int64)
-        self.indices = lower.indices.astype(np.int64)
-        # One BLAS thread: the kernel makes many small GEMM calls, where OpenBLAS threads only
-        # add synchronisation (and collapse when another process holds the other core).
-        with _one_blas_thread():
-            zval, status = _kernels()._takahashi(self.indptr, self.indices, np.asarray(lower.data, dtype=np.float64))
-        if status:
-            raise NumericalError(f"{name}: Cholesky pattern not closed at column {status - 1}; "
-                               "cannot run the Takahashi recurrences")
+        self.indices = lower.indices
+        zval = np.require(lower.data, dtype=np.float64, requirements=["C", "W"])
+        del lower
+        a_diag = _kernels()._row_squares(self.indptr, self.indices, zval, self.perm.size)   # diag(L L^T)
+        why = _takahashi_inplace(self.indptr, self.indices, zval)
+        if why is None:
+            bad = int(_kernels()._count_nonfinite(zval))
+            if bad:
+                why = f"{bad} entries of the selected inverse are not finite"
+            else:
+                d = zval[self.indptr[:-1]]
+                if not (d > 0).all():
+                    why = (f"{int((~(d > 0)).sum())} diagonal entries of the inverse come out non-positive "
+                           "(not positive definite to working precision)")
+        if why:
+            raise NumericalError(f"{name}: selected inversion (Takahashi recurrences) failed: {why}")
         self.zval = zval
         self.n = self.perm.size
+        self.condition_lower_bound = float(np.max(a_diag * zval[self.indptr[:-1]], initial=1.0))
+        self.status = _condition_status(self.condition_lower_bound, name)
 
     def diagonal(self) -> np.ndarray:
         """diag(A^{-1}) in the original ordering."""
