@@ -50,6 +50,18 @@ from ..linalg.cholesky import SymbolicCholesky, cholesky
 from ..linalg.laplacian import reduced_laplacian
 from ..linalg.ordering import solver_symbolic
 
+# CHOLMOD's simplicial factorization for the solver's block matrices (M_red, the chordal
+# initialisation's connection Laplacian) when the pose-level fill is low: ``b * sum c_j^2 / sum c_j``
+# below this, with c_j the column counts of the translation Laplacian's factor (one row per pose)
+# and b the rows per pose of the matrix factored. That quotient estimates the factorization's
+# flops per factor entry, CHOLMOD's own supernodal criterion (its switch is 40, chosen for the
+# factorization alone). Here a factor is used for tens to hundreds of solves with r <= 5
+# right-hand sides, where the simplicial factor's solves take 0.3-0.6x the supernodal's time; its
+# factorization costs no more below ~100 and up to 2-3x more above (benchmarks/solver_variants.py
+# --factor-modes: city10000 (80) and parking-garage (36) gain, cubicle (152), sphere2500 (168)
+# and the 2D 10^5-pose grid (400) keep the supernodal factor).
+SIMPLICIAL_MAX_FLOPS_PER_ENTRY = 110.0
+
 # An edge's R~ counts as orthogonal when max |I - R~ R~^T| is at the rounding level of a
 # rotation computed in floating point (normalised quaternions measure up to ~10 eps on the
 # shared datasets); its defect term is then dropped, so orthogonal data give exactly the
@@ -112,6 +124,7 @@ class Problem:
     _full_base: np.ndarray | None = field(default=None, repr=False)
     _full_diag_pos: np.ndarray | None = field(default=None, repr=False)
     _full_lam_pos: np.ndarray | None = field(default=None, repr=False)
+    _fill: float | None = field(default=None, repr=False)
 
     # ---- construction ------------------------------------------------------
     @classmethod
@@ -143,6 +156,24 @@ class Problem:
                    Vred=Vred, VredT=Vred.T.tocsr(), Lred=Lred, Lfactor=Lfactor, tau=tau, kappa=kappa,
                    src=src, dst=dst, rot=rot, rotT=np.ascontiguousarray(np.swapaxes(rot, 1, 2)), trans=tt,
                    defect_edges=defect_edges, defect=defect)
+
+    def pose_fill(self) -> float:
+        """``sum c_j^2 / sum c_j`` over the column counts c_j of the L(W^tau) factor (computed once):
+        the flops per factor entry of a one-row-per-pose factorization of the pose graph."""
+        if self._fill is None:
+            fill = 1.0
+            if self.n > 1:
+                # LD(): the simplicial LDL' factor's own storage (a supernodal one is converted).
+                counts = np.diff(self.Lfactor.LD().indptr).astype(float)
+                fill = float(np.dot(counts, counts) / max(counts.sum(), 1.0))
+            self._fill = fill
+        return self._fill
+
+    def factor_mode(self, rows_per_pose: int) -> str:
+        """CHOLMOD mode for a solver matrix with ``rows_per_pose`` rows per pose
+        (``SIMPLICIAL_MAX_FLOPS_PER_ENTRY``): "simplicial" or "supernodal"."""
+        sparse_enough = rows_per_pose * self.pose_fill() < SIMPLICIAL_MAX_FLOPS_PER_ENTRY
+        return "simplicial" if sparse_enough else "supernodal"
 
     # ---- the objective -----------------------------------------------------
     def translations(self, Z: np.ndarray) -> np.ndarray:
@@ -232,7 +263,8 @@ class Problem:
         self._full_diag_pos = positions(diag, diag)
         self._full_lam_pos = positions(rr, cc)
         self._full_pattern = pattern
-        self._full_symbolic = solver_symbolic(pattern, d, n)   # pose-level nested dissection on large 3D
+        # pose-level nested dissection on large 3D; simplicial or supernodal by the fill (factor_mode)
+        self._full_symbolic = solver_symbolic(pattern, d, n, mode=self.factor_mode(d + 1))
 
     def full_matrix(self, lam_blocks: np.ndarray | None, shift: float) -> sp.csc_matrix:
         """M_red(s) = [[L_red, V_red], [V_red^T, C - Lambda + s I]] (sparse, (n-1+dn) square)."""
