@@ -240,13 +240,15 @@ class Problem:
         # of a small problem's set-up); with the block diagonal it gives the analysed pattern.
         blocks = [(self.Lred.tocoo(), 0, 0), (self.Vred.tocoo(), 0, n - 1), (self.VredT.tocoo(), n - 1, 0),
                   (self.C.tocoo(), n - 1, n - 1)]
-        brow = np.concatenate([blk.row.astype(np.int64) + r0 for blk, r0, _ in blocks])
-        bcol = np.concatenate([blk.col.astype(np.int64) + c0 for blk, _, c0 in blocks])
-        bval = np.concatenate([blk.data for blk, _, _ in blocks])
-        prow, pcol = np.concatenate([brow, rr]), np.concatenate([bcol, cc])
-        pattern = sp.csc_matrix((np.ones(prow.size), (prow, pcol)), shape=(N, N))
+        brow = np.concatenate([blk.row.astype(np.int64) + r0 for blk, r0, _ in blocks] + [rr])
+        bcol = np.concatenate([blk.col.astype(np.int64) + c0 for blk, _, c0 in blocks] + [cc])
+        bval = np.concatenate([blk.data for blk, _, _ in blocks] + [np.zeros(rr.size)])
+        # scipy sums duplicates (the block diagonal's explicit zeros onto C's diagonal blocks) and
+        # keeps explicit zeros: the values of [[L_red, V_red], [V_red^T, C]] on the analysed pattern.
+        pattern = sp.csc_matrix((bval, (brow, bcol)), shape=(N, N))
         pattern.sum_duplicates()
         pattern.sort_indices()
+        # Only the diagonal and the block diagonal are rewritten per factorization: locate them.
         keys = np.repeat(np.arange(N, dtype=np.int64), np.diff(pattern.indptr)) * N + pattern.indices
 
         def positions(rows: np.ndarray, cols: np.ndarray) -> np.ndarray:
@@ -256,9 +258,7 @@ class Problem:
                 raise InternalError("entry outside the analysed pattern")
             return pos
 
-        # add.at: a block that stored duplicate entries would still sum them, as scipy does.
-        self._full_base = np.zeros(keys.size)
-        np.add.at(self._full_base, positions(brow, bcol), bval)
+        self._full_base = pattern.data.copy()
         diag = np.arange(n - 1, N)
         self._full_diag_pos = positions(diag, diag)
         self._full_lam_pos = positions(rr, cc)
