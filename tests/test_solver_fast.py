@@ -56,3 +56,39 @@ def test_factor_mode_solves_match_dense(dim, threshold, monkeypatch):
     D[:, -1] = np.sign(np.linalg.det(U @ Vt))
     R = np.swapaxes((U * D[:, None, :]) @ Vt, 1, 2)
     np.testing.assert_allclose(chordal_rotations(p), R, rtol=0, atol=MARGIN * np.linalg.cond(Lrr) * EPS)
+
+
+def svd_nearest_rotation(m: np.ndarray) -> np.ndarray:
+    """Nearest rotation to one d x d matrix: U diag(1, .., det(U V^T)) V^T (Umeyama), block by block."""
+    u, _, vt = np.linalg.svd(m)
+    D = np.eye(m.shape[0])
+    D[-1, -1] = np.sign(np.linalg.det(u @ vt))
+    return u @ D @ vt
+
+
+@pytest.mark.parametrize("dim", [2, 3])
+def test_nearest_rotations_match_svd_per_block(dim):
+    """Near-rotations, noisy and reflected blocks at scales 1e-3..1e3, plus nearly singular ones
+    (the SVD fall-back). Tolerance: O(d^2 eps) backward error of either computation times the
+    nearest rotation's condition number sigma_1 / (sigma_{d-1} + sigma_d), with sigma_{d-1} - sigma_d
+    when det M < 0 (Umeyama's sign flip); reflected blocks get distinct singular values so it is finite."""
+    from posecrb.sim.generators import uniform_rotations
+    from posecrb.solver.stiefel import nearest_rotations
+
+    rng = np.random.default_rng(7 + dim)
+    k = 400
+    R = uniform_rotations(k, dim, rng)
+    noise = np.repeat([1e-6, 0.1, 0.5, 3.0], k // 4)[:, None, None]
+    M = (R + noise * rng.standard_normal(R.shape)) * 10.0 ** rng.uniform(-3, 3, (k, 1, 1))
+    spread = np.diag([3.0, 2.0, 1.0][:dim - 1] + [-0.5])                # det < 0, distinct singular values
+    M[:5] = R[:5] @ spread @ uniform_rotations(5, dim, rng)
+    M[5:10, :, -1] = 1e-12 * M[5:10, :, 0]                        # nearly singular
+    got = nearest_rotations(M)
+    for i in range(k):
+        s = np.linalg.svd(M[i], compute_uv=False)
+        gap = s[-2] - s[-1] if np.linalg.det(M[i]) < 0 else s[-2] + s[-1]
+        tol = MARGIN * dim * dim * EPS * s[0] / gap
+        np.testing.assert_allclose(got[i], svd_nearest_rotation(M[i]), rtol=0, atol=tol)
+    np.testing.assert_allclose(got @ np.swapaxes(got, 1, 2), np.broadcast_to(np.eye(dim), got.shape),
+                               rtol=0, atol=MARGIN * dim * EPS)
+    assert np.all(np.linalg.det(got) > 0)

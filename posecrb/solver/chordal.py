@@ -8,9 +8,9 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..lie.so import so_project
 from ..linalg.cholesky import SymbolicCholesky
 from .problem import Problem
+from .stiefel import nearest_rotations
 
 
 def chordal_rotations(problem: Problem, anchor: int = 0) -> np.ndarray:
@@ -26,5 +26,5 @@ def chordal_rotations(problem: Problem, anchor: int = 0) -> np.ndarray:
     Z = np.empty((n * d, d))
     Z[keep] = factor(np.asarray(rhs))
     Z[~keep] = np.eye(d)
-    Zt = so_project(Z.reshape(n, d, d))   # blocks are R_i^T
+    Zt = nearest_rotations(Z.reshape(n, d, d))   # blocks are R_i^T
     return np.ascontiguousarray(np.swapaxes(Zt, 1, 2))
