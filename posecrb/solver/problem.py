@@ -125,6 +125,15 @@ class Problem:
     _full_diag_pos: np.ndarray | None = field(default=None, repr=False)
     _full_lam_pos: np.ndarray | None = field(default=None, repr=False)
     _fill: float | None = field(default=None, repr=False)
+    # C and V_red^T in CSC for the products Q Z (every Hessian-vector product): scipy's CSC
+    # kernel multiplies these by an (nd, r) block 0.6-0.9x the CSR kernel's time on the SE-Sync
+    # datasets (benchmarks/solver_variants.py --kernels).
+    _C_csc: sp.csc_matrix | None = field(default=None, repr=False)
+    _VredT_csc: sp.csc_matrix | None = field(default=None, repr=False)
+
+    def __post_init__(self) -> None:
+        self._C_csc = self.C.tocsc()
+        self._VredT_csc = self.Vred.T.tocsc()
 
     # ---- construction ------------------------------------------------------
     @classmethod
@@ -186,13 +195,13 @@ class Problem:
     def Q_product(self, Z: np.ndarray) -> np.ndarray:
         """Q Z for Z of shape (dn, k), through the L(W^tau) factor (never forming Q)."""
         w = self.Lfactor(self.Vred @ Z)
-        return self.C @ Z - self.VredT @ w
+        return self._C_csc @ Z - self._VredT_csc @ w
 
     def Q_product_and_translations(self, Z: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         w = self.Lfactor(self.Vred @ Z)
         p = np.zeros((self.n, Z.shape[1]))
         p[1:] = -w
-        return self.C @ Z - self.VredT @ w, p
+        return self._C_csc @ Z - self._VredT_csc @ w, p
 
     def objective_from_translations(self, Z: np.ndarray, p: np.ndarray) -> float:
         """F(Y, p) = tr(X^T M X) summed edge by edge (no cancellation between the large terms of
