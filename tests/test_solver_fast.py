@@ -12,6 +12,7 @@ import pytest
 import posecrb.solver.problem as problem_module
 from posecrb.solver.chordal import chordal_rotations
 from posecrb.solver.problem import Problem
+from posecrb.solver.stiefel import random_point
 
 from .helpers import random_pose_graph
 from .numerics import EPS, MARGIN
@@ -92,3 +93,24 @@ def test_nearest_rotations_match_svd_per_block(dim):
     np.testing.assert_allclose(got @ np.swapaxes(got, 1, 2), np.broadcast_to(np.eye(dim), got.shape),
                                rtol=0, atol=MARGIN * dim * EPS)
     assert np.all(np.linalg.det(got) > 0)
+
+
+@pytest.mark.parametrize("r", [2, 3, 4])
+def test_retraction_2d_closed_form_matches_eigh(r):
+    """The closed-form 2D polar retraction against (A A^T)^{-1/2} A from numpy's eigh, block by
+    block, for tangent steps from tiny to large (A A^T = I + W W^T: condition <= 1 + |W|^2)."""
+    from posecrb.solver.stiefel import project, retract
+
+    rng = np.random.default_rng(r)
+    n = 300
+    Z = random_point(n, 2, r, rng)
+    W = project(Z, rng.standard_normal((n, 2, r))) * 10.0 ** rng.uniform(-8, 2, (n, 1, 1))
+    got = retract(Z, W)
+    for i in range(n):
+        A = Z[i] + W[i]
+        s, U = np.linalg.eigh(A @ A.T)
+        want = U @ np.diag(s ** -0.5) @ U.T @ A
+        cond = s[-1] / s[0]
+        np.testing.assert_allclose(got[i], want, rtol=0, atol=MARGIN * r * cond * EPS)
+    np.testing.assert_allclose(got @ np.swapaxes(got, 1, 2), np.broadcast_to(np.eye(2), (n, 2, 2)),
+                               rtol=0, atol=MARGIN * r * EPS)

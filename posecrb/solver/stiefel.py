@@ -151,9 +151,36 @@ def nearest_rotations(m: np.ndarray) -> np.ndarray:
     return out
 
 
+def _polar2(A: np.ndarray) -> np.ndarray:
+    """(A A^T)^{-1/2} A for (n, 2, r) blocks in closed form (no batched eigh): for a 2 x 2 SPD G
+    with s = sqrt(det G), sqrt(G) = (G + s I) / sqrt(tr G + 2 s) (Cayley-Hamilton), and its
+    inverse is adj(sqrt G) / s. det G is summed as sum_{j<k} (A_0j A_1k - A_0k A_1j)^2
+    (Cauchy-Binet), not as ac - b^2, which cancels for long, nearly parallel rows."""
+    a = np.einsum("nr,nr->n", A[:, 0], A[:, 0])
+    b = np.einsum("nr,nr->n", A[:, 0], A[:, 1])
+    c = np.einsum("nr,nr->n", A[:, 1], A[:, 1])
+    r = A.shape[2]
+    det = np.zeros(A.shape[0])
+    for j in range(r):
+        for k in range(j + 1, r):
+            minor = A[:, 0, j] * A[:, 1, k] - A[:, 0, k] * A[:, 1, j]
+            det += minor * minor
+    s = np.sqrt(det)
+    t = np.sqrt(a + c + 2.0 * s)
+    k = 1.0 / (s * t)
+    # sqrt(G) = [[a + s, b], [b, c + s]] / t; its inverse = [[c + s, -b], [-b, a + s]] / (t s).
+    out = np.empty_like(A)
+    out[:, 0] = ((c + s) * k)[:, None] * A[:, 0] - (b * k)[:, None] * A[:, 1]
+    out[:, 1] = ((a + s) * k)[:, None] * A[:, 1] - (b * k)[:, None] * A[:, 0]
+    return out
+
+
 def retract(Z: np.ndarray, W: np.ndarray) -> np.ndarray:
-    """Polar retraction: the orthonormal polar factor (A A^T)^{-1/2} A of A = Z + W, per block."""
+    """Polar retraction: the orthonormal polar factor (A A^T)^{-1/2} A of A = Z + W, per block
+    (closed form for d = 2, batched eigh of the d x d Gram matrices otherwise)."""
     A = Z + W
+    if A.shape[1] == 2:
+        return _polar2(A)
     s, U = np.linalg.eigh(A @ np.swapaxes(A, -1, -2))
     inv_sqrt = (U * (1.0 / np.sqrt(s))[..., None, :]) @ np.swapaxes(U, -1, -2)
     return inv_sqrt @ A
