@@ -54,12 +54,13 @@ from ..linalg.ordering import solver_symbolic
 # initialisation's connection Laplacian) when the pose-level fill is low: ``b * sum c_j^2 / sum c_j``
 # below this, with c_j the column counts of the translation Laplacian's factor (one row per pose)
 # and b the rows per pose of the matrix factored. That quotient estimates the factorization's
-# flops per factor entry, CHOLMOD's own supernodal criterion (its switch is 40, chosen for the
-# factorization alone). Here a factor is used for tens to hundreds of solves with r <= 5
-# right-hand sides, where the simplicial factor's solves take 0.3-0.6x the supernodal's time; its
-# factorization costs no more below ~100 and up to 2-3x more above (benchmarks/solver_variants.py
-# --factor-modes: city10000 (80) and parking-garage (36) gain, cubicle (152), sphere2500 (168)
-# and the 2D 10^5-pose grid (400) keep the supernodal factor).
+# flops per factor entry, CHOLMOD's own supernodal criterion (its switch, 40, is tuned for the
+# factorization alone). Here one M_red factor serves tens to hundreds of solves with r <= 5
+# right-hand sides. Measured (benchmarks/solver_variants.py --kernels, thread CPU time): at fill 80
+# (city10000) a simplicial solve takes 0.77x the supernodal's time and its factorization 1.4x,
+# a net gain at ~70 solves per factorization; at 152-232 (cubicle, sphere2500, torus3D) the solves
+# cost the same and the factorization 1.7-3.8x, and the 2D 10^5-pose grid (400) is far above.
+# CHOLMOD itself already picks simplicial on the sparse datasets (fill <= 36).
 SIMPLICIAL_MAX_FLOPS_PER_ENTRY = 110.0
 
 # An edge's R~ counts as orthogonal when max |I - R~ R~^T| is at the rounding level of a
