@@ -95,22 +95,23 @@ def test_nearest_rotations_match_svd_per_block(dim):
     assert np.all(np.linalg.det(got) > 0)
 
 
-@pytest.mark.parametrize("r", [2, 3, 4])
-def test_retraction_2d_closed_form_matches_eigh(r):
-    """The closed-form 2D polar retraction against (A A^T)^{-1/2} A from numpy's eigh, block by
-    block, for tangent steps from tiny to large (A A^T = I + W W^T: condition <= 1 + |W|^2)."""
+@pytest.mark.parametrize("d,r", [(2, 2), (2, 3), (2, 4), (3, 3), (3, 4), (3, 5)])
+def test_retraction_matches_eigh(d, r):
+    """The polar retraction (closed form in 2D, Newton's iteration in 3D) against (A A^T)^{-1/2} A
+    from numpy's eigh, block by block, for tangent steps from tiny to large
+    (A A^T = I + W W^T: condition <= 1 + |W|^2)."""
     from posecrb.solver.stiefel import project, retract
 
-    rng = np.random.default_rng(r)
+    rng = np.random.default_rng(10 * d + r)
     n = 300
-    Z = random_point(n, 2, r, rng)
-    W = project(Z, rng.standard_normal((n, 2, r))) * 10.0 ** rng.uniform(-8, 2, (n, 1, 1))
+    Z = random_point(n, d, r, rng)
+    W = project(Z, rng.standard_normal((n, d, r))) * 10.0 ** rng.uniform(-8, 2, (n, 1, 1))
     got = retract(Z, W)
     for i in range(n):
         A = Z[i] + W[i]
         s, U = np.linalg.eigh(A @ A.T)
         want = U @ np.diag(s ** -0.5) @ U.T @ A
         cond = s[-1] / s[0]
-        np.testing.assert_allclose(got[i], want, rtol=0, atol=MARGIN * r * cond * EPS)
-    np.testing.assert_allclose(got @ np.swapaxes(got, 1, 2), np.broadcast_to(np.eye(2), (n, 2, 2)),
-                               rtol=0, atol=MARGIN * r * EPS)
+        np.testing.assert_allclose(got[i], want, rtol=0, atol=MARGIN * d * r * cond * EPS)
+    np.testing.assert_allclose(got @ np.swapaxes(got, 1, 2), np.broadcast_to(np.eye(d), (n, d, d)),
+                               rtol=0, atol=MARGIN * d * r * EPS)

@@ -175,12 +175,51 @@ def _polar2(A: np.ndarray) -> np.ndarray:
     return out
 
 
+def _polar3(A: np.ndarray) -> np.ndarray | None:
+    """(A A^T)^{-1/2} A for (n, 3, r) blocks of full row rank by Newton's iteration for the polar
+    factor, ``X <- (g X + (X X^T)^{-1} X / g) / 2`` (each singular value s -> (g s + 1/(g s)) / 2,
+    singular vectors fixed), with determinant scaling g = det(X X^T)^{-1/6} until the quadratic
+    phase (Higham, Functions of Matrices, 2008, section 8.6; the rectangular form uses the
+    pseudo-inverse), vectorised in the component-major layout with closed-form 3 x 3 cofactors.
+    None when it has not converged (the caller falls back to eigh)."""
+    X = to_components(A)                              # (3, r, n)
+    scaled, last = True, False
+    for _ in range(60):
+        G = np.empty((3, 3, X.shape[2]))
+        for a in range(3):
+            for b in range(a, 3):
+                G[a, b] = np.einsum("kn,kn->n", X[a], X[b])
+                G[b, a] = G[a, b]
+        C = _cofactors3(G)                            # symmetric: G^{-1} = C / det
+        det = np.einsum("jn,jn->n", G[0], C[0])
+        if not np.all(det > 0):
+            return None
+        g = det ** (-1.0 / 6.0) if scaled else np.ones_like(det)
+        h = 1.0 / (g * det)
+        Xn = np.empty_like(X)
+        for a in range(3):
+            Xn[a] = (C[a, 0] * h) * X[0] + (C[a, 1] * h) * X[1] + (C[a, 2] * h) * X[2] + g * X[a]
+        Xn *= 0.5
+        change = float(np.max(np.abs(Xn - X), initial=0.0))
+        X = Xn
+        if last:
+            return from_components(X)
+        scaled = change > 1e-2
+        last = change < 1e-9
+    return None
+
+
 def retract(Z: np.ndarray, W: np.ndarray) -> np.ndarray:
     """Polar retraction: the orthonormal polar factor (A A^T)^{-1/2} A of A = Z + W, per block
-    (closed form for d = 2, batched eigh of the d x d Gram matrices otherwise)."""
+    (closed form for d = 2, Newton's polar iteration for d = 3, batched eigh of the d x d Gram
+    matrices otherwise or when the iteration fails)."""
     A = Z + W
     if A.shape[1] == 2:
         return _polar2(A)
+    if A.shape[1] == 3 and A.shape[0] > 0:
+        X = _polar3(A)
+        if X is not None:
+            return X
     s, U = np.linalg.eigh(A @ np.swapaxes(A, -1, -2))
     inv_sqrt = (U * (1.0 / np.sqrt(s))[..., None, :]) @ np.swapaxes(U, -1, -2)
     return inv_sqrt @ A
