@@ -6,6 +6,8 @@ definitions (tests/test_sesync_geometry.py) and closed forms.
 """
 from __future__ import annotations
 
+import dataclasses
+
 import numpy as np
 import pytest
 
@@ -115,3 +117,22 @@ def test_retraction_matches_eigh(d, r):
         np.testing.assert_allclose(got[i], want, rtol=0, atol=MARGIN * d * r * cond * EPS)
     np.testing.assert_allclose(got @ np.swapaxes(got, 1, 2), np.broadcast_to(np.eye(d), (n, d, d)),
                                rtol=0, atol=MARGIN * d * r * EPS)
+
+
+@pytest.mark.parametrize("dim", [2, 3])
+def test_defect_constant_is_the_defect_term_on_the_manifold(dim):
+    """With non-orthogonal R~ (SE-Sync's unnormalised quaternions), the per-edge defect sum
+    kappa tr(Z_i^T (I - R~ R~^T) Z_i) at random points of St(d, r)^n equals the constant."""
+    rng = np.random.default_rng(60 + dim)
+    g, _, _ = random_pose_graph(30, dim, rng, loop_closures=20, rot_noise=0.1)
+    g = dataclasses.replace(g, rot=g.rot * (1.0 + 1e-3 * rng.standard_normal((g.m, 1, 1))))   # not orthogonal
+    p = Problem.from_graph(g)
+    assert p.defect_edges.size == g.m
+    terms = p.kappa * np.abs(np.trace(p.defect, axis1=1, axis2=2))
+    for r in (dim, dim + 2):
+        Z = random_point(g.n, dim, r, rng)
+        direct = p.defect_term(Z[p.src[p.defect_edges]])
+        # each edge's trace to O(d r eps) relative to kappa |E| r (|Z_i| entries <= 1)
+        atol = MARGIN * dim * r * EPS * float(np.sum(p.kappa * np.abs(p.defect).sum(axis=(1, 2))))
+        assert p.defect_constant() == pytest.approx(direct, rel=0, abs=atol)
+        assert abs(p.defect_constant()) > 100 * atol and terms.sum() > 0

@@ -126,6 +126,7 @@ class Problem:
     _full_diag_pos: np.ndarray | None = field(default=None, repr=False)
     _full_lam_pos: np.ndarray | None = field(default=None, repr=False)
     _fill: float | None = field(default=None, repr=False)
+    _defect_const: float | None = field(default=None, repr=False)
     # C and V_red^T in CSC for the products Q Z (every Hessian-vector product): scipy's CSC
     # kernel multiplies these by an (nd, r) block 0.6-0.9x the CSR kernel's time on the SE-Sync
     # datasets (benchmarks/solver_variants.py --kernels).
@@ -206,7 +207,8 @@ class Problem:
 
     def objective_from_translations(self, Z: np.ndarray, p: np.ndarray) -> float:
         """F(Y, p) = tr(X^T M X) summed edge by edge (no cancellation between the large terms of
-        tr(Z^T Q Z)); the rotation term in the residual + defect form of the module docstring."""
+        tr(Z^T Q Z)); the rotation term in the residual + defect form of the module docstring.
+        Z is a point of St(d, r)^n (its defect term is then :meth:`defect_constant`)."""
         n, d = self.n, self.d
         Zb = Z.reshape(n, d, -1)
         Zi = Zb[self.src]
@@ -216,7 +218,16 @@ class Problem:
         tr = p[self.dst] - p[self.src] - np.einsum("ea,ear->er", self.trans, Zi)
         f = float(np.dot(self.kappa, np.einsum("eab,eab->e", rr, rr))
                   + np.dot(self.tau, np.einsum("er,er->e", tr, tr)))
-        return f + self.defect_term(Zi[self.defect_edges])
+        return f + self.defect_constant()
+
+    def defect_constant(self) -> float:
+        """The defect term at any point of St(d, r)^n: with Z_i Z_i^T = I_d,
+        ``tr(Z_i^T E Z_i) = tr(E Z_i Z_i^T) = tr(E)``, so it is ``sum kappa tr(I - R~ R~^T)``
+        (computed once; the per-edge sum cost a tenth of an objective evaluation on 3D raw data)."""
+        if self._defect_const is None:
+            self._defect_const = float(np.dot(self.kappa[self.defect_edges],
+                                              np.trace(self.defect, axis1=1, axis2=2)))
+        return self._defect_const
 
     def defect_term(self, Zi: np.ndarray) -> float:
         """sum kappa tr(Z_i^T (I - R~ R~^T) Z_i) over the non-orthogonal edges (Zi: their (k, d, r) source blocks)."""
