@@ -50,6 +50,7 @@ STAGES = [
     ("    prepare (adaptive preconditioner refactor)", "posecrb/solver/staircase.py", "prepare"),
     ("    evaluate (f, gradient, Lambda)", "posecrb/solver/staircase.py", "evaluate"),
     ("    retract", "posecrb/solver/stiefel.py", "retract"),
+    ("  nearest_rotations (chordal, rounding)", "posecrb/solver/stiefel.py", "nearest_rotations"),
     ("  verify", "posecrb/solver/staircase.py", "verify"),
     ("    Lanczos (_largest_inverse_eig)", "posecrb/solver/staircase.py", "_largest_inverse_eig"),
     ("  escape", "posecrb/solver/staircase.py", "escape"),
@@ -57,11 +58,11 @@ STAGES = [
     ("  recover_translations", "posecrb/solver/rounding.py", "recover_translations"),
     ("factor_full (all: precond, prepare, verify)", "posecrb/solver/problem.py", "factor_full"),
     ("  _full_parts (pattern + symbolic, once)", "posecrb/solver/problem.py", "_full_parts"),
-    ("CHOLMOD analyses (linalg.SymbolicCholesky)", "posecrb/linalg.py", "__init__"),
-    ("CHOLMOD factorizations + log-det checks", "posecrb/linalg.py", "factor_logdet"),
+    ("CHOLMOD analyses (linalg.SymbolicCholesky)", "posecrb/linalg/cholesky.py", "__init__"),
+    ("CHOLMOD factorizations + log-det checks", "posecrb/linalg/cholesky.py", "factor_logdet"),
     ("sparse mat-vec (csr _matmul_vector/_multivector)", "scipy/sparse/_compressed.py", "_matmul_multivector"),
     ("threadpoolctl controller", "threadpoolctl.py", "__init__"),
-    ("rendering (report.print_rows)", "posecrb/report.py", "print_rows"),
+    ("rendering (report.print_rows)", "posecrb/report/render.py", "print_rows"),
 ]
 
 

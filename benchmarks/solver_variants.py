@@ -18,13 +18,23 @@ baseline variant. Variants (keyword arguments of posecrb.solver.solve):
                 factorization at an accepted iterate already certifies it
   dec=1e-9      decrement_tol=1e-9 (default 1e-11): stop at a 100x larger Newton decrement
   dec=1e-10     decrement_tol=1e-10
-BLAS is single-threaded (the solver limits it itself). Usage:
+BLAS is single-threaded (the solver limits it itself).
+
+With --kernels, instead of solving, times the kernels behind the solver's implementation choices
+per dataset (thread CPU time, the best of --repeat rounds x 5, robust to other load on the machine):
+the M_red factorization and a solve with d + 1 right-hand sides for CHOLMOD's simplicial and
+supernodal kinds next to the kind the solver picks (posecrb.solver.problem.factor_mode, with its
+fill measure (d + 1) sum c^2 / sum c), the product C Z through scipy's CSR and CSC kernels, and
+the nearest rotations of the chordal blocks by batched SVD (lie.so.so_project) and by
+solver.stiefel.nearest_rotations. Usage:
   python benchmarks/solver_variants.py [--repeat K] [--variants base,fixed-precond,r0=5] [--sesync-compat] [NAME ...]
+  python benchmarks/solver_variants.py --kernels [--repeat K] [NAME ...]
 """
 from __future__ import annotations
 
 import argparse
 import logging
+import math
 import statistics
 import sys
 import time
@@ -55,7 +65,10 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--repeat", type=int, default=3)
     ap.add_argument("--variants", default="base,fixed-precond,r0=5")
     ap.add_argument("--sesync-compat", action="store_true", help="read 3D quaternions as SE-Sync does")
+    ap.add_argument("--kernels", action="store_true", help="time the solver's kernel choices instead")
     args = ap.parse_args(argv)
+    if args.kernels:
+        return kernels(suite_files(data_dir(args.data_dir), args.names or DEFAULT_NAMES), args.repeat)
     logging.getLogger("posecrb").setLevel(logging.ERROR)
     from posecrb import load
     from posecrb.solver import solve
@@ -93,6 +106,58 @@ def main(argv: list[str] | None = None) -> int:
                   f"{res.iterations:4d} {res.hessian_vector_products:5d} {res.rank:4d} "
                   f"{'yes' if res.certified else 'NO':>4s} {res.objective:18.10f} "
                   f"{(res.objective - base_obj) / abs(base_obj):11.1e}", flush=True)
+    return 0
+
+
+def _best_cpu(fn, rounds: int) -> float:
+    """Best thread CPU time of ``fn`` over ``rounds`` x 5 calls (after one warm-up), in ms."""
+    fn()
+    best = math.inf
+    for _ in range(5 * max(rounds, 1)):
+        t0 = time.thread_time()
+        fn()
+        best = min(best, time.thread_time() - t0)
+    return 1e3 * best
+
+
+def kernels(files, rounds: int) -> int:
+    import numpy as np
+    from threadpoolctl import threadpool_limits
+
+    from posecrb import load
+    from posecrb.lie.so import so_project
+    from posecrb.linalg.cholesky import SymbolicCholesky
+    from posecrb.solver.chordal import chordal_rotations
+    from posecrb.solver.problem import Problem
+    from posecrb.solver.stiefel import nearest_rotations
+
+    print_header("posecrb.solver kernel choices (thread CPU time, ms)", 1,
+                 [f"best of {5 * rounds} calls after one warm-up; BLAS single-threaded as in the solver"])
+    print(f"{'dataset':24s} {'fill':>6s} {'picked':>10s} {'simpl fac':>9s} {'solve':>6s} {'super fac':>9s} "
+          f"{'solve':>6s} {'C@Z csr':>7s} {'csc':>6s} {'SVD rot':>7s} {'nearest':>7s}")
+    with threadpool_limits(1, user_api="blas"):
+        for path in files:
+            if not path.is_file():
+                print(f"{path.stem:24s} missing: {path}")
+                continue
+            p = Problem.from_graph(load(path))
+            d = p.d
+            M = p.full_matrix(None, p.gershgorin_max() / 1e6)
+            rhs = np.asfortranarray(np.random.default_rng(0).standard_normal((M.shape[0], d + 1)))
+            cells = []
+            for mode in ("simplicial", "supernodal"):
+                sym = SymbolicCholesky(M, mode=mode)
+                f = sym.factor(M)
+                cells += [_best_cpu(lambda: sym.factor(M), rounds), _best_cpu(lambda: f.solve_A(rhs), rounds)]
+            Z = np.random.default_rng(1).standard_normal((p.n * d, d + 1))
+            C_csc = p.C.tocsc()
+            cells += [_best_cpu(lambda: p.C @ Z, rounds), _best_cpu(lambda: C_csc @ Z, rounds)]
+            noise = 0.1 * np.random.default_rng(2).standard_normal((p.n, d, d))
+            blocks = np.swapaxes(chordal_rotations(p), 1, 2) + noise
+            cells += [_best_cpu(lambda: so_project(blocks), rounds),
+                      _best_cpu(lambda: nearest_rotations(blocks), rounds)]
+            print(f"{path.stem:24s} {(d + 1) * p.pose_fill():6.0f} {p.factor_mode(d + 1):>10s} "
+                  + " ".join(f"{c:{w}.2f}" for c, w in zip(cells, (9, 6, 9, 6, 7, 6, 7, 7), strict=True)), flush=True)
     return 0
 
 

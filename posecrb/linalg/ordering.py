@@ -172,16 +172,17 @@ def block_cholesky(a: sp.spmatrix, ordering: str, *, dim: int, poses: int, matri
     return sym.factor(a, name=name)
 
 
-def solver_symbolic(pattern: sp.spmatrix, dim: int, n: int) -> SymbolicCholesky:
+def solver_symbolic(pattern: sp.spmatrix, dim: int, n: int, mode: str = "auto") -> SymbolicCholesky:
     """The symbolic analysis of the solver's M_red = [[L_red, V_red], [V_red^T, C + ...]]
     (posecrb.solver.problem: n - 1 translation rows for poses 1..n-1, then d rotation rows per pose
     0..n-1). Under ``auto``'s rule for 3D graphs of at least ``AUTO_ND_MIN_POSES`` poses: nested
     dissection of the pose graph expanded to each pose's rows (benchmarks/orderings.py: M_red's
     factorization about 0.75x of CHOLMOD's default choice on a 3D grid of 21,952 poses);
-    otherwise CHOLMOD's default ordering, as before."""
+    otherwise CHOLMOD's default ordering, as before. ``mode``: CHOLMOD's factorization kind
+    (auto | simplicial | supernodal; the solver picks it, posecrb.solver.problem)."""
 
     if auto_ordering(dim, n, "solver") == "amd" or n < 2:
-        return SymbolicCholesky(pattern)
+        return SymbolicCholesky(pattern, mode=mode)
     pose_of_row = np.concatenate([np.arange(1, n), np.repeat(np.arange(n), dim)])
     return ordered_symbolic(pattern, "nesdis", dim=dim, poses=n, matrix="solver", pose_of_row=pose_of_row,
-                            n_poses=n)[0]
+                            n_poses=n, mode=mode)[0]

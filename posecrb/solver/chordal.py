@@ -8,9 +8,9 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..lie.so import so_project
-from ..linalg.cholesky import cholesky
+from ..linalg.cholesky import SymbolicCholesky
 from .problem import Problem
+from .stiefel import nearest_rotations
 
 
 def chordal_rotations(problem: Problem, anchor: int = 0) -> np.ndarray:
@@ -21,9 +21,10 @@ def chordal_rotations(problem: Problem, anchor: int = 0) -> np.ndarray:
     keep[anchor * d:(anchor + 1) * d] = False
     Lrr = L[keep][:, keep]
     rhs = -(L[keep][:, ~keep] @ np.eye(d))   # Z_anchor = I_d
-    factor = cholesky(Lrr, name="reduced connection Laplacian L(G^rho)")
+    symbolic = SymbolicCholesky(Lrr, mode=problem.factor_mode(d))   # d rows per pose
+    factor = symbolic.factor(Lrr, name="reduced connection Laplacian L(G^rho)")
     Z = np.empty((n * d, d))
     Z[keep] = factor(np.asarray(rhs))
     Z[~keep] = np.eye(d)
-    Zt = so_project(Z.reshape(n, d, d))   # blocks are R_i^T
+    Zt = nearest_rotations(Z.reshape(n, d, d))   # blocks are R_i^T
     return np.ascontiguousarray(np.swapaxes(Zt, 1, 2))

@@ -50,6 +50,19 @@ from ..linalg.cholesky import SymbolicCholesky, cholesky
 from ..linalg.laplacian import reduced_laplacian
 from ..linalg.ordering import solver_symbolic
 
+# CHOLMOD's simplicial factorization for the solver's block matrices (M_red, the chordal
+# initialisation's connection Laplacian) when the pose-level fill is low: ``b * sum c_j^2 / sum c_j``
+# below this, with c_j the column counts of the translation Laplacian's factor (one row per pose)
+# and b the rows per pose of the matrix factored. That quotient estimates the factorization's
+# flops per factor entry, CHOLMOD's own supernodal criterion (its switch, 40, is tuned for the
+# factorization alone). Here one M_red factor serves tens to hundreds of solves with r <= 5
+# right-hand sides. Measured (benchmarks/solver_variants.py --kernels, thread CPU time): at fill 80
+# (city10000) a simplicial solve takes 0.77x the supernodal's time and its factorization 1.4x,
+# a net gain at ~70 solves per factorization; at 152-232 (cubicle, sphere2500, torus3D) the solves
+# cost the same and the factorization 1.7-3.8x, and the 2D 10^5-pose grid (400) is far above.
+# CHOLMOD itself already picks simplicial on the sparse datasets (fill <= 36).
+SIMPLICIAL_MAX_FLOPS_PER_ENTRY = 110.0
+
 # An edge's R~ counts as orthogonal when max |I - R~ R~^T| is at the rounding level of a
 # rotation computed in floating point (normalised quaternions measure up to ~10 eps on the
 # shared datasets); its defect term is then dropped, so orthogonal data give exactly the
@@ -112,6 +125,17 @@ class Problem:
     _full_base: np.ndarray | None = field(default=None, repr=False)
     _full_diag_pos: np.ndarray | None = field(default=None, repr=False)
     _full_lam_pos: np.ndarray | None = field(default=None, repr=False)
+    _fill: float | None = field(default=None, repr=False)
+    _defect_const: float | None = field(default=None, repr=False)
+    # C and V_red^T in CSC for the products Q Z (every Hessian-vector product): scipy's CSC
+    # kernel multiplies these by an (nd, r) block 0.6-0.9x the CSR kernel's time on the SE-Sync
+    # datasets (benchmarks/solver_variants.py --kernels).
+    _C_csc: sp.csc_matrix | None = field(default=None, repr=False)
+    _VredT_csc: sp.csc_matrix | None = field(default=None, repr=False)
+
+    def __post_init__(self) -> None:
+        self._C_csc = self.C.tocsc()
+        self._VredT_csc = self.Vred.T.tocsc()
 
     # ---- construction ------------------------------------------------------
     @classmethod
@@ -144,6 +168,24 @@ class Problem:
                    src=src, dst=dst, rot=rot, rotT=np.ascontiguousarray(np.swapaxes(rot, 1, 2)), trans=tt,
                    defect_edges=defect_edges, defect=defect)
 
+    def pose_fill(self) -> float:
+        """``sum c_j^2 / sum c_j`` over the column counts c_j of the L(W^tau) factor (computed once):
+        the flops per factor entry of a one-row-per-pose factorization of the pose graph."""
+        if self._fill is None:
+            fill = 1.0
+            if self.n > 1:
+                # LD(): the simplicial LDL' factor's own storage (a supernodal one is converted).
+                counts = np.diff(self.Lfactor.LD().indptr).astype(float)
+                fill = float(np.dot(counts, counts) / max(counts.sum(), 1.0))
+            self._fill = fill
+        return self._fill
+
+    def factor_mode(self, rows_per_pose: int) -> str:
+        """CHOLMOD mode for a solver matrix with ``rows_per_pose`` rows per pose
+        (``SIMPLICIAL_MAX_FLOPS_PER_ENTRY``): "simplicial" or "supernodal"."""
+        sparse_enough = rows_per_pose * self.pose_fill() < SIMPLICIAL_MAX_FLOPS_PER_ENTRY
+        return "simplicial" if sparse_enough else "supernodal"
+
     # ---- the objective -----------------------------------------------------
     def translations(self, Z: np.ndarray) -> np.ndarray:
         """Optimal relaxed translations (n, r) for Z (dn, r); pose 0's is zero: L p = -V Z."""
@@ -155,17 +197,18 @@ class Problem:
     def Q_product(self, Z: np.ndarray) -> np.ndarray:
         """Q Z for Z of shape (dn, k), through the L(W^tau) factor (never forming Q)."""
         w = self.Lfactor(self.Vred @ Z)
-        return self.C @ Z - self.VredT @ w
+        return self._C_csc @ Z - self._VredT_csc @ w
 
     def Q_product_and_translations(self, Z: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         w = self.Lfactor(self.Vred @ Z)
         p = np.zeros((self.n, Z.shape[1]))
         p[1:] = -w
-        return self.C @ Z - self.VredT @ w, p
+        return self._C_csc @ Z - self._VredT_csc @ w, p
 
     def objective_from_translations(self, Z: np.ndarray, p: np.ndarray) -> float:
         """F(Y, p) = tr(X^T M X) summed edge by edge (no cancellation between the large terms of
-        tr(Z^T Q Z)); the rotation term in the residual + defect form of the module docstring."""
+        tr(Z^T Q Z)); the rotation term in the residual + defect form of the module docstring.
+        Z is a point of St(d, r)^n (its defect term is then :meth:`defect_constant`)."""
         n, d = self.n, self.d
         Zb = Z.reshape(n, d, -1)
         Zi = Zb[self.src]
@@ -175,7 +218,16 @@ class Problem:
         tr = p[self.dst] - p[self.src] - np.einsum("ea,ear->er", self.trans, Zi)
         f = float(np.dot(self.kappa, np.einsum("eab,eab->e", rr, rr))
                   + np.dot(self.tau, np.einsum("er,er->e", tr, tr)))
-        return f + self.defect_term(Zi[self.defect_edges])
+        return f + self.defect_constant()
+
+    def defect_constant(self) -> float:
+        """The defect term at any point of St(d, r)^n: with Z_i Z_i^T = I_d,
+        ``tr(Z_i^T E Z_i) = tr(E Z_i Z_i^T) = tr(E)``, so it is ``sum kappa tr(I - R~ R~^T)``
+        (computed once; the per-edge sum cost a tenth of an objective evaluation on 3D raw data)."""
+        if self._defect_const is None:
+            self._defect_const = float(np.dot(self.kappa[self.defect_edges],
+                                              np.trace(self.defect, axis1=1, axis2=2)))
+        return self._defect_const
 
     def defect_term(self, Zi: np.ndarray) -> float:
         """sum kappa tr(Z_i^T (I - R~ R~^T) Z_i) over the non-orthogonal edges (Zi: their (k, d, r) source blocks)."""
@@ -209,13 +261,15 @@ class Problem:
         # of a small problem's set-up); with the block diagonal it gives the analysed pattern.
         blocks = [(self.Lred.tocoo(), 0, 0), (self.Vred.tocoo(), 0, n - 1), (self.VredT.tocoo(), n - 1, 0),
                   (self.C.tocoo(), n - 1, n - 1)]
-        brow = np.concatenate([blk.row.astype(np.int64) + r0 for blk, r0, _ in blocks])
-        bcol = np.concatenate([blk.col.astype(np.int64) + c0 for blk, _, c0 in blocks])
-        bval = np.concatenate([blk.data for blk, _, _ in blocks])
-        prow, pcol = np.concatenate([brow, rr]), np.concatenate([bcol, cc])
-        pattern = sp.csc_matrix((np.ones(prow.size), (prow, pcol)), shape=(N, N))
+        brow = np.concatenate([blk.row.astype(np.int64) + r0 for blk, r0, _ in blocks] + [rr])
+        bcol = np.concatenate([blk.col.astype(np.int64) + c0 for blk, _, c0 in blocks] + [cc])
+        bval = np.concatenate([blk.data for blk, _, _ in blocks] + [np.zeros(rr.size)])
+        # scipy sums duplicates (the block diagonal's explicit zeros onto C's diagonal blocks) and
+        # keeps explicit zeros: the values of [[L_red, V_red], [V_red^T, C]] on the analysed pattern.
+        pattern = sp.csc_matrix((bval, (brow, bcol)), shape=(N, N))
         pattern.sum_duplicates()
         pattern.sort_indices()
+        # Only the diagonal and the block diagonal are rewritten per factorization: locate them.
         keys = np.repeat(np.arange(N, dtype=np.int64), np.diff(pattern.indptr)) * N + pattern.indices
 
         def positions(rows: np.ndarray, cols: np.ndarray) -> np.ndarray:
@@ -225,14 +279,13 @@ class Problem:
                 raise InternalError("entry outside the analysed pattern")
             return pos
 
-        # add.at: a block that stored duplicate entries would still sum them, as scipy does.
-        self._full_base = np.zeros(keys.size)
-        np.add.at(self._full_base, positions(brow, bcol), bval)
+        self._full_base = pattern.data.copy()
         diag = np.arange(n - 1, N)
         self._full_diag_pos = positions(diag, diag)
         self._full_lam_pos = positions(rr, cc)
         self._full_pattern = pattern
-        self._full_symbolic = solver_symbolic(pattern, d, n)   # pose-level nested dissection on large 3D
+        # pose-level nested dissection on large 3D; simplicial or supernodal by the fill (factor_mode)
+        self._full_symbolic = solver_symbolic(pattern, d, n, mode=self.factor_mode(d + 1))
 
     def full_matrix(self, lam_blocks: np.ndarray | None, shift: float) -> sp.csc_matrix:
         """M_red(s) = [[L_red, V_red], [V_red^T, C - Lambda + s I]] (sparse, (n-1+dn) square)."""

@@ -3,8 +3,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..lie.so import so_project
 from .problem import Problem
+from .stiefel import nearest_rotations
 
 
 def round_rotations(Z: np.ndarray) -> np.ndarray:
@@ -20,7 +20,7 @@ def round_rotations(Z: np.ndarray) -> np.ndarray:
     B = (Zf @ U[:, ::-1][:, :d]).reshape(n, d, d)      # blocks ~ R_i^T
     if np.count_nonzero(np.linalg.det(B) > 0) < n / 2:
         B[:, :, -1] *= -1.0                              # reflect: det -> +
-    return np.ascontiguousarray(np.swapaxes(so_project(B), 1, 2))
+    return np.ascontiguousarray(np.swapaxes(nearest_rotations(B), 1, 2))
 
 
 def recover_translations(problem: Problem, rot: np.ndarray) -> np.ndarray:
