@@ -460,3 +460,17 @@ def test_non_regular_expected_file_is_named_not_read(tmp_path, capsys):
             assert rc == 2 and f"'{path}' is a directory" in err, err
         else:
             assert rc == 1 and f"{path}: {what}, not a regular file" in err, err
+
+
+def test_warning_origin_is_found_by_location_not_by_directory_name(tmp_path):
+    """A checkout (or any directory) named ``posecrb`` is not the package: only files inside the
+    installed package are named as its modules."""
+    import os
+
+    import posecrb.models.paper.fim as paper_fim
+    from posecrb.cli import _warning_origin
+
+    assert _warning_origin(paper_fim.__file__) == "posecrb.models.paper.fim"
+    outside = tmp_path / "posecrb" / "tests" / "test_x.py"
+    assert _warning_origin(str(outside)) == "test_x.py"
+    assert _warning_origin(os.path.join("somewhere", "posecrb", "fim.py")) == "fim.py"

@@ -134,11 +134,11 @@ def cli(verbose: int, quiet: bool) -> None:
 
 
 def _warning_origin(filename: str) -> str:
-    """``posecrb.models.paper.fim`` for .../posecrb/fim.py; the file's base name otherwise."""
-    parts = os.path.normpath(filename).split(os.sep)
-    if "posecrb" in parts:
-        k = len(parts) - 1 - parts[::-1].index("posecrb")
-        mod = ".".join(parts[k:])
+    """``posecrb.models.paper.fim`` for a file of this package; the file's base name otherwise
+    (by location, not by name: a checkout directory may itself be called ``posecrb``)."""
+    path = os.path.normpath(os.path.abspath(filename))
+    if path.startswith(_PACKAGE_DIR + os.sep):
+        mod = "posecrb." + os.path.relpath(path, _PACKAGE_DIR).replace(os.sep, ".")
         return mod[:-3] if mod.endswith(".py") else mod
     return os.path.basename(filename)
 
