@@ -89,3 +89,14 @@ def test_bad_start_vector(v0):
 def test_no_restart_allowed_is_an_error():
     with pytest.raises(ValueError, match="max_restarts"):
         largest_eigenpair(lambda x: x, np.ones(3), tol=1e-8, max_restarts=0)
+
+
+def test_a_separated_top_eigenvalue_stops_before_the_basis_is_full():
+    """The certificate's case: (S + s I)^{-1} with s << the next eigenvalue of S. Convergence is
+    tested at every step, so a few products suffice where a full basis would take 20."""
+    rng = np.random.default_rng(6)
+    ev = np.concatenate([[1e6], rng.uniform(0.0, 1.0, 300)])
+    a = _symmetric(rng, ev)
+    ritz = largest_eigenpair(lambda x: a @ x, rng.standard_normal(301), tol=1e-10, max_restarts=10, basis=20)
+    assert ritz.converged and ritz.restarts == 1 and ritz.matvecs <= 6
+    _check(a, 1e-10, rng)
