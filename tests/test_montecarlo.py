@@ -72,7 +72,7 @@ def test_dask_local_cluster_bit_identical_to_serial():
     contexts = [{"size": 30}] * 2
     serial = _stack(run_tasks(demo_trial, contexts, tasks))
     with distributed.LocalCluster(n_workers=2, threads_per_worker=1, processes=True, host="127.0.0.1",
-                                  dashboard_address=None) as cluster, distributed.Client(cluster) as client:
+                                  dashboard_address=":0") as cluster, distributed.Client(cluster) as client:
         via_client = _stack(run_tasks(demo_trial, contexts, tasks, executor="dask", client=client, chunksize=3))
         via_address = _stack(run_tasks(demo_trial, contexts, tasks, executor="dask",
                                        scheduler=cluster.scheduler_address))

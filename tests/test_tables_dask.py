@@ -35,7 +35,7 @@ def test_dask_rows_equal_local_rows(small_files):
         local = build_rows(small_files, settings)
     done = []
     with distributed.LocalCluster(n_workers=1, threads_per_worker=1, processes=False,
-                                  dashboard_address=None) as cluster, distributed.Client(cluster) as client:
+                                  dashboard_address=":0") as cluster, distributed.Client(cluster) as client:
         remote = build_rows(small_files, settings, executor="dask", client=client,
                             on_done=lambda name, row: done.append(name))
     assert sorted(done) == sorted(small_files)

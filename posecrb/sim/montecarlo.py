@@ -177,7 +177,7 @@ def run_dask(fn, contexts, chunks, jobs, scheduler, client, collect, out):
             else:
                 cluster = stack.enter_context(LocalCluster(
                     n_workers=jobs, threads_per_worker=1, processes=True, host="127.0.0.1",
-                    dashboard_address=None))
+                    dashboard_address=":0"))   # any free port: None means distributed's 8787, which may be taken
                 client = stack.enter_context(Client(cluster))
         # A fresh key per run (hash=False): re-scattering identical data under the same key from a
         # second client can leave workers replicating it forever (seen with distributed 2026.8).
