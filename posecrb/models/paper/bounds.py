@@ -165,7 +165,8 @@ def rotation_lambda_min(lap: WeightedLaplacians, graph: PoseGraph, symbolic: Sym
             if factor is None:
                 factor = symbolic.factor(a, name=name)
             inverse = factor
-            ritz = largest_eigenpair(lambda x: inverse(x), np.ones(n), tol=1e-12, max_restarts=300)
+            # tol near the rounding level: the interval below is as narrow as the vector is accurate
+            ritz = largest_eigenpair(lambda x: inverse(x), np.ones(n), tol=1e-14, max_restarts=300)
             if not ritz.converged:
                 return EigenEstimate(None, None, Status.unavailable(
                     f"the eigenvalue solver did not converge on {name} (residual {ritz.residual:.2g} after "
