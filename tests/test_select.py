@@ -590,3 +590,34 @@ def test_cli_experiment_sparsify_writes_run_record(g2o_path, tmp_path, capsys):
     assert not list(out.glob("*.tmp"))
     rc, _, err = run_cli(["experiment", "sparsify", str(g2o_path), "--methods", "greedy,bogus"], capsys)
     assert rc == 2 and "bogus" in err
+
+
+@pytest.mark.parametrize("state", ["warning", "unavailable"])
+def test_sparsify_reports_a_doubtful_crlb_trace(g2o_path, capsys, monkeypatch, state):
+    """The pruned graphs' CRLB traces carry the selected inverse's status (computed and tested in
+    posecrb.linalg.selinv): here forced, to follow it through rows, JSON, the table and stderr."""
+    import posecrb.experiments.sparsify as sparsify
+    from posecrb.core.status import Status
+    from posecrb.linalg.selinv import SelectedInverse
+
+    class Doubtful(SelectedInverse):
+        def __init__(self, factor, name="matrix"):
+            super().__init__(factor, name)
+            self.status = Status(state, f"forced {state} of the {name}")
+
+    monkeypatch.setattr(sparsify, "SelectedInverse", Doubtful)
+    argv = ["experiment", "sparsify", str(g2o_path), "--budgets", "2", "--methods", "greedy"]
+    code, text, err = run_cli([*argv, "--format", "json"], capsys)
+    assert code == 0, err
+    (row,) = json.loads(text)
+    assert row["crlb_trace_status"] == {"status": state, "reason": f"forced {state} of the pruned graph FIM"}
+    assert (row["crlb_trace"] is None) == (state == "unavailable")
+    what = "not available" if state == "unavailable" else "doubtful"
+    for where in ("full graph", "fixed edges only", "greedy@2"):
+        assert f"posecrb: warning: tr CRLB ({where}) {what}: forced {state}" in err
+    code, text, _ = run_cli([*argv, "--format", "markdown"], capsys)
+    assert code == 0
+    assert ("n/a (forced unavailable" if state == "unavailable" else "(warning)") in text
+    code, text, _ = run_cli([*argv, "--format", "table"], capsys)   # the title names the full graph's trace
+    assert code == 0
+    assert ("tr CRLB n/a" in " ".join(text.split())) == (state == "unavailable")

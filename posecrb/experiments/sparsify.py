@@ -32,8 +32,9 @@ import numpy as np
 
 from ..core.errors import SolverError, UsageError
 from ..core.graph import PoseGraph
+from ..core.status import put
 from ..linalg.cholesky import SymbolicCholesky
-from ..linalg.selinv import trace_inverse
+from ..linalg.selinv import SelectedInverse
 from ..models.paper.fim import paper_fim
 from ..selection.select import (
     METHODS,
@@ -155,7 +156,7 @@ class SparsifyRow:
     tree: float                 # eq. (75) lower bound of the pruned graph
     fiedler: float              # lambda_2 of its rotation-weighted Laplacian
     fim_logdet: float           # logdet F of the pruned graph at the full graph's optimum
-    crlb_trace: float           # trace F^{-1} there
+    crlb_trace: float | None    # trace F^{-1} there (None: not available, see crlb_trace_status)
     solve_objective: float
     certified: bool
     ate_trans: float
@@ -178,8 +179,12 @@ def _evaluate(context: dict, keep_mask: np.ndarray) -> dict:
     pruned = pruned_graph(graph, np.flatnonzero(keep_mask))
     fim = paper_fim(pruned, ref.rot, ref.trans, anchor, variant="consistent")
     f, ld = SymbolicCholesky(fim.matrix).factor_logdet(fim.matrix, "pruned graph FIM")
-    return {"tree": float(tree), "fiedler": float(lam), "fim_logdet": float(ld),
-            "crlb_trace": trace_inverse(fim.matrix, "pruned graph FIM", factor=f), "pruned": pruned}
+    # A pruned graph can leave some unknowns barely observed: the trace then carries the selected
+    # inverse's status (``crlb_trace_status`` beside it when not ok; None when it has no digit).
+    inverse = SelectedInverse(f, "pruned graph FIM")
+    out = {"tree": float(tree), "fiedler": float(lam), "fim_logdet": float(ld), "pruned": pruned}
+    put(out, "crlb_trace", float(inverse.diagonal().sum()), inverse.status)
+    return out
 
 
 def _sparsify_task(context: dict, task: Task) -> dict:
@@ -195,18 +200,22 @@ def _sparsify_task(context: dict, task: Task) -> dict:
     keep = np.zeros(graph.m, dtype=bool)
     keep[res.kept_edges] = True
     ev = _evaluate(context, keep)
+    crlb_status = ev.pop("crlb_trace_status", None)
     t0 = time.perf_counter()
     sol = solve(ev.pop("pruned"), SolverOptions(anchor=context["anchor"]))
     t_solve = time.perf_counter() - t0
     ref = context["reference"]
     err = trajectory_error(sol.rot, sol.trans, ref.rot, ref.trans)
     cand = context["split"].candidates.size
-    return vars(SparsifyRow(
+    row = vars(SparsifyRow(
         budget_spec=budget, budget=res.budget, percent=100.0 * res.budget / cand, method=label,
         objective=objective, value=res.value, base_value=res.base_value, upper_bound=res.upper_bound,
         certified_ratio=res.certified_ratio, rounding=res.rounding, time_select=t_sel, **ev,
         solve_objective=float(sol.objective), certified=bool(sol.certified), **vars(err),
         time_solve=t_solve, edges=int(res.kept_edges.size)))
+    if crlb_status is not None:
+        row["crlb_trace_status"] = crlb_status
+    return row
 
 
 @dataclass

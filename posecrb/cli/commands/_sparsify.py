@@ -7,6 +7,7 @@ import time
 import click
 
 from ...core.provenance import dataset_entry, run_record
+from ...core.status import Status, log_status
 from ...experiments.sparsify import (
     DEFAULT_BUDGETS,
     DEFAULT_METHODS,
@@ -76,11 +77,17 @@ def sparsify_cmd(file, budgets, methods, objective, fixed, certify, max_iter, se
     if bad:
         log.warning("pruned graph(s) whose optimum is NOT certified: %s", ", ".join(bad))
     ref = res.reference
+    for where, row in [("full graph", ref), ("fixed edges only", ref["fixed_only"]),
+                       *((f"{r['method']}@{r['budget_spec']}", r) for r in res.rows)]:
+        if row.get("crlb_trace_status"):
+            st = row["crlb_trace_status"]
+            log_status(log, f"tr CRLB ({where})", Status(st["status"], st["reason"], st.get("hint")))
+    crlb_ref = "n/a" if ref["crlb_trace"] is None else f"{ref['crlb_trace']:.4g}"
     print_rows(res.rows, fmt, COLUMNS if fmt in ("table", "markdown") else None, headers=HEADERS,
                single_json=False,
                title=f"{res.dataset}: {res.candidates} loop closures, {res.fixed} fixed edges, objective "
                      f"{res.objective}; full graph: tree {ref['tree']:.6g}, λ2 {ref['fiedler']:.4g}, "
-                     f"FIM logdet {ref['fim_logdet']:.6g}, tr CRLB {ref['crlb_trace']:.4g} ({elapsed:.1f} s)")
+                     f"FIM logdet {ref['fim_logdet']:.6g}, tr CRLB {crlb_ref} ({elapsed:.1f} s)")
     target = plot_target(plot_path, out_dir, "sparsify")
     if target:
         plot_sparsify(res, target)
