@@ -156,16 +156,18 @@ def test_cli_defers_numpy_modules_it_never_uses_and_they_still_work(solvable_g2o
     submodules, which stay unexecuted through a whole solve and load normally on first use."""
     code = ("import sys, importlib.util; from posecrb.cli import main; "
             f"rc = main(['solve', {str(solvable_g2o)!r}, '--format', 'json']); "
-            "names = ('numpy.f2py', 'numpy.testing', 'numpy.polynomial'); "
+            "names = ('numpy.f2py', 'numpy.testing', 'numpy.polynomial', 'numpy.ma'); "
             "lazy = [type(sys.modules[n]).__name__ for n in names]; "
             "import numpy as np; np.testing.assert_allclose(np.sqrt(2.0) ** 2, 2.0); "
+            "masked = float(np.ma.masked_invalid([1.0, np.nan]).sum()); "
             "coef = np.polynomial.polynomial.polyfit([0.0, 1.0, 2.0], [1.0, 3.0, 5.0], 1); "
             "f2py = callable(np.f2py.run_main); ok = [type(sys.modules[n]).__name__ for n in names]; "
-            "print(rc, lazy, ok, [round(float(c), 9) for c in coef], f2py, file=sys.stderr)")
+            "print(rc, lazy, ok, [round(float(c), 9) for c in coef], f2py, masked, file=sys.stderr)")
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True, timeout=300)
     rc, rest = out.stderr.strip().splitlines()[-1].split(" ", 1)
     assert rc == "0"
-    assert rest == "['_LazyModule', '_LazyModule', '_LazyModule'] ['module', 'module', 'module'] [1.0, 2.0] True"
+    assert rest == ("['_LazyModule', '_LazyModule', '_LazyModule', '_LazyModule'] "
+                    "['module', 'module', 'module', 'module'] [1.0, 2.0] True 1.0")
 
 
 def test_library_import_changes_no_import_machinery():

@@ -159,9 +159,10 @@ class _DeferredImport(importlib.abc.MetaPathFinder):
 
     scipy >= 1.15 builds its array-API namespace by cloning ``numpy``'s public names, which imports
     every submodule listed in ``numpy.__all__``; ``numpy.f2py`` (a Fortran wrapper generator),
-    ``numpy.testing`` (unittest, importlib.metadata, charset_normalizer) and ``numpy.polynomial``
-    are among them and cost ~65 ms of every command's start-up although the commands use none of
-    them (``numpy.ma`` is not deferred: ``numpy.unique`` calls into it). Deferred, they are real
+    ``numpy.testing`` (unittest, importlib.metadata, charset_normalizer), ``numpy.ma`` and
+    ``numpy.polynomial`` are among them and cost ~70 ms of every command's start-up although a
+    solve uses none of them (``numpy.unique`` without counts consults ``numpy.ma``; the readers
+    avoid it, other paths simply load it then). Deferred, they are real
     modules that execute on first use. Installed by ``main`` only: importing posecrb as a library
     changes nothing in the caller's interpreter.
     """
@@ -180,7 +181,7 @@ class _DeferredImport(importlib.abc.MetaPathFinder):
         return spec
 
 
-_UNUSED_AT_START = frozenset({"numpy.f2py", "numpy.testing", "numpy.polynomial"})
+_UNUSED_AT_START = frozenset({"numpy.f2py", "numpy.testing", "numpy.polynomial", "numpy.ma"})
 
 
 def _defer_unused_imports() -> None:

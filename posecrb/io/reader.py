@@ -185,7 +185,9 @@ def parse(tokens: Tokens, formats: Mapping[str, Format], path: str = "<string>",
                 k = unknown[0]
                 raise ParseError(path, int(e_lines[k]), f"{erec.tag}: edge to undeclared vertex id {end[k]}")
     else:
-        ids = np.unique(np.concatenate([ei, ej]))
+        # sorted distinct ids (not np.unique, which consults numpy.ma, deferred by the CLI)
+        ids = np.sort(np.concatenate([ei, ej]))
+        ids = ids[np.flatnonzero(np.diff(ids, prepend=ids[:1] - 1))]
 
     if skipped:
         summary = ", ".join(f"{n} {'comment' if t == '#' else t}" for t, n in sorted(skipped.items()))

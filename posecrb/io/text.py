@@ -211,7 +211,8 @@ def scan_bytes(data: bytes) -> Tokens:
     # Tags: per length, the bytes as one fixed-width string each; np.unique groups them.
     tag_of_line: dict[str, np.ndarray] = {}
     first_seen: dict[str, int] = {}
-    for length in np.unique(tag_len):
+    # (bincount, not np.unique: numpy's unique consults numpy.ma, which the CLI defers; see posecrb.cli)
+    for length in np.flatnonzero(np.bincount(tag_len)):
         sel = np.flatnonzero(tag_len == length)
         raw = buf[tag_start[sel][:, None] + np.arange(length)]
         names, inverse = np.unique(np.ascontiguousarray(raw).view(f"S{length}").ravel(), return_inverse=True)
