@@ -59,6 +59,18 @@ def test_lambda_min_matches_dense():
         assert lambda_min(a) == pytest.approx(ev[0], abs=MARGIN * n * EPS * ev[-1])
 
 
+def test_lambda_min_unconverged_is_an_error_not_an_estimate(monkeypatch):
+    import posecrb.linalg.cholesky as chol
+    from posecrb.core.errors import NumericalError
+    from posecrb.linalg.lanczos import RitzPair
+
+    a = _spd(np.random.default_rng(6), 300, density=0.01)
+    monkeypatch.setattr(chol, "largest_eigenpair",
+                        lambda *args, **kw: RitzPair(1.0, np.ones(300), 0.5, False, 6000, 300))
+    with pytest.raises(NumericalError, match="did not converge"):
+        lambda_min(a, name="A")
+
+
 _CYCLE_SCRIPT = r"""
 import ctypes, gc, os, sys
 import scipy.sparse as sp

@@ -15,7 +15,8 @@ import numpy as np
 import scipy.sparse as sp
 from sksparse.cholmod import CholmodNotPositiveDefiniteError, Factor, analyze
 
-from ..core.errors import NotPositiveDefinite, UsageError
+from ..core.errors import NotPositiveDefinite, NumericalError, UsageError
+from .lanczos import largest_eigenpair
 
 log = logging.getLogger("posecrb")
 
@@ -217,16 +218,18 @@ def lambda_min(a: sp.spmatrix, factor: Factor | None = None, name: str = "matrix
     (Lanczos, posecrb.linalg.lanczos), applied through a Cholesky factor.
 
     Reuses ``factor`` (a Cholesky factor of ``a``) as the inverse operator, so no
-    extra factorization happens when the caller already has one.
+    extra factorization happens when the caller already has one. An eigensolver that does not
+    converge raises NumericalError rather than returning its estimate.
     """
-    from .lanczos import largest_eigenpair  # noqa: PLC0415 -- import cycle: lanczos is a leaf, keep it one
-
     a = _as_csc(a)
     n = a.shape[0]
     if n <= 200:
         return float(np.linalg.eigvalsh(a.toarray())[0])
     factor = factor or cholesky(a, name=name)
-    ritz = largest_eigenpair(lambda x: factor(x), np.ones(n), tol=1e-12, max_restarts=10 * n)
+    ritz = largest_eigenpair(factor, np.ones(n), tol=1e-12, max_restarts=10 * n)   # ARPACK's default
+    if not ritz.converged:
+        raise NumericalError(f"{name}: Lanczos did not converge on the smallest eigenvalue "
+                             f"(residual {ritz.residual:.2g} after {ritz.matvecs} products)")
     return 1.0 / ritz.value
 
 

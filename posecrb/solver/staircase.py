@@ -37,6 +37,7 @@ import numpy as np
 
 from ..core.errors import NotPositiveDefinite, SolverError
 from ..linalg.cholesky import Factor
+from ..linalg.lanczos import largest_eigenpair
 from .problem import Problem
 from .stiefel import (
     gram_eigh,
@@ -193,8 +194,6 @@ def _largest_inverse_eig(problem: Problem, factor: Factor, dn: int, rng: np.rand
     """Largest eigenpair of (S + s I)^{-1} through the sparse factor of M_red(s) (thick-restart Lanczos,
     at most ``maxiter`` restarts; an unconverged search returns its best Ritz pair, which the callers
     only use as an estimate or check against the exact operator)."""
-    from ..linalg.lanczos import largest_eigenpair  # noqa: PLC0415 -- only when a certificate is computed
-
     def apply_inverse(x: np.ndarray) -> np.ndarray:
         return problem.schur_solve(factor, x.reshape(dn, 1)).ravel()
 

@@ -31,6 +31,7 @@ from ...core.noise import isotropic_precisions, rotation_weight
 from ...core.status import OK, Status, put
 from ...core.timing import timed
 from ...linalg.cholesky import Factor, SymbolicCholesky
+from ...linalg.lanczos import largest_eigenpair
 from ...linalg.laplacian import kron_identity, reduced_index, reduced_laplacian
 from ...linalg.ordering import ordered_symbolic
 
@@ -150,8 +151,6 @@ def rotation_lambda_min(lap: WeightedLaplacians, graph: PoseGraph, symbolic: Sym
        ``lower = s - delta`` is a lower bound of lambda_min. When ``lower <= 0`` the eigenvalue is
        below what double precision resolves for this matrix: unavailable, with the reason.
     """
-    from ...linalg.lanczos import largest_eigenpair  # noqa: PLC0415 -- `posecrb fim` never needs it
-
     a = sp.csc_matrix(lap.l_w)
     n = a.shape[0]
     if n == 0:
@@ -164,9 +163,8 @@ def rotation_lambda_min(lap: WeightedLaplacians, graph: PoseGraph, symbolic: Sym
         else:
             if factor is None:
                 factor = symbolic.factor(a, name=name)
-            inverse = factor
             # tol near the rounding level: the interval below is as narrow as the vector is accurate
-            ritz = largest_eigenpair(lambda x: inverse(x), np.ones(n), tol=1e-14, max_restarts=300)
+            ritz = largest_eigenpair(factor, np.ones(n), tol=1e-14, max_restarts=300)
             if not ritz.converged:
                 return EigenEstimate(None, None, Status.unavailable(
                     f"the eigenvalue solver did not converge on {name} (residual {ritz.residual:.2g} after "
