@@ -621,3 +621,11 @@ def test_sparsify_reports_a_doubtful_crlb_trace(g2o_path, capsys, monkeypatch, s
     code, text, _ = run_cli([*argv, "--format", "table"], capsys)   # the title names the full graph's trace
     assert code == 0
     assert ("tr CRLB n/a" in " ".join(text.split())) == (state == "unavailable")
+
+
+@pytest.mark.parametrize("status", [("warning", "w", None), ("unavailable", "u", "rescale"), ("ok", None, None)])
+def test_status_json_round_trip(status):
+    from posecrb.core.status import Status
+
+    st = Status(*status)
+    assert Status.from_json(st.as_json()) == st

@@ -58,6 +58,11 @@ class Status:
             out["hint"] = self.hint
         return out
 
+    @classmethod
+    def from_json(cls, d: dict) -> Status:
+        """The inverse of ``as_json`` (rows carry statuses in that form across processes)."""
+        return cls(d["status"], d.get("reason"), d.get("hint"))
+
     def message(self, quantity: str) -> str:
         """One line for stderr: which quantity, why, what to do."""
         what = "not available" if self.state == "unavailable" else "doubtful"

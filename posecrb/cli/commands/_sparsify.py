@@ -80,8 +80,7 @@ def sparsify_cmd(file, budgets, methods, objective, fixed, certify, max_iter, se
     for where, row in [("full graph", ref), ("fixed edges only", ref["fixed_only"]),
                        *((f"{r['method']}@{r['budget_spec']}", r) for r in res.rows)]:
         if row.get("crlb_trace_status"):
-            st = row["crlb_trace_status"]
-            log_status(log, f"tr CRLB ({where})", Status(st["status"], st["reason"], st.get("hint")))
+            log_status(log, f"tr CRLB ({where})", Status.from_json(row["crlb_trace_status"]))
     crlb_ref = "n/a" if ref["crlb_trace"] is None else f"{ref['crlb_trace']:.4g}"
     print_rows(res.rows, fmt, COLUMNS if fmt in ("table", "markdown") else None, headers=HEADERS,
                single_json=False,
