@@ -30,17 +30,6 @@ from .. import __version__
 from ..core.errors import PosecrbError, UsageError
 from ..core.files import Terminated, handle_sigterm, remove_temporaries
 
-with warnings.catch_warnings():
-    # click 8.4 deprecates this helper (removed in click 9); the --help listing must match what
-    # click itself renders, so use click's while it exists and a first-sentence fallback after.
-    warnings.simplefilter("ignore", DeprecationWarning)
-    try:
-        from click.utils import make_default_short_help
-    except ImportError:  # pragma: no cover - click >= 9
-        def make_default_short_help(help: str, max_length: int = 45) -> str:
-            first = help.split("\n\n")[0].split(". ")[0].strip().rstrip(".")
-            return first if len(first) <= max_length else first[: max_length - 3].rsplit(" ", 1)[0] + "..."
-
 log = logging.getLogger("posecrb")
 
 
@@ -104,9 +93,14 @@ class LazyGroup(click.Group):
 
 
 def _short_help(name: str, limit: int) -> str:
-    """click's short help: the explicit ``short_help`` whole, else the help's first sentence cut at limit."""
+    """click's short help: the explicit ``short_help`` whole, else the help's first sentence cut at limit.
+
+    Computed by click's own public ``Command.get_short_help_str`` on a stand-in command, so the
+    listing matches what click renders for the real command without importing it."""
     text = COMMANDS[name][1]
-    return text if name in _EXPLICIT_SHORT_HELP else make_default_short_help(text, limit)
+    stand_in = (click.Command(name, short_help=text) if name in _EXPLICIT_SHORT_HELP
+                else click.Command(name, help=text))
+    return stand_in.get_short_help_str(limit)
 
 
 _EXPLICIT_SHORT_HELP = {"select"}   # commands declared with short_help= (shown whole, wrapped)
