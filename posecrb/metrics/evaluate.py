@@ -13,7 +13,7 @@ from typing import Any
 from ..core.errors import PosecrbError
 from ..core.graph import PoseGraph
 from ..core.timing import timed
-from ..models.paper.bounds import BoundsResult, compute_bounds
+from ..models.paper.bounds import GraphBounds, compute_bounds
 from ..models.paper.fim import PaperFim, fim_symbolic_choice, paper_fim, trace_fim
 from ..solver.estimate import Estimate, get_estimate
 
@@ -41,7 +41,7 @@ class DatasetMetrics:
     after the bounds (only with ``errors="keep"``)."""
 
     graph: PoseGraph
-    bounds: BoundsResult
+    bounds: GraphBounds
     estimate: Estimate | None = None
     fim: PaperFim | None = None
     fim_logdet: float | None = None
@@ -51,7 +51,7 @@ class DatasetMetrics:
 
 
     def to_row(self, times: Mapping[str, float] | None = None) -> dict:
-        """The ``bounds`` command's row: the graph, ``BoundsResult.to_row()``, the times (``times``
+        """The ``bounds`` command's row: the graph, ``GraphBounds.to_row()``, the times (``times``
         first, e.g. the parse time, then the bounds', the FIM's and the solve's) and, when an
         estimate was evaluated, the FIM log-det, trace (eq. 69/70) and variant, the estimate's source,
         certificate and objective; ``status`` is ``"uncertified"`` when the solver did not certify."""

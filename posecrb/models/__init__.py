@@ -22,11 +22,11 @@ from ..io.npz import save_npz
 from ..linalg.cholesky import anchored_logdet
 from ..linalg.ordering import resolve_ordering
 from .paper.bounds import t_optimality
-from .paper.crlb import CrlbResult, InverseAccuracy, paper_crlb
+from .paper.crlb import InverseAccuracy, PaperCrlb, paper_crlb
 from .paper.fim import fim_symbolic_choice, paper_fim, trace_fim
-from .thesis.crb import SedCrbResult
-from .thesis.fim import sed_fim
-from .thesis.frames import convert_information, coordinate_names, coordinates_description, sed_crb_in_frame
+from .sed.crlb import SedCrlb
+from .sed.fim import sed_fim
+from .sed.frames import convert_information, coordinate_names, coordinates_description, sed_crlb_in_frame
 
 log = logging.getLogger("posecrb")
 
@@ -105,7 +105,7 @@ def fisher_information(graph: PoseGraph, rot: np.ndarray, trans: np.ndarray, *, 
                                  ordering=str(choice))
     sfim = sed_fim(graph, rot, trans, ordering=ordering)
     times = dict(sfim.times)
-    # log-det, rank and nullity are the same in both frames (det B_i = +-1, posecrb.models.thesis.frames)
+    # log-det, rank and nullity are the same in both frames (det B_i = +-1, posecrb.models.sed.frames)
     matrix = sfim.matrix if frame == "world" else convert_information(sfim.matrix, rot, trans, "body")
     if anchor_id is not None:
         if graph.n_components > 1:
@@ -157,7 +157,7 @@ def cramer_rao_bound(graph: PoseGraph, rot: np.ndarray, trans: np.ndarray, *, mo
     if model not in MODELS:
         raise UsageError(f"model must be one of {MODELS}, got {model!r}")
     row: dict = {}
-    res: CrlbResult | SedCrbResult
+    res: PaperCrlb | SedCrlb
     if model == "paper":
 
         if quotient:
@@ -191,7 +191,7 @@ def cramer_rao_bound(graph: PoseGraph, rot: np.ndarray, trans: np.ndarray, *, mo
             want = [graph.index_of(p) for p in poses]
         else:
             want = False
-        res = sed_crb_in_frame(graph, rot, trans, frame, anchors=anchors, quotient=quotient, per_pose=want,
+        res = sed_crlb_in_frame(graph, rot, trans, frame, anchors=anchors, quotient=quotient, per_pose=want,
                                ordering=ordering)
         row.update({"kind": res.kind, "anchors": [int(graph.ids[a]) for a in res.anchors],
                     "nullity": res.nullity})

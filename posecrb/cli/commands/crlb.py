@@ -1,4 +1,4 @@
-"""`posecrb crlb FILE`: Cramér-Rao lower bounds at an estimate, paper or thesis model."""
+"""`posecrb crlb FILE`: Cramér-Rao lower bounds at an estimate, paper or sed model."""
 from __future__ import annotations
 
 import logging
@@ -54,7 +54,7 @@ def crlb_result(file: str, data_dir: str | None, model: str, source: str, anchor
                 ordering: str = "auto") -> tuple[dict, list[dict]]:
     """The JSON-ready result and, when per-pose blocks were asked, one row per pose.
     ``fim_variant``: None (default: consistent, the model's Fisher information), "eq64" or
-    "consistent". ``frame``: sed only, None/"world" or "body" (``posecrb.models.thesis.frames``).
+    "consistent". ``frame``: sed only, None/"world" or "body" (``posecrb.models.sed.frames``).
     Doubtful numbers carry a ``<key>_status`` and a warning on stderr."""
     variant, frame = resolve_model_settings(model, fim_variant, frame)
     graph, est, est_info, times = load_with_estimate(file, data_dir, source)

@@ -1,4 +1,4 @@
-"""`posecrb fim FILE`: the Fisher information matrix at an estimate, paper or thesis model."""
+"""`posecrb fim FILE`: the Fisher information matrix at an estimate, paper or sed model."""
 from __future__ import annotations
 
 import logging
@@ -9,7 +9,7 @@ from ...datasets import search as datasets
 from ...io import check_output_file
 from ...io.npz import npz_path
 from ...models import fisher_information
-from ...models.thesis.frames import coordinates_description
+from ...models.sed.frames import coordinates_description
 from ...report.render import key_value_rows, print_rows
 from ..options import (
     POSE_ID,

@@ -159,7 +159,7 @@ def inverse_accuracy(a: sp.spmatrix, factor: Factor, name: str = "matrix", colum
 
 
 @dataclass(frozen=True, eq=False, kw_only=True)
-class CrlbResult:
+class PaperCrlb:
     """CRLB of the paper model at one estimate.
 
     ``trace_crlb = trace(F^{-1})`` (the whole bound in 2D, the flat leading term in 3D) and
@@ -231,7 +231,7 @@ def _requested_ids(graph: PoseGraph, per_pose: bool | Sequence[int]) -> np.ndarr
 
 
 def crlb_from_fim(fim: PaperFim, graph: PoseGraph, per_pose: bool | Sequence[int] = False, *,
-                  ordering: str = "auto") -> CrlbResult:
+                  ordering: str = "auto") -> PaperCrlb:
     """CRLB (eq. 67 / 68) from an already built paper FIM of ``graph``, with its accuracy
     estimate and the validity of the curvature term (module docstring). ``ordering``: the FIM
     factorization's fill-reducing ordering (posecrb.linalg.ordering; cost only)."""
@@ -284,7 +284,7 @@ def crlb_from_fim(fim: PaperFim, graph: PoseGraph, per_pose: bool | Sequence[int
         pp = {int(i): (blocks[r] if f else zero) for i, r, f in zip(ids, row, free)}
         if curv_blocks is not None:
             ppc = {int(i): (curv_blocks[r] if f else zero) for i, r, f in zip(ids, row, free)}
-    return CrlbResult(model="paper", dim=d, poses=graph.n, n_free=npf, anchor_id=fim.anchor_id, trace_crlb=trace,
+    return PaperCrlb(model="paper", dim=d, poses=graph.n, n_free=npf, anchor_id=fim.anchor_id, trace_crlb=trace,
                       mse_bound=trace / npf if npf else 0.0, trace_translation=tr_t, trace_rotation=tr_r,
                       trace_crlb_curvature=trace_curv, mse_bound_curvature=mse_curv,
                       coordinates=coordinate_names(d), per_pose=pp, per_pose_curvature=ppc, times=times,
@@ -294,7 +294,7 @@ def crlb_from_fim(fim: PaperFim, graph: PoseGraph, per_pose: bool | Sequence[int
 
 def paper_crlb(graph: PoseGraph, rot: np.ndarray, trans: np.ndarray, anchor: int = 0,
                per_pose: bool | Sequence[int] = False, rotation_model: str = "eq59",
-               variant: str = "consistent", *, ordering: str = "auto") -> CrlbResult:
+               variant: str = "consistent", *, ordering: str = "auto") -> PaperCrlb:
     """CRLB of the paper model at the estimate ``(rot, trans)`` with pose ``anchor``
     (internal index) fixed: 2D eq. (67), 3D eq. (68). ``per_pose``: True for every pose,
     or a sequence of pose ids (as in the file). ``variant``: the FIM it inverts,
