@@ -1,4 +1,4 @@
-"""The sed model (the thesis's model on SE(d)^n): right-invariant Fisher information, gauge, anchored and quotient CRLBs.
+"""The sed model (the thesis's, on SE(d)^n): right-invariant Fisher information, gauge, anchored and quotient CRLBs.
 
 Bertini, "On Intrinsic Cramér-Rao Bounds on the Lie Group SE(d)^n" (the thesis), chapters 4-5;
 docs/design.md#thesis-fim.
