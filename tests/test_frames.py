@@ -206,6 +206,6 @@ def test_cli_frame_with_paper_model_is_a_usage_error(cmd, tmp_path, capsys):
     path = tmp_path / "p.g2o"
     write_g2o(consistent_graph(2, 8), path)
     code, _, err = run_cli([cmd, str(path), "--estimate", "vertices", "--frame", "body"], capsys)
-    assert code == 2 and "--frame applies to --model sed" in err
+    assert code == 2 and "--frame body applies to the sed model" in err
     code, out, err = run_cli([cmd, str(path), "--estimate", "vertices", "--format", "json"], capsys)
     assert code == 0 and json.loads(out)["frame"] == "mixed"

@@ -242,4 +242,4 @@ def test_bounds_and_fim_json_say_which_ordering(tmp_path, ordering):
     assert res.exit_code == 0, res.output
     row = json.loads(res.stdout)
     row = row[0] if isinstance(row, list) else row
-    assert row["ordering"] == want
+    assert row["ordering"] == {"requested": ordering, "fim": want}

@@ -4,6 +4,7 @@
 
     PosecrbError
     ├── UsageError (also a ValueError)   an argument the caller can fix
+    │   └── ArgumentError                one named argument: ``anchor=5 is not a pose id of g.g2o``
     ├── ParseError                       file:line and reason
     ├── DatasetNotFound
     ├── NumericalError
@@ -43,9 +44,64 @@ class DatasetNotFound(PosecrbError):
 
 
 class UsageError(PosecrbError, ValueError):
-    """A usage error the library detects (exit code 2), e.g. an anchor id not in the graph.
+    """A request that cannot be honoured as asked (exit code 2 on the command line).
 
-    Also a ValueError, so library callers that catch ValueError for a bad argument keep working."""
+    Also a ``ValueError``, so that code catching ``ValueError`` for a bad argument catches it.
+
+    Examples
+    --------
+    >>> import posecrb
+    >>> issubclass(posecrb.UsageError, ValueError)
+    True
+    """
+
+
+class ArgumentError(UsageError):
+    """One argument of a library call is wrong; the message names it in Python terms.
+
+    ``str(exc)`` is ``parameter=value`` followed by the reason, e.g.
+    ``anchor=5 is not a pose id of shifted.g2o (ids 100..1827)``. The command line shows the
+    same error with its option instead (``--anchor 5 is not a pose id ...``, ``cli_message``):
+    library keywords are the command-line options in snake_case.
+
+    Parameters
+    ----------
+    parameter : str
+        The keyword (or positional parameter) of the library call.
+    value : object
+        The value given.
+    reason : str
+        What is wrong with it, as a predicate (``"is not a pose id of g.g2o"``) or, with
+        ``sep=": "``, a sentence.
+    sep : str
+        What separates ``parameter=value`` from ``reason``.
+
+    Examples
+    --------
+    >>> import posecrb
+    >>> exc = posecrb.ArgumentError("anchor", 5, "is not a pose id of shifted.g2o")
+    >>> str(exc)
+    'anchor=5 is not a pose id of shifted.g2o'
+    >>> exc.cli_message()
+    '--anchor 5 is not a pose id of shifted.g2o'
+    >>> isinstance(exc, posecrb.UsageError)
+    True
+    """
+
+    def __init__(self, parameter: str, value: object, reason: str, *, sep: str = " "):
+        self.parameter, self.value, self.reason, self.sep = parameter, value, reason, sep
+        super().__init__(f"{parameter}={value!r}{sep}{reason}")
+
+    def cli_message(self) -> str:
+        """The message with the command-line spelling: ``--max-iter 0 ...`` for ``max_iter=0``;
+        ``source`` (the file argument) as ``FILE``."""
+        if self.parameter == "source":
+            return f"FILE {self.value}{self.sep}{self.reason}"
+        flag = "--" + self.parameter.replace("_", "-")
+        if isinstance(self.value, bool):   # a flag: given or not
+            return f"{flag}{self.sep}{self.reason}"
+        shown = " ".join(map(str, self.value)) if isinstance(self.value, (list, tuple)) else str(self.value)
+        return f"{flag} {shown}{self.sep}{self.reason}"
 
 
 class NumericalError(PosecrbError):

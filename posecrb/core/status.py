@@ -14,6 +14,7 @@ together with a ``Status``. It is rendered the same way everywhere (``posecrb.re
 from __future__ import annotations
 
 import logging
+from collections.abc import Mapping
 from dataclasses import dataclass
 
 from .errors import InternalError
@@ -94,3 +95,9 @@ def log_status(logger: logging.Logger, quantity: str, status: Status) -> None:
     """One stderr line for a status that is not ok (warning level for both kinds)."""
     if not status.ok:
         logger.warning("%s", status.message(quantity))
+
+
+def log_statuses(logger: logging.Logger, name: str, statuses: Mapping[str, Status]) -> None:
+    """``log_status`` for each of a result's ``statuses()``, the quantity prefixed by ``name``."""
+    for quantity, status in statuses.items():
+        log_status(logger, f"{name}: {quantity}", status)

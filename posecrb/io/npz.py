@@ -6,14 +6,10 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from ..core.files import atomic_write
+from ..core.result import npz_path
 
 if TYPE_CHECKING:
     import scipy.sparse as sp
-
-
-def npz_path(path: str) -> str:
-    """The file ``--save PATH`` writes: numpy's rule, ``.npz`` appended unless present."""
-    return path if path.endswith(".npz") else path + ".npz"
 
 
 def save_npz(path: str, matrix: sp.spmatrix | sp.sparray, row_ids: np.ndarray, row_coord: np.ndarray, names: list[str],

@@ -36,13 +36,15 @@ Statuses (``posecrb.core.status``), never a silent number:
 from __future__ import annotations
 
 import time
-from collections.abc import Callable, Sequence
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, field
+from typing import Any
 
 import numpy as np
 import scipy.sparse as sp
 
 from ...core.graph import PoseGraph
+from ...core.result import Result, plain
 from ...core.status import OK, Status
 from ...linalg.cholesky import Factor
 from ...linalg.ordering import block_cholesky
@@ -63,7 +65,7 @@ ACCURACY_COLUMNS = 4
 
 
 @dataclass(frozen=True)
-class InverseAccuracy:
+class InverseAccuracy(Result):
     """How far the computed inverse of a sparse SPD matrix can be trusted.
 
     ``residual``: max over ``columns`` sampled unit vectors e_k (``numpy.random.default_rng(seed)``)
@@ -82,10 +84,21 @@ class InverseAccuracy:
     columns: int
     status: Status = OK
 
-    def as_json(self) -> dict:
-        return {"residual": self.residual, "condition_estimate": self.condition_estimate,
-                "condition_unscaled": self.condition_unscaled, "error_bound": self.error_bound,
-                "columns": self.columns, **self.status.as_json()}
+    def to_dict(self) -> dict[str, Any]:
+        """The ``accuracy`` object of the ``crlb`` JSON: the numbers, then the status flattened
+        in (``status``, ``reason``[, ``hint``])."""
+        return plain({"residual": self.residual, "condition_estimate": self.condition_estimate,
+                      "condition_unscaled": self.condition_unscaled, "error_bound": self.error_bound,
+                      "columns": self.columns, **self.status.as_json()})
+
+    @classmethod
+    def from_dict(cls, d: Mapping[str, Any]) -> InverseAccuracy:
+        """The inverse of ``to_dict``."""
+        return cls(d["residual"], d["condition_estimate"], d["condition_unscaled"], d["error_bound"], d["columns"],
+                   Status.from_json(d))
+
+    def statuses(self) -> dict[str, Status]:
+        return {"CRLB": self.status}
 
 
 def _onenorm_inverse(solve: Callable[[np.ndarray], np.ndarray], n: int) -> float:
