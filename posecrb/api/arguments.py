@@ -207,16 +207,16 @@ def resolve_estimate(graph: PoseGraph, estimate: Any, *, allow_none: bool = Fals
             return None
         raise ArgumentError("estimate", estimate, "is not 'solve', 'vertices', a path, a SolveResult or an Estimate")
     if isinstance(estimate, SolveResult):
-        if estimate.rot is None or estimate.trans is None:
+        if estimate.rot.size == 0:
             raise ArgumentError("estimate", f"SolveResult of {estimate.dataset}", "carries no poses (it was rebuilt "
                                 "from a dict); SolveResult.load of a saved result has them", sep=": ")
-        if estimate.ids is not None and not np.array_equal(estimate.ids, graph.ids):
+        if estimate.ids.size and not np.array_equal(estimate.ids, graph.ids):
             raise ArgumentError("estimate", f"SolveResult of {estimate.dataset}",
                                 f"is the estimate of another graph (its pose ids are not those of {graph.name})",
                                 sep=": ")
         return _checked(graph, Estimate(estimate.rot, estimate.trans, "solve", estimate.certified, estimate.objective))
     if isinstance(estimate, Estimate):
-        if estimate.rot is None or estimate.trans is None:
+        if not estimate.has_poses:
             raise ArgumentError("estimate", f"Estimate from {estimate.source}", "carries no poses", sep=": ")
         return _checked(graph, estimate)
     if isinstance(estimate, (str, os.PathLike)) and os.fspath(estimate):
@@ -233,8 +233,6 @@ def _checked(graph: PoseGraph, estimate: Estimate) -> Estimate:
 
     """``estimate`` with its poses as float arrays of the graph's shapes (``check_estimate``),
     without a solve time (this call did not run the solver)."""
-    if estimate.rot is None or estimate.trans is None:  # pragma: no cover - checked by the callers
-        raise ArgumentError("estimate", estimate.source, "carries no poses")
     try:
         rot, trans = graph.check_estimate(estimate.rot, estimate.trans)
     except UsageError as exc:

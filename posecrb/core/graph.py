@@ -74,6 +74,42 @@ class PoseDimensions:
 
 @dataclass(frozen=True, eq=False)
 class PoseGraph(PoseDimensions):
+    """A pose graph: relative-pose measurements as edge arrays over poses 0..n-1.
+
+    The measurement on edge k is the relative pose ``X_i^{-1} X_j`` of its ends
+    i = ``src[k]``, j = ``dst[k]`` (g2o and SE-Sync convention): rotation ``rot[k]`` and
+    translation ``trans[k]`` in frame i, in the file's length units, with the information
+    matrix ``info[k]`` in g2o order (translation block first). Poses are numbered by their ids'
+    order: ``ids[k]`` is the id, as in the file, of internal pose k. Every public function takes
+    and reports ids; ``index_of`` maps an id to its index.
+
+    Read one with ``posecrb.load`` or ``posecrb.parse``.
+
+    Attributes
+    ----------
+    dim : int
+        d = 2 or 3.
+    ids : numpy.ndarray
+        (n,) pose ids, increasing.
+    src, dst : numpy.ndarray
+        (m,) internal indices of each edge's ends.
+    rot, trans, info : numpy.ndarray
+        (m, d, d) measured rotations, (m, d) translations, (m, q, q) information matrices.
+    vertex_rot, vertex_trans : numpy.ndarray or None
+        The file's VERTEX poses, if any (an estimate).
+    path, format, sha256 : str or None
+        The file read, its format (``"g2o"``, ``"toro"``) and the sha256 of its bytes.
+
+    Examples
+    --------
+    >>> import posecrb
+    >>> g = posecrb.load("intel")
+    >>> g.n, g.m, g.n_components, g.has_vertices
+    (1728, 2512, 1, True)
+    >>> g.index_of(5)
+    5
+    """
+
     dim: int                                # d = 2 or 3
     ids: np.ndarray                         # (n,) original vertex ids, increasing; index = internal id
     src: np.ndarray                         # (m,) internal index of i

@@ -6,7 +6,7 @@ command's ``--format json`` object. ``Result`` gives every such class the same m
 * ``to_dict()``: that object, JSON-serialisable (numpy values as Python numbers and lists,
   NaN as ``None``, infinities as ``"inf"``/``"-inf"``), pose ids never internal indices;
 * ``from_dict(d)``: the inverse on what the dict carries (``from_dict(d).to_dict() == d``);
-  the big arrays the JSON leaves out (an estimate's poses, a FIM) come back as ``None``;
+  the big arrays the JSON leaves out (an estimate's poses, a FIM) come back empty;
 * ``to_frame()``: a pandas DataFrame (one row of the scalar values unless the class has
   per-pose or per-edge data);
 * ``save(path)`` / ``load(path)``: the dict and the big arrays in one ``.npz`` file;
@@ -75,9 +75,16 @@ def plain(value: Any) -> Any:
     return value
 
 
-def array_field(**kwargs: Any) -> Any:
-    """A big array: not in the JSON, kept by ``save``; ``None`` after ``from_dict``."""
-    return dataclasses.field(default=None, repr=False, compare=False, metadata={ARRAY: True}, **kwargs)
+def _no_array() -> np.ndarray:
+    return np.empty(0)
+
+
+def array_field(default: Any = dataclasses.MISSING) -> Any:
+    """A big array: not in the JSON, kept by ``save``; empty (size 0) after ``from_dict``
+    unless ``default`` says otherwise."""
+    if default is dataclasses.MISSING:
+        return dataclasses.field(default_factory=_no_array, repr=False, compare=False, metadata={ARRAY: True})
+    return dataclasses.field(default=default, repr=False, compare=False, metadata={ARRAY: True})
 
 
 def internal_field(default: Any = None) -> Any:
@@ -193,7 +200,7 @@ class Result:
         out: dict[str, np.ndarray] = {}
         for f in dataclasses.fields(self):  # type: ignore[arg-type]
             value = getattr(self, f.name)
-            if f.metadata.get(ARRAY) and value is not None:
+            if f.metadata.get(ARRAY) and value is not None and np.size(value):
                 out[f.name] = np.asarray(value)
         return out
 

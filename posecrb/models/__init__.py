@@ -44,8 +44,8 @@ def model_fim(graph: PoseGraph, estimate: Estimate, *, model: str = "paper", anc
     trace (eq. 69/70) and eq. (72)'s approximation. sed: the whole FIM (4.6) in ``frame``, its rank
     and nullity (Th. 4.8.1) and the log-det with one anchor per component (or ``anchor`` on a
     connected graph; several components with an anchor is an ArgumentError)."""
-    if estimate.rot is None or estimate.trans is None:
-        raise ArgumentError("estimate", estimate, "carries no poses")
+    if not estimate.has_poses:
+        raise ArgumentError("estimate", f"Estimate from {estimate.source}", "carries no poses", sep=": ")
     rot, trans = estimate.rot, estimate.trans
     if model == "paper":
         idx = graph.anchor_index(anchor)
@@ -105,8 +105,8 @@ def model_crlb(graph: PoseGraph, estimate: Estimate, *, model: str = "paper", an
     (5.5) in ``frame`` coordinates (docs/design.md#anchored-crb). ``poses``: per-pose covariance
     blocks for every pose (True) or the listed pose ids. ``ordering``: the factorizations'
     fill-reducing ordering (posecrb.linalg.ordering; cost only)."""
-    if estimate.rot is None or estimate.trans is None:
-        raise ArgumentError("estimate", estimate, "carries no poses")
+    if not estimate.has_poses:
+        raise ArgumentError("estimate", f"Estimate from {estimate.source}", "carries no poses", sep=": ")
     rot, trans = estimate.rot, estimate.trans
     keys = _graph_keys(graph, model)
     used = {"requested": ordering, "crlb": str(resolve_ordering(ordering, dim=graph.dim, poses=graph.n,

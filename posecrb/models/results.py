@@ -13,6 +13,7 @@ import numpy as np
 
 from ..core.errors import UsageError
 from ..core.result import (
+    ARRAY,
     NESTED,
     Result,
     array_field,
@@ -81,8 +82,9 @@ class FimResult(Result):
         Where the poses come from.
     times : dict of str to float
         Seconds per step.
-    matrix, row_ids, row_coord : None or arrays
-        The matrix, the pose id of each row and its coordinate number within the pose.
+    matrix, row_ids, row_coord : scipy.sparse matrix and numpy.ndarray
+        The matrix, the pose id of each row and its coordinate number within the pose (None and
+        empty after ``from_dict``; ``load`` keeps them).
     coordinate_names : list of str
         Names of a pose's coordinates (``row_coord`` indexes them).
 
@@ -121,16 +123,16 @@ class FimResult(Result):
     saved: str | None = optional_field()
     estimate: Estimate | None = field(default=None, metadata={NESTED: Estimate})
     times: dict[str, float] = field(default_factory=dict)
-    matrix: Any = array_field()
-    row_ids: np.ndarray | None = array_field()
-    row_coord: np.ndarray | None = array_field()
-    coordinate_names: list[str] | None = array_field()
+    matrix: Any = array_field(None)
+    row_ids: np.ndarray = array_field()
+    row_coord: np.ndarray = array_field()
+    coordinate_names: list[str] = field(default_factory=list, repr=False, metadata={ARRAY: True})
 
     def arrays(self) -> dict[str, np.ndarray]:
         """The scipy sparse layout (``data``, ``indices``, ``indptr``, ``format``, ``shape``)
         plus the index map: ``row_pose_id``, ``row_coordinate`` (into ``coordinate_names``),
         ``model``, ``anchor_ids`` and ``frame``."""
-        if self.matrix is None or self.row_ids is None or self.row_coord is None:
+        if self.matrix is None:
             return {}
         m = self.matrix.tocsc()
         return {"data": m.data, "indices": m.indices, "indptr": m.indptr, "format": np.array("csc"),
@@ -140,7 +142,7 @@ class FimResult(Result):
                 "anchor_ids": np.asarray(self.anchors, np.int64), "frame": np.array(self.frame)}
 
     @classmethod
-    def from_arrays(cls, arrays: dict[str, np.ndarray]) -> dict[str, Any]:
+    def from_arrays(cls, arrays: Mapping[str, np.ndarray]) -> dict[str, Any]:
         if "data" not in arrays:
             return {}
         import scipy.sparse as sp  # noqa: PLC0415 -- lazy: start-up time (scipy only when a FIM is read)

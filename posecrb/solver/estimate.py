@@ -34,9 +34,10 @@ class Estimate(Result):
 
     Attributes
     ----------
-    rot : numpy.ndarray or None
-        (n, d, d) rotations, row k for the pose with the k-th smallest id.
-    trans : numpy.ndarray or None
+    rot : numpy.ndarray
+        (n, d, d) rotations, row k for the pose with the k-th smallest id (empty after
+        ``from_dict``: the JSON does not carry the poses).
+    trans : numpy.ndarray
         (n, d) translations in the file's length units.
     source : str
         Where the poses come from.
@@ -56,12 +57,17 @@ class Estimate(Result):
     {'source': 'given', 'certified': None, 'objective': None}
     """
 
-    rot: np.ndarray | None = array_field()
-    trans: np.ndarray | None = array_field()
+    rot: np.ndarray = array_field()
+    trans: np.ndarray = array_field()
     source: str = "given"
     certified: bool | None = None
     objective: float | None = None
     solve_time: float | None = internal_field()
+
+    @property
+    def has_poses(self) -> bool:
+        """Whether the poses are here (not after ``from_dict``)."""
+        return bool(np.size(self.rot) and np.size(self.trans))
 
     def statuses(self) -> dict[str, Status]:
         """``{"estimate": ...}``: a warning when the solver did not certify the poses."""

@@ -73,9 +73,9 @@ class SolveResult(Result):
     times : dict of str to float
         Seconds: ``parse`` (when the call read the file), ``init``, ``optimize``, ``verify``,
         ``round`` and ``total``.
-    rot, trans, ids : numpy.ndarray or None
+    rot, trans, ids : numpy.ndarray
         The estimate, (n, d, d) rotations and (n, d) translations, and the pose ids of the rows;
-        None after ``from_dict``.
+        empty after ``from_dict`` (``load`` keeps them).
 
     Examples
     --------
@@ -106,9 +106,9 @@ class SolveResult(Result):
     quaternions: str = "normalize"
     saved: str | None = optional_field()
     times: dict[str, float] = field(default_factory=dict)
-    rot: np.ndarray | None = array_field()
-    trans: np.ndarray | None = array_field()
-    ids: np.ndarray | None = array_field()
+    rot: np.ndarray = array_field()
+    trans: np.ndarray = array_field()
+    ids: np.ndarray = array_field()
 
     def statuses(self) -> dict[str, Status]:
         """``{"certificate": ...}``: a warning when the estimate is not certified."""
@@ -122,7 +122,7 @@ class SolveResult(Result):
         (a result rebuilt by ``from_dict``; ``load`` keeps it)."""
         import pandas as pd  # noqa: PLC0415 -- lazy: start-up time (pandas only for frames)
 
-        if self.rot is None or self.trans is None or self.ids is None:
+        if self.rot.size == 0:
             raise UsageError("this SolveResult carries no estimate (rebuilt from a dict); "
                              "SolveResult.load(path) of a saved result has it")
         cols: dict[str, Any] = {"id": np.asarray(self.ids, dtype=np.int64)}
@@ -192,10 +192,10 @@ class SolverOptions:
                        trust_region={**base.trust_region, **tuning})
 
 
-_BLAS_CONTROLLER = None
+_BLAS_CONTROLLER: Any = None
 
 
-def _blas_controller():
+def _blas_controller() -> Any:
     """threadpoolctl's controller, built once: scanning the loaded libraries costs ~1.5 ms, a
     tenth of a small problem's solve."""
     global _BLAS_CONTROLLER

@@ -74,7 +74,16 @@ class InverseAccuracy(Result):
     ``H = D^{-1/2} A D^{-1/2}`` (``D = diag A``; Hager-Higham estimate of ``||H^{-1}||_1``), which
     governs the accuracy of Cholesky-based inverses. ``error_bound = condition_estimate * eps``:
     estimated relative error of the computed inverse (normwise, in the scaled coordinates).
-    ``condition_unscaled``: the same for A itself (what other tools print).
+    ``condition_unscaled``: the same for A itself (what other tools print). ``status`` is a
+    warning above an estimated relative error of 1e-6 and unavailable when no digit is
+    guaranteed; ``to_dict()`` is the ``accuracy`` object of the ``crlb`` JSON.
+
+    Examples
+    --------
+    >>> import posecrb
+    >>> acc = posecrb.crlb("intel").accuracy
+    >>> acc.status.ok, acc.columns, acc.error_bound < 1e-6
+    (True, 4, True)
     """
 
     residual: float
@@ -87,9 +96,11 @@ class InverseAccuracy(Result):
     def to_dict(self) -> dict[str, Any]:
         """The ``accuracy`` object of the ``crlb`` JSON: the numbers, then the status flattened
         in (``status``, ``reason``[, ``hint``])."""
-        return plain({"residual": self.residual, "condition_estimate": self.condition_estimate,
-                      "condition_unscaled": self.condition_unscaled, "error_bound": self.error_bound,
-                      "columns": self.columns, **self.status.as_json()})
+        out: dict[str, Any] = plain({
+            "residual": self.residual, "condition_estimate": self.condition_estimate,
+            "condition_unscaled": self.condition_unscaled, "error_bound": self.error_bound,
+            "columns": self.columns, **self.status.as_json()})
+        return out
 
     @classmethod
     def from_dict(cls, d: Mapping[str, Any]) -> InverseAccuracy:
