@@ -28,7 +28,19 @@ from .paper.crlb import InverseAccuracy
 
 
 @dataclass(frozen=True, kw_only=True)
-class FimResult(Result):
+class _ModelKeys(Result):
+    """The first keys of the ``fim`` and ``crlb`` JSON: the graph and the model."""
+
+    dataset: str
+    model: str
+    dim: int
+    poses: int
+    edges: int
+    components: int
+
+
+@dataclass(frozen=True, kw_only=True)
+class FimResult(_ModelKeys):
     """The Fisher information matrix of one model at an estimate: what ``posecrb fim`` prints.
 
     Two models (docs/design.md#models): ``"paper"``, Chen et al.'s anchored FIM on
@@ -98,12 +110,6 @@ class FimResult(Result):
     30194.332
     """
 
-    dataset: str
-    model: str
-    dim: int
-    poses: int
-    edges: int
-    components: int
     anchors: list[int]
     layout: str
     size: int
@@ -154,7 +160,7 @@ class FimResult(Result):
 
 
 @dataclass(frozen=True, kw_only=True)
-class CrlbResult(Result):
+class CrlbResult(_ModelKeys):
     """The Cramér-Rao lower bound of one model at an estimate: what ``posecrb crlb`` prints.
 
     ``"paper"``: ``C >= F^{-1}`` of the anchored paper FIM (2D, eq. 67), with eq. (68)'s
@@ -216,12 +222,6 @@ class CrlbResult(Result):
     1   2  0.011651  0.012008   0.004436  0.028095
     """
 
-    dataset: str
-    model: str
-    dim: int
-    poses: int
-    edges: int
-    components: int
     kind: str
     fim_variant: str | None = optional_field()
     rotation_weight: str | None = optional_field()
