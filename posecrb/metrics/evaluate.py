@@ -1,8 +1,8 @@
 """The one pipeline behind ``bounds``, ``tables`` and ``regress``: graph -> bounds -> estimate ->
 paper FIM -> log-det (docs/design.md#tables, timing regions as in #timing-protocol).
 
-Each command renders its own row from the ``DatasetMetrics`` (its keys are unchanged); the
-numbers come from here only.
+``posecrb.bounds`` builds its ``BoundsResult`` from the ``DatasetMetrics``, ``tables`` and
+``regress`` their rows; the numbers come from here only.
 """
 from __future__ import annotations
 
