@@ -140,7 +140,7 @@ def test_crlb_sweep_bit_identical_across_executors():
 # ---------------------------------------------------------------- thesis
 def test_thesis_bounds_and_mle_on_noise_free_data():
     from posecrb.experiments import thesis as th
-    from posecrb.models.thesis.example import ANCHORS, left_information, thesis_graph, true_poses
+    from posecrb.models.sed.example import ANCHORS, left_information, thesis_graph, true_poses
 
     fm, anch, quot, nb = th.thesis_bounds(3)
     assert np.allclose(quot, np.linalg.pinv(fm, rcond=1e-10), atol=1e-10 * np.abs(quot).max())
@@ -156,7 +156,7 @@ def test_thesis_bounds_and_mle_on_noise_free_data():
 
 def test_thesis_gradient_matches_finite_differences():
     from posecrb.experiments import thesis as th
-    from posecrb.models.thesis.example import left_information, sample_graph, true_poses
+    from posecrb.models.sed.example import left_information, sample_graph, true_poses
 
     g = sample_graph(np.random.default_rng(5), 2)
     omega = np.repeat(left_information(), 2, axis=0)

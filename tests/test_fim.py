@@ -305,7 +305,7 @@ def test_cli_fim_sed_near_singular_bridge_is_a_status(dim, tmp_path, capsys):
     import json
 
     from posecrb.io import load, write_g2o
-    from posecrb.models.thesis.fim import sed_fim
+    from posecrb.models.sed.fim import sed_fim
 
     path = tmp_path / "bridge.g2o"
     write_g2o(_bridge_graph(dim, 1e-14), path)

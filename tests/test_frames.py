@@ -1,6 +1,6 @@
 """World <-> body frame conversion of the thesis model against a dense finite-difference reference.
 
-The reference never uses posecrb.models.thesis.frames or posecrb.models.thesis.fim: it differentiates the g2o/GTSAM
+The reference never uses posecrb.models.sed.frames or posecrb.models.sed.fim: it differentiates the g2o/GTSAM
 error
 ``e_ij = Log(z^{-1} X_i^{-1} X_j)`` (scipy's expm, posecrb.lie.se's checked Log) under body-frame retractions
 ``X_i expm(hat(xi_i))`` with ``xi`` in GTSAM's order (Pose2 (x, y, theta), Pose3 (rotation,
@@ -15,15 +15,15 @@ import numpy as np
 import pytest
 import scipy.sparse as sp
 
-from posecrb.models.thesis.crb import sed_crb
-from posecrb.models.thesis.fim import kernel_basis, sed_fim
-from posecrb.models.thesis.frames import (
+from posecrb.models.sed.crlb import sed_crlb
+from posecrb.models.sed.fim import kernel_basis, sed_fim
+from posecrb.models.sed.frames import (
     FRAMES,
     body_map,
     convert_covariance_blocks,
     convert_information,
     coordinate_names,
-    sed_crb_in_frame,
+    sed_crlb_in_frame,
     world_map,
 )
 
@@ -61,7 +61,7 @@ def test_body_anchored_blocks_are_the_dense_inverse(dim, seed):
     cov = np.zeros((n * q, n * q))
     cov[np.ix_(dofs, dofs)] = np.linalg.inv(ref[np.ix_(dofs, dofs)])
     cond = np.linalg.cond(ref[np.ix_(dofs, dofs)])
-    res = sed_crb_in_frame(g, r, t, "body", anchors=anchors, per_pose=True)
+    res = sed_crlb_in_frame(g, r, t, "body", anchors=anchors, per_pose=True)
     assert res.frame == "body"
     for i in range(n):
         blk = cov[i * q:(i + 1) * q, i * q:(i + 1) * q]
@@ -104,7 +104,7 @@ def test_round_trips_and_invariants(dim):
     assert ld_w[0] == ld_b[0] == 1 and ld_b[1] == pytest.approx(ld_w[1], abs=1e-9)
     assert np.linalg.matrix_rank(fb.toarray()) == fim.rank
     assert (abs(fb) > 0).astype(int).nnz <= (abs(fim.matrix) > 0).astype(int).nnz
-    blocks = np.stack([v for _, v in sorted(sed_crb(g, r, t, per_pose=True).per_pose.items())])
+    blocks = np.stack([v for _, v in sorted(sed_crlb(g, r, t, per_pose=True).per_pose.items())])
     there = convert_covariance_blocks(blocks, r, t, "body")
     np.testing.assert_allclose(convert_covariance_blocks(there, r, t, "world"), blocks, rtol=0,
                                atol=1e-11 * np.abs(blocks).max())
@@ -121,7 +121,7 @@ def test_quotient_in_body_frame_is_a_generalised_inverse(dim):
     gb = bmat @ fplus @ bmat.T
     fb = convert_information(sp.csc_matrix(f), r, t, "body").toarray()
     np.testing.assert_allclose(fb @ gb @ fb, fb, rtol=0, atol=1e-8 * np.abs(fb).max())
-    res = sed_crb_in_frame(g, r, t, "body", quotient=True, per_pose=[1, 3])
+    res = sed_crlb_in_frame(g, r, t, "body", quotient=True, per_pose=[1, 3])
     assert sorted(res.per_pose) == [1, 3]
     for i in (1, 3):
         np.testing.assert_allclose(res.per_pose[i], gb[i * q:(i + 1) * q, i * q:(i + 1) * q], rtol=1e-7,
@@ -133,8 +133,8 @@ def test_quotient_in_body_frame_is_a_generalised_inverse(dim):
 def test_world_frame_is_sed_crb_unchanged():
     g = consistent_graph(2, 5)
     r, t = g.vertex_rot, g.vertex_trans
-    a = sed_crb(g, r, t, per_pose=[2])
-    b = sed_crb_in_frame(g, r, t, "world", per_pose=[2])
+    a = sed_crlb(g, r, t, per_pose=[2])
+    b = sed_crlb_in_frame(g, r, t, "world", per_pose=[2])
     assert b.frame == "world" and a.trace_crlb == b.trace_crlb
     np.testing.assert_array_equal(a.per_pose[2], b.per_pose[2])
 
@@ -150,7 +150,7 @@ def test_coordinate_names_and_bad_frame():
         coordinate_names(2, "gtsam")
     g = consistent_graph(2, 6)
     with pytest.raises(UsageError):
-        sed_crb_in_frame(g, g.vertex_rot, g.vertex_trans, "body", per_pose=[g.n])
+        sed_crlb_in_frame(g, g.vertex_rot, g.vertex_trans, "body", per_pose=[g.n])
 
 
 # ------------------------------------------------------------------ CLI
@@ -206,6 +206,6 @@ def test_cli_frame_with_paper_model_is_a_usage_error(cmd, tmp_path, capsys):
     path = tmp_path / "p.g2o"
     write_g2o(consistent_graph(2, 8), path)
     code, _, err = run_cli([cmd, str(path), "--estimate", "vertices", "--frame", "body"], capsys)
-    assert code == 2 and "--frame applies to --model sed" in err
+    assert code == 2 and "--frame body applies to the sed model" in err
     code, out, err = run_cli([cmd, str(path), "--estimate", "vertices", "--format", "json"], capsys)
     assert code == 0 and json.loads(out)["frame"] == "mixed"

@@ -3,7 +3,7 @@
 Runs only where ``gtsam`` imports (``pip install posecrb[gtsam]``). GTSAM builds its own
 Hessian from ``BetweenFactorPose2/3`` (error ``Log(z^{-1} X_i^{-1} X_j)``, body-frame
 retraction, analytic Jacobians) and ``gtsam.Marginals`` inverts it; posecrb's
-``crlb --model sed --frame body`` must give the same per-pose blocks (posecrb.models.thesis.frames).
+``crlb --model sed --frame body`` must give the same per-pose blocks (posecrb.models.sed.frames).
 
 Gauge: posecrb's anchored bound (thesis 5.1) fixes the anchor pose exactly. On the GTSAM
 side the anchor is not a variable; each of its edges becomes a prior on the other pose
@@ -22,7 +22,7 @@ gtsam = pytest.importorskip("gtsam", reason="gtsam is not installed (pip install
 
 from posecrb.core.graph import PoseGraph  # noqa: E402
 from posecrb.io import load  # noqa: E402
-from posecrb.models.thesis.frames import sed_crb_in_frame  # noqa: E402
+from posecrb.models.sed.frames import sed_crlb_in_frame  # noqa: E402
 from posecrb.solver.estimate import get_estimate  # noqa: E402
 
 from .helpers import body_fim_reference, consistent_graph, free_dofs, gtsam_information  # noqa: E402
@@ -95,7 +95,7 @@ def test_gauge_and_frame_on_a_small_graph(dim, gauge):
     # inverse amplifies that by at most cond(F_ff)
     tol = 1e-8 * np.linalg.cond(fff)
     gt = marginal_blocks(g, r, t, gauge=gauge)
-    ours = sed_crb_in_frame(g, r, t, "body", per_pose=True).per_pose
+    ours = sed_crlb_in_frame(g, r, t, "body", per_pose=True).per_pose
     dense = {i: cov[(i - 1) * q:i * q, (i - 1) * q:i * q] for i in range(1, g.n)}
     assert relative_errors(dense, gt).max() < tol
     assert relative_errors(dense, ours).max() < tol
@@ -128,14 +128,14 @@ def certified(shared_datasets):
 @pytest.mark.parametrize("name, rtol", [("intel", 1e-5), pytest.param("sphere2500", 1e-6, marks=pytest.mark.slow)])
 def test_marginals_match_body_frame_crlb(certified, name, rtol):
     g, est = certified(name)
-    ours = sed_crb_in_frame(g, est.rot, est.trans, "body", per_pose=True)
+    ours = sed_crlb_in_frame(g, est.rot, est.trans, "body", per_pose=True)
     gt = marginal_blocks(g, est.rot, est.trans, anchor=ours.anchors[0])
     err = relative_errors(gt, ours.per_pose)
     assert err.max() < rtol, (name, err.max())
     trace_gt = sum(float(np.trace(c)) for c in gt.values())
     assert ours.trace_crlb == pytest.approx(trace_gt, rel=rtol)
     # the world-frame trace is a different number (lever arms about the origin): the frames matter
-    world = sed_crb_in_frame(g, est.rot, est.trans, "world")
+    world = sed_crlb_in_frame(g, est.rot, est.trans, "world")
     assert abs(world.trace_crlb - trace_gt) > 100 * rtol * trace_gt
 
 

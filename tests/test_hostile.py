@@ -389,9 +389,9 @@ def test_pose_id_options_are_integers_that_fit_int64(tmp_path, capsys):
 
 # ---------------------------------------------------------------- outputs never destroy data
 def test_solve_refuses_to_write_over_its_input(tmp_path, capsys, monkeypatch):
-    import posecrb.cli.commands.solve as solve_cmd
+    import posecrb.solver
 
-    monkeypatch.setattr(solve_cmd, "solve", lambda *a, **k: pytest.fail("solved before checking --out"))
+    monkeypatch.setattr(posecrb.solver, "solve", lambda *a, **k: pytest.fail("solved before checking --out"))
     f = write_clean(CASES["crlf_line_ends"], tmp_path)
     before = f.read_bytes()
     link = tmp_path / "link.g2o"
@@ -440,8 +440,8 @@ def test_output_locations_are_checked_before_the_work(tmp_path, capsys, monkeypa
                       (sweep, "crlb_sweep"), (posecrb.metrics.regress, "compute_metrics")):
         monkeypatch.setattr(mod, name, forbidden)
     import posecrb.cli.commands.regress as regress_cmd
-    import posecrb.cli.commands.solve as solve_cmd
-    monkeypatch.setattr(solve_cmd, "solve", forbidden)
+    import posecrb.solver
+    monkeypatch.setattr(posecrb.solver, "solve", forbidden)
     monkeypatch.setattr(regress_cmd, "compute_metrics", forbidden)
     f = write_clean(CASES["crlf_line_ends"], tmp_path)
     (tmp_path / "afile").write_text("keep\n")

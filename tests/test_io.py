@@ -362,10 +362,11 @@ def test_failed_write_keeps_the_previous_file_and_no_temporary(tmp_path, exc_typ
     assert f.read_text() == "previous\n" and [p.name for p in tmp_path.iterdir()] == ["result.txt"]
 
 
-def test_fim_npz_write_failure_keeps_the_previous_file(tmp_path, monkeypatch):
+def test_result_npz_write_failure_keeps_the_previous_file(tmp_path, monkeypatch):
     import scipy.sparse as sp
 
-    from posecrb.io import npz
+    from posecrb.core import result
+    from posecrb.models.results import FimResult
 
     target = tmp_path / "f.npz"
     target.write_bytes(b"previous")
@@ -377,9 +378,13 @@ def test_fim_npz_write_failure_keeps_the_previous_file(tmp_path, monkeypatch):
         file.flush()
         raise OSError(28, "No space left on device")
 
-    monkeypatch.setattr(npz.np, "savez", broken_savez)
+    monkeypatch.setattr(result.np, "savez", broken_savez)
+    fim = FimResult(dataset="g", model="paper", dim=2, poses=2, edges=1, components=1, anchors=[0], layout="blocks",
+                    size=3, nnz=3, logdet=0.0, trace=3.0, rank=3, nullity=0, frame="mixed",
+                    coordinates_description="", matrix=sp.eye(3), row_ids=np.arange(3), row_coord=np.zeros(3),
+                    coordinate_names=["x"])
     with pytest.raises(OSError):
-        npz.save_npz(str(tmp_path / "f"), sp.eye(3), np.arange(3), np.zeros(3), ["x"], "paper", [0])
+        fim.save(str(tmp_path / "f"))
     assert target.read_bytes() == b"previous" and [p.name for p in tmp_path.iterdir()] == ["f.npz"]
 
 

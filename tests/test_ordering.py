@@ -20,7 +20,7 @@ from posecrb.linalg.ordering import (
 from posecrb.models.paper.bounds import compute_bounds, weighted_laplacians
 from posecrb.models.paper.crlb import paper_crlb
 from posecrb.models.paper.fim import fim_logdet, fim_symbolic_choice, paper_fim
-from posecrb.models.thesis.fim import sed_fim
+from posecrb.models.sed.fim import sed_fim
 
 from .helpers import make_random_graph
 from .numerics import EPS, MARGIN, logdet_atol, spd_condition, trace_inverse_rtol
@@ -242,4 +242,4 @@ def test_bounds_and_fim_json_say_which_ordering(tmp_path, ordering):
     assert res.exit_code == 0, res.output
     row = json.loads(res.stdout)
     row = row[0] if isinstance(row, list) else row
-    assert row["ordering"] == want
+    assert row["ordering"] == {"requested": ordering, "fim": want}

@@ -13,9 +13,9 @@ from posecrb.core.errors import NotPositiveDefinite, UsageError
 from posecrb.core.graph import PoseGraph
 from posecrb.io import load
 from posecrb.lie import se as L
-from posecrb.models.thesis import example as te
-from posecrb.models.thesis.crb import sed_crb
-from posecrb.models.thesis.fim import edge_residuals, kernel_basis, left_information, sed_fim
+from posecrb.models.sed import example as te
+from posecrb.models.sed.crlb import sed_crlb
+from posecrb.models.sed.fim import edge_residuals, kernel_basis, left_information, sed_fim
 
 from .helpers import hat_ref, perturbed_graph
 from .numerics import (
@@ -210,7 +210,7 @@ def test_rank_deficiency_beyond_gauge_is_detected():
     fim = sed_fim(g, g.vertex_rot, g.vertex_trans, information=om)
     assert (fim.nullity, fim.rank_method, fim.logdet_anchored) == (2 * g.q, "dense-eig", None)
     with pytest.raises(NotPositiveDefinite):
-        sed_crb(g, g.vertex_rot, g.vertex_trans, fim=fim)
+        sed_crlb(g, g.vertex_rot, g.vertex_trans, fim=fim)
 
 
 # ------------------------------------------------------------------ CRBs
@@ -221,7 +221,7 @@ def test_anchored_crb_is_the_dense_inverse_on_free_poses(dim):
     q = g.q
     f = sed_fim(g, g.vertex_rot, g.vertex_trans).matrix.toarray()
     for anchors in (None, [1, 6], [0, 3, 5, 8]):
-        res = sed_crb(g, g.vertex_rot, g.vertex_trans, anchors=anchors, per_pose=True)
+        res = sed_crlb(g, g.vertex_rot, g.vertex_trans, anchors=anchors, per_pose=True)
         used = [0, 5] if anchors is None else anchors        # smallest index per component
         assert res.anchors == used and res.kind == "anchored" and res.model == "sed"
         free = np.setdiff1d(np.arange(g.n), used)
@@ -254,7 +254,7 @@ def test_quotient_crb_is_the_pseudoinverse(dim):
     rtol, atol = pinv_trace_rtol(f, q * c), pinv_entry_atol(f, q * c)
     blocks = dense_blocks(fp, q)
     for anchors in (None, [2, 3, 4, 6, 10]):
-        res = sed_crb(g, g.vertex_rot, g.vertex_trans, anchors=anchors, quotient=True, per_pose=[0, 4, 9, 10])
+        res = sed_crlb(g, g.vertex_rot, g.vertex_trans, anchors=anchors, quotient=True, per_pose=[0, 4, 9, 10])
         assert res.kind == "quotient" and res.nullity == q * c and res.components == c
         np.testing.assert_allclose(res.trace_crlb, np.trace(fp), rtol=rtol)
         assert res.mse_bound == pytest.approx(np.trace(fp) / (g.n - c), rel=rtol)
@@ -267,9 +267,9 @@ def test_unanchored_component_is_a_usage_error():
     rng = np.random.default_rng(5)
     g = union(sed_graph(rng, 2, n=4), sed_graph(rng, 2, n=3, extra=1))
     with pytest.raises(UsageError, match=r"component #1 \(3 poses"):
-        sed_crb(g, g.vertex_rot, g.vertex_trans, anchors=[0, 2])
+        sed_crlb(g, g.vertex_rot, g.vertex_trans, anchors=[0, 2])
     with pytest.raises(UsageError, match="out of range"):
-        sed_crb(g, g.vertex_rot, g.vertex_trans, anchors=[0, 99])
+        sed_crlb(g, g.vertex_rot, g.vertex_trans, anchors=[0, 99])
 
 
 # ------------------------------------------------------------------ indefinite information
@@ -332,11 +332,11 @@ def test_thesis_example_six_zero_eigenvalues():
     # block diagonal over the components {1,2} and {3,4,5} (sec. 6.6)
     assert np.all(f[:6, 6:] == 0)
     # the anchored bound with A = {1, 3} (sec. 6.7) and the quotient bound
-    res = sed_crb(g, rot, trans, anchors=te.ANCHORS, per_pose=True)
+    res = sed_crlb(g, rot, trans, anchors=te.ANCHORS, per_pose=True)
     dofs = np.r_[3:6, 9:15]
     f_ff = f[np.ix_(dofs, dofs)]
     np.testing.assert_allclose(res.trace_crlb, np.trace(np.linalg.inv(f_ff)), rtol=trace_inverse_rtol(f_ff))
-    qres = sed_crb(g, rot, trans, quotient=True)
+    qres = sed_crlb(g, rot, trans, quotient=True)
     np.testing.assert_allclose(qres.trace_crlb, np.trace(np.linalg.pinv(f, rcond=1e-10, hermitian=True)),
                                rtol=pinv_trace_rtol(f, 6))
     assert qres.mse_bound == pytest.approx(qres.trace_crlb / 3)
@@ -374,8 +374,8 @@ def test_real_dataset_against_dense(shared_datasets, name):
     g = load(shared_datasets / f"{name}.g2o")
     fim = sed_fim(g, g.vertex_rot, g.vertex_trans)
     assert (fim.nullity, fim.components, fim.rank_method) == (g.q, 1, "cholesky")
-    a = sed_crb(g, g.vertex_rot, g.vertex_trans, fim=fim)
-    qres = sed_crb(g, g.vertex_rot, g.vertex_trans, fim=fim, quotient=True, per_pose=[0, g.n - 1])
+    a = sed_crlb(g, g.vertex_rot, g.vertex_trans, fim=fim)
+    qres = sed_crlb(g, g.vertex_rot, g.vertex_trans, fim=fim, quotient=True, per_pose=[0, g.n - 1])
     assert 0 < qres.trace_crlb <= a.trace_crlb
     if g.n * g.q <= 1000:
         f = fim.matrix.toarray()

@@ -1,26 +1,13 @@
 """SolverOptions: the typed options of ``solve`` and its keyword form."""
 from __future__ import annotations
 
-import inspect
-
 import numpy as np
 import pytest
 
 from posecrb.core.errors import UsageError
 from posecrb.sim.generators import random_graph
 from posecrb.solver import SolverOptions, solve
-from posecrb.solver.solve import _solve
 from posecrb.solver.trust_region import TROptions
-
-
-def test_defaults_are_the_staircase_defaults():
-    # SolverOptions restates _solve's keyword defaults; a default changed on one side only would
-    # silently change what solve(graph) computes.
-    params = inspect.signature(_solve).parameters
-    opts = SolverOptions()
-    for name, value in opts.keywords().items():
-        assert params[name].default == value, name
-    assert set(opts.keywords()) == {n for n, p in params.items() if p.kind is p.KEYWORD_ONLY}
 
 
 def test_keyword_form_maps_trust_region_fields_and_rejects_unknown_names():

@@ -27,7 +27,7 @@ from typing import TextIO
 import click
 
 from .. import __version__
-from ..core.errors import PosecrbError, UsageError
+from ..core.errors import ArgumentError, PosecrbError, UsageError
 from ..core.files import Terminated, handle_sigterm, remove_temporaries
 
 log = logging.getLogger("posecrb")
@@ -202,8 +202,8 @@ def _main(argv: list[str] | None) -> int:
     except click.UsageError as exc:
         exc.show()
         return 2
-    except UsageError as exc:
-        click.echo(f"posecrb: usage error: {exc}", err=True)
+    except UsageError as exc:   # a library ArgumentError is shown with the option's name
+        click.echo(f"posecrb: usage error: {exc.cli_message() if isinstance(exc, ArgumentError) else exc}", err=True)
         return 2
     except click.Abort as exc:
         # click turns KeyboardInterrupt into Abort

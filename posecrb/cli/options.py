@@ -16,7 +16,6 @@ from ..datasets import search as datasets
 
 if TYPE_CHECKING:
     from ..core.graph import PoseGraph
-    from ..solver.estimate import Estimate
 
 log = logging.getLogger("posecrb")
 
@@ -99,11 +98,6 @@ anchor_option = click.option(
 repeat_option = click.option(
     "--repeat", type=click.IntRange(1, 1000), default=3, show_default=True,
     help="Timing: warm-up once, then the median of K runs.")
-
-
-def estimate_inputs(source: str | None) -> list[str]:
-    """The input file named by an --estimate value (none for solve/vertices/none)."""
-    return [] if source in (None, "", "solve", "vertices", "none") else [source]
 
 
 def load_dataset(name_or_path: str, data_dir: str | None = None, repeat: int = 1) -> tuple[PoseGraph, float]:
@@ -195,40 +189,3 @@ def model_settings_options(command):
     for option in (frame_option, fim_variant_option, rotation_weight_option):   # click applies bottom-up
         command = option(command)
     return command
-
-
-def resolve_model_settings(model: str, fim_variant: str | None, frame: str | None) -> tuple[str, str]:
-    """(fim_variant, frame) of ``--model`` after the checks of ``resolve_fim_variant`` and ``resolve_frame``."""
-    return resolve_fim_variant(model, fim_variant), resolve_frame(model, frame)
-
-
-def resolve_frame(model: str, frame: str | None) -> str:
-    """The frame of the numbers: ``--frame`` for sed (default world), "mixed" for the paper model."""
-    if model != "sed":
-        if frame is not None:
-            raise UsageError("--frame applies to --model sed (the paper model's coordinates are translation "
-                             "in the world frame, rotation in the body frame)")
-        return "mixed"
-    return frame or "world"
-
-
-def resolve_fim_variant(model: str, fim_variant: str | None) -> str:
-    """The paper FIM variant to use; ``--fim-variant`` with ``--model sed`` is a usage error."""
-    if fim_variant is not None and model != "paper":
-        raise UsageError("--fim-variant applies to --model paper")
-    return fim_variant or "consistent"
-
-
-def load_with_estimate(file: str, data_dir: str | None, source: str) -> tuple[PoseGraph, Estimate, dict, dict]:
-    """Graph, estimate and a JSON-ready description of the estimate plus parse/solve times."""
-    from ..solver.estimate import get_estimate  # noqa: PLC0415 -- lazy: start-up time (scipy, sksparse)
-
-    graph, t_parse = load_dataset(file, data_dir)
-    est = get_estimate(graph, source)
-    if est.certified is False:
-        log.warning("%s: the solver's estimate is NOT certified globally optimal (%s)", graph.name, est.status)
-    info = {"source": est.source, "certified": est.certified, "objective": est.objective}
-    times = {"parse": t_parse}
-    if est.solve_time is not None:
-        times["solve"] = est.solve_time
-    return graph, est, info, times

@@ -4,6 +4,7 @@
 
     PosecrbError
     ├── UsageError (also a ValueError)   an argument the caller can fix
+    │   └── ArgumentError                one named argument: ``anchor=5 is not a pose id of g.g2o``
     ├── ParseError                       file:line and reason
     ├── DatasetNotFound
     ├── NumericalError
@@ -22,10 +23,43 @@ from dataclasses import dataclass
 
 
 class PosecrbError(Exception):
-    """Base class: a data or solver error (exit code 1)."""
+    """Base class of every error posecrb raises on purpose (a data, solver or usage error).
+
+    The command line exits 1 for it (2 for a ``UsageError``). A bug is anything else.
+
+    Examples
+    --------
+    >>> import posecrb
+    >>> try:
+    ...     posecrb.load("no-such-dataset")
+    ... except posecrb.PosecrbError as exc:
+    ...     print(type(exc).__name__)
+    DatasetNotFound
+    """
 
 
 class ParseError(PosecrbError):
+    """A file cannot be read, or its content is malformed: ``path:line: reason``.
+
+    Attributes
+    ----------
+    path : str
+        The file (``"<string>"`` for ``posecrb.parse``).
+    line : int or None
+        The 1-based line, when the error has one.
+    reason : str
+        What is wrong.
+
+    Examples
+    --------
+    >>> import posecrb
+    >>> try:
+    ...     posecrb.parse("EDGE_SE2 0 1 1 0\\n")
+    ... except posecrb.ParseError as exc:
+    ...     print(exc.path, exc.line)
+    <string> 1
+    """
+
     def __init__(self, path: str, line: int | None, reason: str):
         self.path, self.line, self.reason = str(path), line, reason
         where = f"{self.path}:{line}" if line is not None else self.path
@@ -33,6 +67,26 @@ class ParseError(PosecrbError):
 
 
 class DatasetNotFound(PosecrbError):
+    """A bare dataset name found nowhere on the search path; the message lists the directories
+    searched and how to fetch the dataset.
+
+    Attributes
+    ----------
+    name : str
+        The name asked for.
+    searched : list of str
+        The directories searched.
+
+    Examples
+    --------
+    >>> import posecrb
+    >>> try:
+    ...     posecrb.load("no-such-dataset")
+    ... except posecrb.DatasetNotFound as exc:
+    ...     print(exc.name)
+    no-such-dataset
+    """
+
     def __init__(self, name: str, searched: list[str]):
         self.name, self.searched = name, searched
         hint = "; searched: " + ", ".join(searched) if searched else ""
@@ -43,13 +97,75 @@ class DatasetNotFound(PosecrbError):
 
 
 class UsageError(PosecrbError, ValueError):
-    """A usage error the library detects (exit code 2), e.g. an anchor id not in the graph.
+    """A request that cannot be honoured as asked (exit code 2 on the command line).
 
-    Also a ValueError, so library callers that catch ValueError for a bad argument keep working."""
+    Also a ``ValueError``, so that code catching ``ValueError`` for a bad argument catches it.
+
+    Examples
+    --------
+    >>> import posecrb
+    >>> issubclass(posecrb.UsageError, ValueError)
+    True
+    """
+
+
+class ArgumentError(UsageError):
+    """One argument of a library call is wrong; the message names it in Python terms.
+
+    ``str(exc)`` is ``parameter=value`` followed by the reason, e.g.
+    ``anchor=5 is not a pose id of shifted.g2o (ids 100..1827)``. The command line shows the
+    same error with its option instead (``--anchor 5 is not a pose id ...``, ``cli_message``):
+    library keywords are the command-line options in snake_case.
+
+    Parameters
+    ----------
+    parameter : str
+        The keyword (or positional parameter) of the library call.
+    value : object
+        The value given.
+    reason : str
+        What is wrong with it, as a predicate (``"is not a pose id of g.g2o"``) or, with
+        ``sep=": "``, a sentence.
+    sep : str
+        What separates ``parameter=value`` from ``reason``.
+
+    Examples
+    --------
+    >>> import posecrb
+    >>> exc = posecrb.ArgumentError("anchor", 5, "is not a pose id of shifted.g2o")
+    >>> str(exc)
+    'anchor=5 is not a pose id of shifted.g2o'
+    >>> exc.cli_message()
+    '--anchor 5 is not a pose id of shifted.g2o'
+    >>> isinstance(exc, posecrb.UsageError)
+    True
+    """
+
+    def __init__(self, parameter: str, value: object, reason: str, *, sep: str = " "):
+        self.parameter, self.value, self.reason, self.sep = parameter, value, reason, sep
+        super().__init__(f"{parameter}={value!r}{sep}{reason}")
+
+    def cli_message(self) -> str:
+        """The message with the command-line spelling: ``--max-iter 0 ...`` for ``max_iter=0``;
+        ``source`` (the file argument) as ``FILE``."""
+        if self.parameter == "source":
+            return f"FILE {self.value}{self.sep}{self.reason}"
+        flag = "--" + self.parameter.replace("_", "-")
+        if isinstance(self.value, bool):   # a flag: given or not
+            return f"{flag}{self.sep}{self.reason}"
+        shown = " ".join(map(str, self.value)) if isinstance(self.value, (list, tuple)) else str(self.value)
+        return f"{flag} {shown}{self.sep}{self.reason}"
 
 
 class NumericalError(PosecrbError):
-    """A computation that cannot give a trustworthy number (reported, never a silent value)."""
+    """A computation that cannot give a trustworthy number (reported, never a silent value).
+
+    Examples
+    --------
+    >>> import posecrb
+    >>> issubclass(posecrb.NotPositiveDefinite, posecrb.NumericalError)
+    True
+    """
 
 
 class InternalError(RuntimeError):
@@ -57,7 +173,23 @@ class InternalError(RuntimeError):
 
 
 class NotPositiveDefinite(NumericalError):
-    """A matrix that must be symmetric positive definite is not (reported, never a silent NaN)."""
+    """A matrix that must be symmetric positive definite is not (reported, never a silent NaN).
+
+    Attributes
+    ----------
+    matrix : str
+        Which matrix (``"paper FIM"``, ``"reduced rotation Laplacian L_w"``, ...).
+    reason : str
+        What the factorization found.
+    column : int or None
+        The column where the Cholesky pivot failed.
+
+    Examples
+    --------
+    >>> import posecrb
+    >>> str(posecrb.NotPositiveDefinite("paper FIM", "a zero pivot", 4))
+    'paper FIM is not positive definite (pivot failed at column 4): a zero pivot'
+    """
 
     def __init__(self, matrix: str, reason: str, column: int | None = None):
         self.matrix, self.reason, self.column = matrix, reason, column
@@ -72,6 +204,27 @@ class ComponentSummary:
 
 
 class DisconnectedGraph(PosecrbError):
+    """An anchored quantity asked of a disconnected graph; the message gives each component's
+    size and some of its pose ids.
+
+    Attributes
+    ----------
+    path : str or None
+        The graph's file.
+    components : list of ComponentSummary
+        Size and sample ids of each component, largest first.
+
+    Examples
+    --------
+    >>> import posecrb
+    >>> g = posecrb.parse("EDGE_SE2 0 1 1 0 0 1 0 0 1 0 1\\nEDGE_SE2 2 3 1 0 0 1 0 0 1 0 1\\n")
+    >>> try:
+    ...     posecrb.bounds(g)
+    ... except posecrb.DisconnectedGraph as exc:
+    ...     print([c.size for c in exc.components])
+    [2, 2]
+    """
+
     def __init__(self, path: str | None, components: list[ComponentSummary]):
         self.path, self.components = path, components
         parts = "; ".join(
@@ -88,7 +241,15 @@ class DisconnectedGraph(PosecrbError):
 
 
 class SolverError(PosecrbError):
-    """The solver could not produce a certified estimate."""
+    """The solver could not produce a certified estimate (the command line's exit 1 for ``solve``;
+    the library returns the uncertified ``SolveResult`` with a warning status instead).
+
+    Examples
+    --------
+    >>> import posecrb
+    >>> issubclass(posecrb.SolverError, posecrb.PosecrbError)
+    True
+    """
 
 
 def status_of(exc: BaseException) -> str:

@@ -13,8 +13,10 @@ from functools import cached_property
 
 import numpy as np
 
-from .errors import ComponentSummary, DisconnectedGraph, UsageError
+from .errors import ArgumentError, ComponentSummary, DisconnectedGraph, UsageError
 from .noise import isotropic_precisions, rotation_weight
+
+_INT64_MAX = 2 ** 63 - 1
 
 
 def connected_components(n: int, src: np.ndarray, dst: np.ndarray) -> tuple[int, np.ndarray]:
@@ -72,6 +74,42 @@ class PoseDimensions:
 
 @dataclass(frozen=True, eq=False)
 class PoseGraph(PoseDimensions):
+    """A pose graph: relative-pose measurements as edge arrays over poses 0..n-1.
+
+    The measurement on edge k is the relative pose ``X_i^{-1} X_j`` of its ends
+    i = ``src[k]``, j = ``dst[k]`` (g2o and SE-Sync convention): rotation ``rot[k]`` and
+    translation ``trans[k]`` in frame i, in the file's length units, with the information
+    matrix ``info[k]`` in g2o order (translation block first). Poses are numbered by their ids'
+    order: ``ids[k]`` is the id, as in the file, of internal pose k. Every public function takes
+    and reports ids; ``index_of`` maps an id to its index.
+
+    Read one with ``posecrb.load`` or ``posecrb.parse``.
+
+    Attributes
+    ----------
+    dim : int
+        d = 2 or 3.
+    ids : numpy.ndarray
+        (n,) pose ids, increasing.
+    src, dst : numpy.ndarray
+        (m,) internal indices of each edge's ends.
+    rot, trans, info : numpy.ndarray
+        (m, d, d) measured rotations, (m, d) translations, (m, q, q) information matrices.
+    vertex_rot, vertex_trans : numpy.ndarray or None
+        The file's VERTEX poses, if any (an estimate).
+    path, format, sha256 : str or None
+        The file read, its format (``"g2o"``, ``"toro"``) and the sha256 of its bytes.
+
+    Examples
+    --------
+    >>> import posecrb
+    >>> g = posecrb.load("intel")
+    >>> g.n, g.m, g.n_components, g.has_vertices
+    (1728, 2512, 1, True)
+    >>> g.index_of(5)
+    5
+    """
+
     dim: int                                # d = 2 or 3
     ids: np.ndarray                         # (n,) original vertex ids, increasing; index = internal id
     src: np.ndarray                         # (m,) internal index of i
@@ -86,6 +124,7 @@ class PoseGraph(PoseDimensions):
     skipped: dict[str, int] = field(default_factory=dict)
     edge_lines: np.ndarray | None = None    # (m,) 1-based line numbers of the edges in the file
     sha256: str | None = None               # of the file's bytes, for reproducibility records
+    quaternions: str = "normalize"          # how the reader took 3D edge quaternions (posecrb.io.load)
 
     # ---- sizes -------------------------------------------------------------
     @property
@@ -163,10 +202,19 @@ class PoseGraph(PoseDimensions):
         return np.bincount(self.src, minlength=self.n) + np.bincount(self.dst, minlength=self.n)
 
     # ---- ids ---------------------------------------------------------------
-    def index_of(self, vertex_id: int) -> int:
-        k = int(np.searchsorted(self.ids, vertex_id))
+    def index_of(self, vertex_id: int, parameter: str = "pose") -> int:
+        """Internal index of the pose whose id (as in the file) is ``vertex_id``.
+
+        Raises ``ArgumentError`` naming ``parameter`` (``anchor=5 is not a pose id of g.g2o``)
+        unless ``vertex_id`` is an integer (not a bool, not a float) that is a pose id."""
+        if isinstance(vertex_id, (bool, np.bool_)) or not isinstance(vertex_id, (int, np.integer)):
+            raise ArgumentError(parameter, vertex_id, "is not a pose id (an integer)")
+        vertex_id = int(vertex_id)
+        where = os.path.basename(self.path) if self.path else "the graph"
+        k = int(np.searchsorted(self.ids, vertex_id)) if 0 <= vertex_id <= _INT64_MAX else self.n
         if k >= self.n or self.ids[k] != vertex_id:
-            raise UsageError(f"pose id {vertex_id} is not in the graph (ids range {self.ids[0]}..{self.ids[-1]})")
+            raise ArgumentError(parameter, vertex_id,
+                                f"is not a pose id of {where} (ids {self.ids[0]}..{self.ids[-1]})")
         return k
 
     def check_estimate(self, rot: np.ndarray, trans: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -182,9 +230,10 @@ class PoseGraph(PoseDimensions):
             raise UsageError("the estimate has non-finite values")
         return rot, trans
 
-    def anchor_index(self, anchor_id: int | None) -> int:
-        """Internal index of the anchor; default the smallest id (docs/design.md#anchor)."""
-        return 0 if anchor_id is None else self.index_of(anchor_id)
+    def anchor_index(self, anchor_id: int | None, parameter: str = "anchor") -> int:
+        """Internal index of the anchor, a pose id (``index_of``); default the smallest id
+        (docs/design.md#anchor)."""
+        return 0 if anchor_id is None else self.index_of(anchor_id, parameter)
 
     def with_vertices(self, rot: np.ndarray, trans: np.ndarray) -> PoseGraph:
         """The same measurements with another estimate attached."""

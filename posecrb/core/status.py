@@ -14,7 +14,9 @@ together with a ``Status``. It is rendered the same way everywhere (``posecrb.re
 from __future__ import annotations
 
 import logging
+from collections.abc import Mapping
 from dataclasses import dataclass
+from typing import Any
 
 from .errors import InternalError
 
@@ -23,8 +25,30 @@ STATES = ("ok", "warning", "unavailable")
 
 @dataclass(frozen=True)
 class Status:
-    """``state`` is one of ``STATES``; ``reason`` says why (which quantity, what went wrong);
-    ``hint`` says what the user can do about it."""
+    """The status of a computed number: ok, a warning, or unavailable, with its reason.
+
+    Every result's ``status`` is one of these (the most severe of its numbers'); in the JSON a
+    number that is not ok carries ``<key>_status`` = ``as_json()``, and an unavailable number is
+    ``null``.
+
+    Parameters
+    ----------
+    state : {"ok", "warning", "unavailable"}
+        How far the number can be trusted.
+    reason : str, optional
+        Why (required unless ok): which quantity, what went wrong.
+    hint : str, optional
+        What the user can do about it.
+
+    Examples
+    --------
+    >>> import posecrb
+    >>> st = posecrb.Status.warning("lambda_min(L_w) is only known to lie in [0.1, 0.2]")
+    >>> st.ok, st.available, st.as_json()["status"]
+    (False, True, 'warning')
+    >>> posecrb.Status.from_json(st.as_json()) == st
+    True
+    """
 
     state: str = "ok"
     reason: str | None = None
@@ -52,14 +76,15 @@ class Status:
     def available(self) -> bool:
         return self.state != "unavailable"
 
-    def as_json(self) -> dict:
-        out: dict = {"status": self.state, "reason": self.reason}
+    def as_json(self) -> dict[str, Any]:
+        """``{"status": state, "reason": ...[, "hint": ...]}``: how every JSON output writes it."""
+        out: dict[str, Any] = {"status": self.state, "reason": self.reason}
         if self.hint:
             out["hint"] = self.hint
         return out
 
     @classmethod
-    def from_json(cls, d: dict) -> Status:
+    def from_json(cls, d: Mapping[str, Any]) -> Status:
         """The inverse of ``as_json`` (rows carry statuses in that form across processes)."""
         return cls(d["status"], d.get("reason"), d.get("hint"))
 
@@ -83,7 +108,7 @@ def worst(*statuses: Status) -> Status:
     return best
 
 
-def put(row: dict, key: str, value: object, status: Status) -> None:
+def put(row: dict[str, Any], key: str, value: object, status: Status) -> None:
     """``row[key] = value`` (None when unavailable) plus ``row[key + "_status"]`` unless ok."""
     row[key] = value if status.available else None
     if not status.ok:
@@ -94,3 +119,9 @@ def log_status(logger: logging.Logger, quantity: str, status: Status) -> None:
     """One stderr line for a status that is not ok (warning level for both kinds)."""
     if not status.ok:
         logger.warning("%s", status.message(quantity))
+
+
+def log_statuses(logger: logging.Logger, name: str, statuses: Mapping[str, Status]) -> None:
+    """``log_status`` for each of a result's ``statuses()``, the quantity prefixed by ``name``."""
+    for quantity, status in statuses.items():
+        log_status(logger, f"{name}: {quantity}", status)

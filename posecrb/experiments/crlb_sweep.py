@@ -212,7 +212,7 @@ def _bounds(graph: PoseGraph, rot: np.ndarray, trans: np.ndarray, anchor: int, k
     curv = res.trace_crlb_curvature if graph.dim == 3 else None
     out["mse_bound_curvature"] = None if curv is None else float(curv) / n_p
     out["curvature_status"] = None if res.curvature_status.ok else res.curvature_status.as_json()
-    out["accuracy"] = None if res.accuracy is None else res.accuracy.as_json()
+    out["accuracy"] = None if res.accuracy is None else res.accuracy.to_dict()
     return out
 
 

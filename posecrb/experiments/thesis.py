@@ -1,7 +1,7 @@
 """The thesis's chapter 6 case study: empirical covariance of the intrinsic MLE vs the
 anchored and quotient intrinsic CRBs on SE(2)^5 (Bertini, sections 6.1-6.7).
 
-Setting (``posecrb.models.thesis.example``): five poses, six directed arcs forming two
+Setting (``posecrb.models.sed.example``): five poses, six directed arcs forming two
 components {1, 2} and {3, 4, 5}, heteroscedastic left noise ``H = Exp(xi) T_i T_j^{-1}``,
 ``xi ~ N(0, Sigma_ij)`` (4.3), ``m`` i.i.d. measurements per arc (4.10), so
 ``F_m = m F_1`` (4.12) with ``F_1`` the FIM (4.6) at the truth (nullity 6 = 3 c).
@@ -11,7 +11,7 @@ Per trial and per m:
 * anchored MLE (5.7): poses 1 and 3 fixed at the truth, the others estimated by
   Levenberg-Marquardt on SE(2) with the analytic Jacobians (4.7)
   ``J_i = -Jr^{-1}(r) Ad_{T_i}``, ``J_j = Jr^{-1}(r) Ad_{T_i}`` (closed-form right Jacobians,
-  ``posecrb.models.thesis.fim.edge_kinematics``), right-perturbation updates ``T_k <- T_k Exp(delta_k)``,
+  ``posecrb.models.sed.fim.edge_kinematics``), right-perturbation updates ``T_k <- T_k Exp(delta_k)``,
   started from the measurements composed along each component (not from the truth);
 * intrinsic error ``delta_k = Log(T_true_k^{-1} T_est_k)``: the coordinates of the
   FIM's right perturbation ``T_k Exp(delta)``;
@@ -40,8 +40,8 @@ import numpy as np
 from ..core.errors import UsageError
 from ..core.graph import PoseGraph
 from ..lie.se import se_compose, se_exp, se_inverse, se_jr_inv, se_log
-from ..models.thesis.example import ANCHORS, left_information, sample_graph, thesis_graph, true_estimate, true_poses
-from ..models.thesis.fim import edge_kinematics, kernel_basis, sed_fim
+from ..models.sed.example import ANCHORS, left_information, sample_graph, thesis_graph, true_estimate, true_poses
+from ..models.sed.fim import edge_kinematics, kernel_basis, sed_fim
 from ..sim.montecarlo import Task, make_tasks, run_tasks
 
 DEFAULT_M = (1, 2, 5, 10, 20, 50, 100, 150)

@@ -5,8 +5,8 @@
 (the registry, ``load``, ``save``), ``g2o`` and ``toro`` (record tables, field decoders,
 writers), ``reader`` (the format-independent checks), ``text`` (lines, fields, numbers, limits;
 a vectorised tokeniser and the reference one), ``records`` (what a format is), ``rotations``
-(quaternions, Euler angles), ``npz`` (a FIM as scipy sparse). Every file posecrb writes goes
-through ``posecrb.core.files.atomic_write``.
+(quaternions, Euler angles). Every file posecrb writes goes through
+``posecrb.core.files.atomic_write``.
 """
 from ..core.files import atomic_write, check_output_dir, check_output_file, read_regular_file
 from .formats import FORMATS, QUATERNION_MODES, format_for_path, load, parse_bytes, parse_text, save

@@ -13,7 +13,7 @@ import os
 
 import numpy as np
 
-from ..core.errors import UsageError
+from ..core.errors import ArgumentError, UsageError
 from ..core.files import read_regular_file
 from ..core.graph import PoseGraph
 from .g2o import G2O
@@ -67,6 +67,8 @@ def parse_bytes(data: bytes, path: str = "<string>", sha256: str | None = None,
 def parse_text(text: str, path: str = "<string>", sha256: str | None = None,
                quaternions: str = "normalize") -> PoseGraph:
     """Parse the content of a g2o/TORO file (see ``load``, also for ``quaternions``)."""
+    if not isinstance(text, str):
+        raise ArgumentError("text", type(text).__name__, "is not str (a file's bytes go to parse_bytes)", sep=": ")
     if text.isascii():
         try:
             return parse(scan_bytes(text.encode("ascii")), FORMATS, path, sha256, quaternions)

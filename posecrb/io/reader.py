@@ -195,7 +195,7 @@ def parse(tokens: Tokens, formats: Mapping[str, Format], path: str = "<string>",
     graph = PoseGraph(
         dim=erec.dim, ids=ids, src=np.searchsorted(ids, ei), dst=np.searchsorted(ids, ej),
         rot=erot, trans=etrans, info=einfo, vertex_rot=vertex_rot, vertex_trans=vertex_trans,
-        path=path, format=erec.family, skipped=skipped, edge_lines=e_lines, sha256=sha256,
+        path=path, format=erec.family, skipped=skipped, edge_lines=e_lines, sha256=sha256, quaternions=quaternions,
     )
     graph.__dict__["_precisions"] = precisions   # seed the cached (tau, kappa): computed and checked above
     return graph

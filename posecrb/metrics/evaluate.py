@@ -1,8 +1,8 @@
 """The one pipeline behind ``bounds``, ``tables`` and ``regress``: graph -> bounds -> estimate ->
 paper FIM -> log-det (docs/design.md#tables, timing regions as in #timing-protocol).
 
-Each command renders its own row from the ``DatasetMetrics`` (its keys are unchanged); the
-numbers come from here only.
+``posecrb.bounds`` builds its ``BoundsResult`` from the ``DatasetMetrics``, ``tables`` and
+``regress`` their rows; the numbers come from here only.
 """
 from __future__ import annotations
 
@@ -13,8 +13,8 @@ from typing import Any
 from ..core.errors import PosecrbError
 from ..core.graph import PoseGraph
 from ..core.timing import timed
-from ..models.paper.bounds import BoundsResult, compute_bounds
-from ..models.paper.fim import PaperFim, fim_symbolic_choice, paper_fim, trace_fim
+from ..models.paper.bounds import GraphBounds, compute_bounds
+from ..models.paper.fim import PaperFim, fim_symbolic_choice, paper_fim
 from ..solver.estimate import Estimate, get_estimate
 
 
@@ -41,7 +41,7 @@ class DatasetMetrics:
     after the bounds (only with ``errors="keep"``)."""
 
     graph: PoseGraph
-    bounds: BoundsResult
+    bounds: GraphBounds
     estimate: Estimate | None = None
     fim: PaperFim | None = None
     fim_logdet: float | None = None
@@ -50,29 +50,12 @@ class DatasetMetrics:
     ordering: dict[str, str] = field(default_factory=dict)   # orderings used: lb, ub (bounds), fim
 
 
-    def to_row(self, times: Mapping[str, float] | None = None) -> dict:
-        """The ``bounds`` command's row: the graph, ``BoundsResult.to_row()``, the times (``times``
-        first, e.g. the parse time, then the bounds', the FIM's and the solve's) and, when an
-        estimate was evaluated, the FIM log-det, trace (eq. 69/70) and variant, the estimate's source,
-        certificate and objective; ``status`` is ``"uncertified"`` when the solver did not certify."""
-        g, b = self.graph, self.bounds
-        row: dict = {"dataset": g.name, "path": g.path, "sha256": g.sha256, "dim": g.dim, "poses": g.n,
-                     "edges": g.m, "components": g.n_components, **b.to_row(),
-                     "times": {**(times or {}), **b.times}}
-        if self.estimate is not None and self.fim is not None:
-            est, fim = self.estimate, self.fim
-            row.update(fim_logdet=self.fim_logdet, trace_fim=trace_fim(fim), fim_variant=fim.variant,
-                       estimate={"source": est.source, "certified": est.certified, "objective": est.objective})
-            row["times"].update(fim_build=self.times["fim_build"], fim_logdet=self.times["fim_logdet"],
-                                solve=est.solve_time)
-            if est.certified is False:
-                row["status"] = "uncertified"
-        return row
-
-
 def evaluate(graph: PoseGraph, settings: EvaluationSettings, *, step: Callable[[str], None] | None = None,
-             errors: str = "raise") -> DatasetMetrics:
+             errors: str = "raise", estimate: Estimate | None = None) -> DatasetMetrics:
     """Bounds (section VII-B), the estimate, the anchored paper FIM there and its log-det.
+
+    ``estimate``: poses to evaluate at instead of ``settings.estimate``'s (posecrb.bounds with an
+    estimate object).
 
     ``step`` is told each stage's name ("bounds", "solve", "fim") before it starts.
     ``errors="keep"``: a PosecrbError after the bounds ends the pipeline and is returned in
@@ -82,12 +65,12 @@ def evaluate(graph: PoseGraph, settings: EvaluationSettings, *, step: Callable[[
     b = compute_bounds(graph, settings.anchor, settings.rotation_model, settings.repeat,
                        ordering=settings.ordering)
     used = dict(b.ordering)
-    if settings.estimate == "none":
+    if settings.estimate == "none" and estimate is None:
         return DatasetMetrics(graph=graph, bounds=b, ordering=used)
     est: Estimate | None = None
     try:
         say("solve")
-        est = get_estimate(graph, settings.estimate, **settings.solver)
+        est = estimate if estimate is not None else get_estimate(graph, settings.estimate, **settings.solver)
         say("fim")
         fim, t_build = timed(lambda: paper_fim(graph, est.rot, est.trans, settings.anchor, settings.rotation_model,
                                                variant=settings.fim_variant), settings.repeat)

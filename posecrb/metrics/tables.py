@@ -273,7 +273,7 @@ def failed(rows: Iterable[dict], requested: Sequence[str] | None) -> list[dict]:
 
 
 # ---- reproducibility record ------------------------------------------------------------
-def run_record(settings: TableSettings, rows: list[dict], argv: Sequence[str] | None = None) -> dict:
+def tables_run_record(settings: TableSettings, rows: list[dict], argv: Sequence[str] | None = None) -> dict:
     """The run record of ``tables --out`` (``posecrb.core.provenance.run_record``, one schema for
     every run.json): versions, machine, settings, the solver's seed and every dataset's sha256."""
     statuses: dict[str, int] = {}

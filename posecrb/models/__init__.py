@@ -1,231 +1,166 @@
-"""The two models behind one call: ``fisher_information(graph, rot, trans, model=...)``.
+"""The two models behind one call each: ``model_fim`` and ``model_crlb`` at an estimate.
 
-``"paper"``: Chen et al.'s anchored FIM on (R^d x SO(d))^n (docs/design.md#paper-fim); ``"sed"``:
-the thesis's FIM on SE(d)^n (docs/design.md#thesis-fim), in world or body coordinates
-(docs/design.md#frames). The result holds what ``posecrb fim`` prints (``to_row``) and the matrix
-with its index map (``save``).
+``"paper"``: Chen et al.'s anchored FIM on (R^d x SO(d))^n (docs/design.md#paper-fim) and its CRLB
+(docs/design.md#crlb); ``"sed"``: the thesis's FIM on SE(d)^n (docs/design.md#thesis-fim) and its
+anchored or quotient CRLB (docs/design.md#anchored-crb), in world or body coordinates
+(docs/design.md#frames). Both return the public results of ``posecrb.models.results``; anchors and
+per-pose requests are pose ids here, internal indices below.
 """
 from __future__ import annotations
 
-import logging
 import time
 from collections.abc import Sequence
-from dataclasses import dataclass, field
-from typing import Any
 
 import numpy as np
 
-from ..core.errors import UsageError
+from ..core.errors import ArgumentError
 from ..core.graph import PoseGraph
-from ..core.status import OK, Status, log_status, put
-from ..io.npz import save_npz
+from ..core.status import OK, Status
 from ..linalg.cholesky import anchored_logdet
 from ..linalg.ordering import resolve_ordering
+from ..solver.estimate import Estimate
 from .paper.bounds import t_optimality
-from .paper.crlb import CrlbResult, InverseAccuracy, paper_crlb
+from .paper.crlb import InverseAccuracy, PaperCrlb, paper_crlb
 from .paper.fim import fim_symbolic_choice, paper_fim, trace_fim
-from .thesis.crb import SedCrbResult
-from .thesis.fim import sed_fim
-from .thesis.frames import convert_information, coordinate_names, coordinates_description, sed_crb_in_frame
-
-log = logging.getLogger("posecrb")
+from .results import CrlbResult, FimResult
+from .sed.crlb import SedCrlb
+from .sed.fim import sed_fim
+from .sed.frames import convert_information, coordinate_names, coordinates_description, sed_crlb_in_frame
 
 MODELS = ("paper", "sed")
 
 
-@dataclass(frozen=True, kw_only=True)
-class FisherInformation:
-    """The FIM of one model at an estimate, with the numbers ``posecrb fim`` reports."""
-
-    model: str
-    matrix: Any                      # scipy sparse, the saved matrix (sed: in ``frame`` coordinates)
-    row_ids: np.ndarray              # pose id of every row
-    row_coord: np.ndarray            # index into ``coordinate_names`` of every row
-    coordinate_names: list[str]
-    frame: str                       # "mixed" (paper), "world" or "body" (sed)
-    anchors: list[int]               # anchored pose ids (the log-det's)
-    layout: str
-    logdet: float | None
-    logdet_status: Status = OK
-    trace: float
-    rank: int
-    nullity: int
-    expected_nullity: int | None = None      # sed only
-    t_opt_approx: float | None = None        # paper only (eq. 72)
-    rotation_weight: str | None = None       # paper only
-    fim_variant: str | None = None           # paper only
-    times: dict[str, float] = field(default_factory=dict)
-    ordering: str = ""                       # the log-det factorization's ordering (posecrb.linalg.ordering)
-
-    def to_row(self) -> dict:
-        """The model's part of the ``fim`` row (keys and order of the command's JSON)."""
-        row: dict = {"anchors": self.anchors, "layout": self.layout, "size": int(self.matrix.shape[0]),
-                     "nnz": int(self.matrix.nnz)}
-        if self.model == "paper":
-            row.update({"logdet": self.logdet, "trace": self.trace, "t_opt_approx": self.t_opt_approx,
-                        "rank": self.rank, "nullity": self.nullity, "rotation_weight": self.rotation_weight,
-                        "fim_variant": self.fim_variant})
-        else:
-            put(row, "logdet", self.logdet, self.logdet_status)
-            row.update({"trace": self.trace, "rank": self.rank, "nullity": self.nullity,
-                        "expected_nullity": self.expected_nullity})
-        return row
-
-    def save(self, path: str) -> str:
-        """The matrix and its index map as a scipy sparse .npz (``posecrb.io.npz``); the path written."""
-        return save_npz(path, self.matrix, self.row_ids, self.row_coord, self.coordinate_names, self.model,
-                        self.anchors, **({} if self.model == "paper" else {"frame": self.frame}))
+def _graph_keys(graph: PoseGraph, model: str) -> dict[str, object]:
+    return {"dataset": graph.name, "model": model, "dim": graph.dim, "poses": graph.n, "edges": graph.m,
+            "components": graph.n_components}
 
 
-def fisher_information(graph: PoseGraph, rot: np.ndarray, trans: np.ndarray, *, model: str = "paper",
-                       anchor_id: int | None = None, rotation_model: str = "eq59", variant: str = "consistent",
-                       frame: str = "world", ordering: str = "auto") -> FisherInformation:
-    """The Fisher information of ``model`` at the estimate (rot, trans).
+def model_fim(graph: PoseGraph, estimate: Estimate, *, model: str = "paper", anchor: int | None = None,
+              rotation_weight: str = "eq59", fim_variant: str = "consistent", frame: str = "world",
+              ordering: str = "auto") -> FimResult:
+    """The Fisher information of ``model`` at ``estimate`` (its ``rot`` and ``trans``).
 
-    paper: anchored at ``anchor_id`` (default the smallest id), eq. (42)/(64), log-det and trace
-    (eq. 69/70) and eq. (72)'s approximation. sed: the whole FIM (4.6) in ``frame``, its rank and
-    nullity (Th. 4.8.1) and the log-det with one anchor per component (or ``anchor_id`` on a
-    connected graph; several components with an anchor is a UsageError)."""
-    if model not in MODELS:
-        raise UsageError(f"model must be one of {MODELS}, got {model!r}")
+    paper: anchored at the pose id ``anchor`` (default the smallest id), eq. (42)/(64), log-det and
+    trace (eq. 69/70) and eq. (72)'s approximation. sed: the whole FIM (4.6) in ``frame``, its rank
+    and nullity (Th. 4.8.1) and the log-det with one anchor per component (or ``anchor`` on a
+    connected graph; several components with an anchor is an ArgumentError)."""
+    if not estimate.has_poses:
+        raise ArgumentError("estimate", f"Estimate from {estimate.source}", "carries no poses", sep=": ")
+    rot, trans = estimate.rot, estimate.trans
     if model == "paper":
-        anchor = graph.anchor_index(anchor_id)
-        fim = paper_fim(graph, rot, trans, anchor=anchor, rotation_model=rotation_model, variant=variant)
+        idx = graph.anchor_index(anchor)
+        fim = paper_fim(graph, rot, trans, anchor=idx, rotation_model=rotation_weight, variant=fim_variant)
         times = {"fim_build": fim.build_time}
         t0 = time.perf_counter()
         sym, choice = fim_symbolic_choice(fim, ordering)
         ld: float | None = sym.factor_logdet(fim.matrix, name="paper FIM")[1]
         times["fim_logdet"] = time.perf_counter() - t0
         ids, coord = fim.index_map()
-        return FisherInformation(model="paper", matrix=fim.matrix, row_ids=ids, row_coord=coord,
-                                 coordinate_names=fim.coordinate_names(), frame="mixed", anchors=[fim.anchor_id],
-                                 layout=fim.layout, logdet=ld, trace=trace_fim(fim), rank=fim.size, nullity=0,
-                                 t_opt_approx=t_optimality(graph, anchor, rotation_model)[1],
-                                 rotation_weight=rotation_model, fim_variant=fim.variant, times=times,
-                                 ordering=str(choice))
+        return FimResult(**_graph_keys(graph, model), anchors=[fim.anchor_id], layout=fim.layout,  # type: ignore[arg-type]
+                         size=fim.size, nnz=fim.nnz, logdet=ld, trace=trace_fim(fim),
+                         t_opt_approx=t_optimality(graph, idx, rotation_weight)[1], rank=fim.size, nullity=0,
+                         rotation_weight=rotation_weight, fim_variant=fim.variant,
+                         ordering={"requested": ordering, "fim": str(choice)}, frame="mixed",
+                         coordinates_description=coordinates_description(graph.dim, "mixed"), estimate=estimate,
+                         times=times, matrix=fim.matrix, row_ids=ids, row_coord=coord,
+                         coordinate_names=fim.coordinate_names())
+    if model != "sed":
+        raise ArgumentError("model", model, f"is not one of {', '.join(MODELS)}")
     sfim = sed_fim(graph, rot, trans, ordering=ordering)
     times = dict(sfim.times)
-    # log-det, rank and nullity are the same in both frames (det B_i = +-1, posecrb.models.thesis.frames)
+    # log-det, rank and nullity are the same in both frames (det B_i = +-1, posecrb.models.sed.frames)
     matrix = sfim.matrix if frame == "world" else convert_information(sfim.matrix, rot, trans, "body")
-    if anchor_id is not None:
+    status = OK
+    if anchor is not None:
         if graph.n_components > 1:
-            raise UsageError("--anchor with --model sed needs a connected graph "
-                             "(`posecrb crlb --anchor` takes one anchor per component)")
-        anchors = [graph.anchor_index(anchor_id)]
+            raise ArgumentError("anchor", anchor, f"is one anchor for a graph of {graph.n_components} components; "
+                                "the sed model's log-det takes the default anchors (the smallest id of each "
+                                "component)")
+        anchors = [graph.anchor_index(anchor)]
         t0 = time.perf_counter()
-        ld = anchored_logdet(sfim.matrix, sfim.q, anchors, "SE(d) FIM on the free poses",
-                                ordering=ordering, dim=graph.dim)
+        ld = anchored_logdet(sfim.matrix, sfim.q, anchors, "SE(d) FIM on the free poses", ordering=ordering,
+                             dim=graph.dim)
         times["fim_logdet"] = time.perf_counter() - t0
-        status = OK
     else:
         anchors, ld, status = list(sfim.anchors), sfim.logdet_anchored, sfim.logdet_status
-        log_status(log, f"{graph.name}: log det of the SE(d) FIM", status)
     names = coordinate_names(graph.dim, frame)
     layout = "poses (rotation first)" if frame == "world" else f"poses (GTSAM order: {', '.join(names)})"
-    return FisherInformation(model="sed", matrix=matrix, row_ids=np.repeat(graph.ids, sfim.q),
-                             row_coord=np.tile(np.arange(sfim.q), graph.n), coordinate_names=names, frame=frame,
-                             anchors=[int(graph.ids[a]) for a in anchors], layout=layout, logdet=ld,
-                             logdet_status=status, trace=float(matrix.diagonal().sum()), rank=sfim.rank,
-                             nullity=sfim.nullity, expected_nullity=sfim.q * sfim.components, times=times,
-                             ordering=str(resolve_ordering(ordering, dim=graph.dim, poses=graph.n, matrix="fim")))
+    used = resolve_ordering(ordering, dim=graph.dim, poses=graph.n, matrix="fim")
+    return FimResult(**_graph_keys(graph, model), anchors=[int(graph.ids[a]) for a in anchors],  # type: ignore[arg-type]
+                     layout=layout, size=int(matrix.shape[0]), nnz=int(matrix.nnz), logdet=ld, logdet_status=status,
+                     trace=float(matrix.diagonal().sum()), rank=sfim.rank, nullity=sfim.nullity,
+                     expected_nullity=sfim.q * sfim.components, ordering={"requested": ordering, "fim": str(used)},
+                     frame=frame, coordinates_description=coordinates_description(graph.dim, frame),
+                     estimate=estimate, times=times, matrix=matrix, row_ids=np.repeat(graph.ids, sfim.q),
+                     row_coord=np.tile(np.arange(sfim.q), graph.n), coordinate_names=names)
 
 
-@dataclass(frozen=True, kw_only=True)
-class CramerRaoBound:
-    """What ``posecrb crlb`` reports for one model: the model's part of the row (keys and order of
-    the command's JSON), one row per pose when per-pose blocks were asked, and the timings."""
+def model_crlb(graph: PoseGraph, estimate: Estimate, *, model: str = "paper", anchor: Sequence[int] = (),
+               quotient: bool = False, poses: bool | Sequence[int] = False, rotation_weight: str = "eq59",
+               fim_variant: str = "consistent", frame: str = "mixed", ordering: str = "auto") -> CrlbResult:
+    """The Cramér-Rao bound of ``model`` at ``estimate``.
 
-    row: dict
-    pose_rows: list[dict]
-    times: dict[str, float]
-
-    def to_row(self) -> dict:
-        return dict(self.row)
-
-
-def cramer_rao_bound(graph: PoseGraph, rot: np.ndarray, trans: np.ndarray, *, model: str = "paper",
-                     anchor_ids: Sequence[int] = (), quotient: bool = False, poses: bool | list[int] = False,
-                     rotation_model: str = "eq59", variant: str = "consistent",
-                     frame: str = "mixed", ordering: str = "auto") -> CramerRaoBound:
-    """The Cramér-Rao bound of ``model`` at the estimate (rot, trans).
-
-    paper: anchored at one pose (docs/design.md#crlb), with eq. (68)'s curvature correction in 3D;
-    sed: anchored (5.1) or ``quotient`` (5.5) in ``frame`` coordinates (docs/design.md#anchored-crb).
-    ``poses``: per-pose covariance blocks for every pose (True) or the listed ids. Doubtful numbers
-    carry a ``<key>_status`` and a warning on stderr. ``ordering``: the factorizations' fill-reducing
-    ordering (posecrb.linalg.ordering; cost only), reported in the row's ``ordering``."""
-    if model not in MODELS:
-        raise UsageError(f"model must be one of {MODELS}, got {model!r}")
-    row: dict = {}
-    res: CrlbResult | SedCrbResult
+    paper: anchored at one pose id (docs/design.md#crlb), with eq. (68)'s curvature correction in
+    3D; sed: anchored (5.1) at ``anchor`` (pose ids, one or more per component) or ``quotient``
+    (5.5) in ``frame`` coordinates (docs/design.md#anchored-crb). ``poses``: per-pose covariance
+    blocks for every pose (True) or the listed pose ids. ``ordering``: the factorizations'
+    fill-reducing ordering (posecrb.linalg.ordering; cost only)."""
+    if not estimate.has_poses:
+        raise ArgumentError("estimate", f"Estimate from {estimate.source}", "carries no poses", sep=": ")
+    rot, trans = estimate.rot, estimate.trans
+    keys = _graph_keys(graph, model)
+    used = {"requested": ordering, "crlb": str(resolve_ordering(ordering, dim=graph.dim, poses=graph.n,
+                                                                matrix="crlb"))}
+    res: PaperCrlb | SedCrlb
     if model == "paper":
-
         if quotient:
-            raise UsageError("--quotient applies to --model sed (the paper model is anchored)")
-        if len(anchor_ids) > 1:
-            raise UsageError("--model paper takes a single --anchor (its graph must be connected)")
-        anchor = graph.anchor_index(anchor_ids[0] if anchor_ids else None)
-        res = paper_crlb(graph, rot, trans, anchor=anchor, per_pose=poses, rotation_model=rotation_model,
-                         variant=variant, ordering=ordering)
-        row.update({"kind": "anchored", "fim_variant": res.fim_variant, "rotation_weight": rotation_model,
-                    "anchors": [res.anchor_id], "nullity": 0})
-        acc = _accuracy(row, res.accuracy, graph.name)
-        for key in ("trace_crlb", "mse_bound", "trace_translation", "trace_rotation"):
-            put(row, key, getattr(res, key), acc)
-        if graph.dim == 3:
-            st = res.curvature_status if acc.available else acc
-            log_status(log, f"{graph.name}: curvature-corrected CRLB (eq. 68)", res.curvature_status)
-            put(row, "trace_crlb_curvature", res.trace_crlb_curvature, st)
-            put(row, "mse_bound_curvature", res.mse_bound_curvature, st)
-            row["curvature_correction_max"] = res.curvature_correction_max
-        row["coordinates"] = res.coordinates
-        blocks, curv = res.per_pose, res.per_pose_curvature
-        if not acc.available:
-            blocks = curv = None
-    else:
-
-        anchors = None if not anchor_ids else [graph.index_of(a) for a in anchor_ids]
-        if poses is True:
-            want: bool | list[int] = True
-        elif poses:
-            want = [graph.index_of(p) for p in poses]
-        else:
-            want = False
-        res = sed_crb_in_frame(graph, rot, trans, frame, anchors=anchors, quotient=quotient, per_pose=want,
-                               ordering=ordering)
-        row.update({"kind": res.kind, "anchors": [int(graph.ids[a]) for a in res.anchors],
-                    "nullity": res.nullity})
-        acc = _accuracy(row, res.accuracy, graph.name)
-        put(row, "trace_crlb", res.trace_crlb, acc)
-        put(row, "mse_bound", res.mse_bound, acc)
-        row["coordinates"] = coordinate_names(graph.dim, frame)
-        blocks = None if res.per_pose is None else {int(graph.ids[k]): v for k, v in res.per_pose.items()}
-        curv = None
-        if not acc.available:
-            blocks = None
-
-    row["frame"] = frame
-    row["ordering"] = str(resolve_ordering(ordering, dim=graph.dim, poses=graph.n, matrix="crlb"))
-    row["coordinates_description"] = coordinates_description(graph.dim, frame)
-    per_rows: list[dict] = []
-    if blocks is not None:
-        row["per_pose"] = {str(k): v for k, v in blocks.items()}
-        if curv is not None:
-            row["per_pose_curvature"] = {str(k): v for k, v in curv.items()}
-        names = row["coordinates"]
-        for k, v in blocks.items():
-            r = {"id": k, **{f"var_{c}": float(x) for c, x in zip(names, np.diag(v))}, "trace": float(np.trace(v))}
-            if curv is not None:
-                r["trace_curvature"] = float(np.trace(curv[k]))
-            per_rows.append(r)
-    return CramerRaoBound(row=row, pose_rows=per_rows, times=dict(res.times))
+            raise ArgumentError("quotient", quotient, "applies to the sed model (the paper model is anchored)")
+        if len(anchor) > 1:
+            raise ArgumentError("anchor", list(anchor), "is several anchors; the paper model takes one (its graph "
+                                "must be connected)")
+        idx = graph.anchor_index(anchor[0] if anchor else None)
+        if poses is not True and poses:
+            for p in poses:
+                graph.index_of(p, "poses")
+        res = paper_crlb(graph, rot, trans, anchor=idx, per_pose=poses, rotation_model=rotation_weight,
+                         variant=fim_variant, ordering=ordering)
+        acc = _unavailable(res.accuracy)
+        curv = res.curvature_status if acc.available else acc
+        three = graph.dim == 3
+        blocks, curv_blocks = (res.per_pose, res.per_pose_curvature) if acc.available else (None, None)
+        return CrlbResult(**keys, kind="anchored", fim_variant=res.fim_variant,  # type: ignore[arg-type]
+                          rotation_weight=rotation_weight, anchors=[res.anchor_id], nullity=0,
+                          accuracy=res.accuracy, trace_crlb=res.trace_crlb, trace_crlb_status=acc,
+                          mse_bound=res.mse_bound, mse_bound_status=acc, trace_translation=res.trace_translation,
+                          trace_translation_status=acc, trace_rotation=res.trace_rotation,
+                          trace_rotation_status=acc,
+                          trace_crlb_curvature=res.trace_crlb_curvature if three else None,
+                          trace_crlb_curvature_status=curv if three else OK,
+                          mse_bound_curvature=res.mse_bound_curvature if three else None,
+                          mse_bound_curvature_status=curv if three else OK,
+                          curvature_correction_max=res.curvature_correction_max if three else None,
+                          curvature_status=res.curvature_status, coordinates=res.coordinates, frame=frame,
+                          ordering=used, coordinates_description=coordinates_description(graph.dim, frame),
+                          per_pose=blocks, per_pose_curvature=curv_blocks, estimate=estimate, times=dict(res.times))
+    if model != "sed":
+        raise ArgumentError("model", model, f"is not one of {', '.join(MODELS)}")
+    anchors = [graph.anchor_index(a) for a in anchor] or None
+    want: bool | list[int] = True if poses is True else [graph.index_of(p, "poses") for p in poses] if poses else False
+    res = sed_crlb_in_frame(graph, rot, trans, frame, anchors=anchors, quotient=quotient, per_pose=want,
+                            ordering=ordering)
+    acc = _unavailable(res.accuracy)
+    blocks = None if res.per_pose is None or not acc.available else \
+        {int(graph.ids[k]): v for k, v in res.per_pose.items()}
+    return CrlbResult(**keys, kind=res.kind, anchors=[int(graph.ids[a]) for a in res.anchors],  # type: ignore[arg-type]
+                      nullity=res.nullity, accuracy=res.accuracy, trace_crlb=res.trace_crlb, trace_crlb_status=acc,
+                      mse_bound=res.mse_bound, mse_bound_status=acc, coordinates=coordinate_names(graph.dim, frame),
+                      frame=frame, ordering=used, coordinates_description=coordinates_description(graph.dim, frame),
+                      per_pose=blocks, estimate=estimate, times=dict(res.times))
 
 
-def _accuracy(row: dict, accuracy: InverseAccuracy | None, name: str) -> Status:
-    """Record the inverse's accuracy estimate in ``row`` (key ``accuracy``), warn on stderr when it
-    is not ok, and return the status that the bound's numbers inherit when it is unavailable."""
-    if accuracy is None:
-        return Status()
-    row["accuracy"] = accuracy.as_json()
-    log_status(log, f"{name}: CRLB", accuracy.status)
-    return accuracy.status if not accuracy.status.available else Status()
+def _unavailable(accuracy: InverseAccuracy | None) -> Status:
+    """The status the bound's numbers inherit from the inverse's accuracy: its own when the
+    inverse is unusable, ok otherwise (a warning stays on ``accuracy``)."""
+    if accuracy is None or accuracy.status.available:
+        return OK
+    return accuracy.status

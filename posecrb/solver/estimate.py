@@ -13,27 +13,74 @@ from typing import Any
 
 import numpy as np
 
-from ..core.errors import ParseError, PosecrbError, UsageError
+from ..core.errors import ArgumentError, ParseError, PosecrbError
 from ..core.graph import PoseGraph
+from ..core.result import Result, array_field, internal_field
+from ..core.status import OK, Status
 from ..io import load
 from . import solve
 
 
 @dataclass(frozen=True)
-class Estimate:
-    rot: np.ndarray            # (n, d, d)
-    trans: np.ndarray          # (n, d)
-    source: str                # "solve" | "vertices" | path
-    certified: bool | None     # None when not from the solver
-    objective: float | None    # SE-Sync objective at the estimate (solver only)
-    solve_time: float | None   # seconds spent in the solver
-    status: str = "ok"
+class Estimate(Result):
+    """Poses at which the FIM, the bounds' FIM column and the CRLB are evaluated, and where they
+    come from.
+
+    ``to_dict()`` is the ``"estimate"`` object of the commands' JSON: ``source`` (``"solve"``:
+    the certified solver; ``"vertices"``: the file's VERTEX lines; a path: another file's
+    vertices; ``"given"``: poses passed by the caller), ``certified`` (the solver's certificate;
+    None when the poses do not come from the solver) and ``objective`` (SE-Sync's objective
+    there, solver only). The poses themselves are left out of the JSON.
+
+    Attributes
+    ----------
+    rot : numpy.ndarray
+        (n, d, d) rotations, row k for the pose with the k-th smallest id (empty after
+        ``from_dict``: the JSON does not carry the poses).
+    trans : numpy.ndarray
+        (n, d) translations in the file's length units.
+    source : str
+        Where the poses come from.
+    certified : bool or None
+        Whether the solver certified them globally optimal (None: not from the solver).
+    objective : float or None
+        SE-Sync's objective at the poses (solver only).
+    solve_time : float or None
+        Seconds spent in the solver (not in the JSON).
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> import posecrb
+    >>> est = posecrb.Estimate(np.tile(np.eye(2), (3, 1, 1)), np.zeros((3, 2)))
+    >>> est.to_dict()
+    {'source': 'given', 'certified': None, 'objective': None}
+    """
+
+    rot: np.ndarray = array_field()
+    trans: np.ndarray = array_field()
+    source: str = "given"
+    certified: bool | None = None
+    objective: float | None = None
+    solve_time: float | None = internal_field()
+
+    @property
+    def has_poses(self) -> bool:
+        """Whether the poses are here (not after ``from_dict``)."""
+        return bool(np.size(self.rot) and np.size(self.trans))
+
+    def statuses(self) -> dict[str, Status]:
+        """``{"estimate": ...}``: a warning when the solver did not certify the poses."""
+        if self.certified is False:
+            return {"estimate": Status.warning("the solver's estimate is NOT certified globally optimal")}
+        return {"estimate": OK}
 
 
 def from_vertices(graph: PoseGraph) -> Estimate:
     if graph.vertex_rot is None or graph.vertex_trans is None:  # not graph.has_vertices
-        raise PosecrbError(f"{graph.path}: the file has no VERTEX lines; use --estimate solve or --estimate FILE")
-    return Estimate(graph.vertex_rot, graph.vertex_trans, "vertices", None, None, None)
+        raise PosecrbError(f"{graph.path}: the file has no VERTEX lines to evaluate at; take the solver's "
+                           "estimate or another file's vertices")
+    return Estimate(graph.vertex_rot, graph.vertex_trans, "vertices")
 
 
 def from_file(graph: PoseGraph, path: str) -> Estimate:
@@ -48,7 +95,7 @@ def from_file(graph: PoseGraph, path: str) -> Estimate:
     missing = graph.ids[other.ids[pos] != graph.ids]
     if missing.size:
         raise ParseError(path, None, f"estimate lacks {missing.size} pose(s) of the graph, e.g. id {missing[0]}")
-    return Estimate(other.vertex_rot[pos], other.vertex_trans[pos], str(path), None, None, None)
+    return Estimate(other.vertex_rot[pos], other.vertex_trans[pos], str(path))
 
 
 def from_solver(graph: PoseGraph, **options: Any) -> Estimate:
@@ -56,8 +103,7 @@ def from_solver(graph: PoseGraph, **options: Any) -> Estimate:
     t0 = time.perf_counter()
     res = solve(graph, **options)
     elapsed = time.perf_counter() - t0
-    return Estimate(res.rot, res.trans, "solve", bool(res.certified), float(res.objective), elapsed,
-                    "ok" if res.certified else "uncertified")
+    return Estimate(res.rot, res.trans, "solve", bool(res.certified), float(res.objective), elapsed)
 
 
 def get_estimate(graph: PoseGraph, source: str = "solve", **solver_options: Any) -> Estimate:
@@ -66,5 +112,5 @@ def get_estimate(graph: PoseGraph, source: str = "solve", **solver_options: Any)
     if source == "vertices":
         return from_vertices(graph)
     if not source:
-        raise UsageError("--estimate needs solve, vertices or a FILE")
+        raise ArgumentError("estimate", source, "is empty: give 'solve', 'vertices' or a file")
     return from_file(graph, source)

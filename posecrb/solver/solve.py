@@ -17,8 +17,11 @@ from typing import Any
 import numpy as np
 from threadpoolctl import ThreadpoolController
 
-from ..core.errors import NotPositiveDefinite, PosecrbError, UsageError
+from ..core.errors import ArgumentError, NotPositiveDefinite, PosecrbError, UsageError
 from ..core.graph import PoseGraph
+from ..core.result import Result, array_field, optional_field
+from ..core.status import OK, Status
+from ..io.rotations import rot_to_quat
 from .chordal import chordal_rotations
 from .problem import Problem
 from .rounding import anchor_estimate, recover_translations, round_rotations, se_objective
@@ -29,29 +32,109 @@ from .trust_region import TROptions, trust_region
 log = logging.getLogger("posecrb")
 
 
-@dataclass(frozen=True)
-class SolveResult:
-    rot: np.ndarray            # (n, d, d) in SO(d), rot[anchor] = I
-    trans: np.ndarray          # (n, d), trans[anchor] = 0
-    objective: float           # F(R, t) at the rounded estimate (SE-Sync convention, no 1/2)
-    relaxation_value: float    # f(Y*) of the rank-r relaxation: a lower bound on F* when certified
-    duality_gap: float         # objective - relaxation_value
-    lambda_min: float          # lambda_min(Q - Lambda) at the final relaxed point
+@dataclass(frozen=True, kw_only=True)
+class SolveResult(Result):
+    """The certified maximum-likelihood estimate of a pose graph: what ``posecrb solve`` prints.
+
+    ``to_dict()`` is the command's ``--format json`` object; the estimate itself (``rot``,
+    ``trans``, row k the pose with id ``ids[k]``) is left out of it and kept by ``save``.
+    ``to_frame()`` has one row per pose: its id, translation and rotation (2D: ``theta`` in
+    radians; 3D: the unit quaternion ``qx, qy, qz, qw`` with ``qw >= 0``), translations in the
+    file's length units. Pass the result as ``estimate=`` to ``posecrb.bounds``, ``fim``,
+    ``crlb`` or ``select`` to evaluate them there.
+
+    Attributes
+    ----------
+    dataset : str
+        The graph's name (its file name without the extension).
+    dim, poses, edges : int
+        d (2 or 3), n and m.
+    anchor : int
+        The pose id put at the identity (rotation I, translation 0).
+    objective : float
+        SE-Sync's objective ``F = sum kappa ||R_j - R_i R~||_F^2 + tau ||t_j - t_i - R_i t~||^2``
+        at the rounded estimate (no factor 1/2).
+    relaxation_value : float
+        The rank-r relaxation's value, a lower bound on the optimum when certified.
+    duality_gap : float
+        ``objective - relaxation_value``.
+    lambda_min : float or None
+        lambda_min(Q - Lambda) at the final relaxed point (None when the verification failed).
+    certified : bool
+        Whether ``lambda_min >= -certificate_tol``: the estimate is then a global optimum.
+    reason : str
+        Why it is (or is not) certified.
+    rank, iterations, hessian_vector_products : int
+        The staircase's last rank, trust-region iterations and Hessian-vector products.
+    quaternions : str
+        How the file's 3D quaternions were read (``"normalize"``, or ``"raw"`` as SE-Sync).
+    saved : str or None
+        The g2o file written by ``out=`` (absent from the JSON without it).
+    times : dict of str to float
+        Seconds: ``parse`` (when the call read the file), ``init``, ``optimize``, ``verify``,
+        ``round`` and ``total``.
+    rot, trans, ids : numpy.ndarray
+        The estimate, (n, d, d) rotations and (n, d) translations, and the pose ids of the rows;
+        empty after ``from_dict`` (``load`` keeps them).
+
+    Examples
+    --------
+    >>> import posecrb
+    >>> res = posecrb.solve("intel")
+    >>> res.certified, res.poses, res.anchor
+    (True, 1728, 0)
+    >>> round(res.objective, 6)
+    52.348227
+    >>> res.to_frame().columns.tolist()
+    ['id', 'x', 'y', 'theta']
+    """
+
+    dataset: str
+    dim: int
+    poses: int
+    edges: int
+    anchor: int
+    objective: float
+    relaxation_value: float
+    duality_gap: float
+    lambda_min: float | None
     certified: bool
-    status: str                # "certified" | "uncertified"
     reason: str
     rank: int
-    iterations: int            # trust-region iterations over all staircase levels
+    iterations: int
     hessian_vector_products: int
-    times: dict = field(default_factory=dict)   # {init, optimize, verify, round, total} seconds
-    anchor: int = 0
+    quaternions: str = "normalize"
+    saved: str | None = optional_field()
+    times: dict[str, float] = field(default_factory=dict)
+    rot: np.ndarray = array_field()
+    trans: np.ndarray = array_field()
+    ids: np.ndarray = array_field()
 
-    def to_row(self) -> dict:
-        """The solver's part of a ``solve`` row (keys and order of the command's JSON; no times)."""
-        return {"objective": self.objective, "relaxation_value": self.relaxation_value,
-                "duality_gap": self.duality_gap, "lambda_min": self.lambda_min, "certified": self.certified,
-                "rank": self.rank, "iterations": self.iterations,
-                "hessian_vector_products": self.hessian_vector_products}
+    def statuses(self) -> dict[str, Status]:
+        """``{"certificate": ...}``: a warning when the estimate is not certified."""
+        if self.certified:
+            return {"certificate": OK}
+        return {"certificate": Status.warning(f"the estimate is NOT certified globally optimal ({self.reason})")}
+
+    def to_frame(self) -> Any:
+        """One row per pose: ``id``, the translation (``x, y[, z]``) and the rotation (2D
+        ``theta``, 3D ``qx, qy, qz, qw``). Raises ``UsageError`` when the estimate is absent
+        (a result rebuilt by ``from_dict``; ``load`` keeps it)."""
+        import pandas as pd  # noqa: PLC0415 -- lazy: start-up time (pandas only for frames)
+
+        if self.rot.size == 0:
+            raise UsageError("this SolveResult carries no estimate (rebuilt from a dict); "
+                             "SolveResult.load(path) of a saved result has it")
+        cols: dict[str, Any] = {"id": np.asarray(self.ids, dtype=np.int64)}
+        for k, name in enumerate("xyz"[: self.dim]):
+            cols[name] = self.trans[:, k]
+        if self.dim == 2:
+            cols["theta"] = np.arctan2(self.rot[:, 1, 0], self.rot[:, 0, 0])
+        else:
+            q = rot_to_quat(self.rot)
+            for k, name in enumerate(("qx", "qy", "qz", "qw")):
+                cols[name] = q[:, k]
+        return pd.DataFrame(cols)
 
 
 # TROptions fields a caller may set through SolverOptions.trust_region (max_iterations is a
@@ -108,18 +191,13 @@ class SolverOptions:
         return replace(base, **{k: v for k, v in keywords.items() if k in own},
                        trust_region={**base.trust_region, **tuning})
 
-    def keywords(self) -> dict[str, Any]:
-        """Every option as a keyword of the staircase (trust-region fields flattened)."""
-        out = {f.name: getattr(self, f.name) for f in fields(self) if f.name != "trust_region"}
-        return {**out, **self.trust_region}
+
+_BLAS_CONTROLLER: Any = None
 
 
-_BLAS_CONTROLLER = None
-
-
-def _blas_controller():
-    """threadpoolctl's controller, built once: scanning the loaded libraries costs ~1.5 ms,
-    which was a tenth of a small problem's solve when done on every call."""
+def _blas_controller() -> Any:
+    """threadpoolctl's controller, built once: scanning the loaded libraries costs ~1.5 ms, a
+    tenth of a small problem's solve."""
     global _BLAS_CONTROLLER
     if _BLAS_CONTROLLER is None:
         _BLAS_CONTROLLER = ThreadpoolController()
@@ -138,44 +216,29 @@ def solve(graph: PoseGraph, options: SolverOptions | None = None, **keywords: An
         options = SolverOptions.from_keywords(options, **keywords)
     controller = _blas_controller()
     if not controller:  # pragma: no cover - threadpoolctl missing
-        return _solve(graph, **options.keywords())
+        return _solve(graph, options)
     with controller.limit(limits=1, user_api="blas"):
-        return _solve(graph, **options.keywords())
+        return _solve(graph, options)
 
 
-def _solve(graph: PoseGraph, *, r0: int | None = None, rmax: int = 10, init: str | np.ndarray = "chordal",
-          anchor: int | None = None, max_iterations: int = 500, certificate_tol: float = 1e-3,
-          verbose: bool = False, seed: int = 0, precondition: bool = True,
-          precond_max_cond: float = 1e6, adaptive_precond: float | None = 1e-10, refactor_hvps: int | None = 30,
-          **tuning: Any) -> SolveResult:
-    """Certifiably correct maximum-likelihood estimate of a pose graph.
-
-    ``r0`` is the first staircase rank (default d + 1), ``rmax`` the last. ``init`` is
-    "chordal" (default) or "vertices" (the file's own estimate), or an (n, d, d)
-    array of rotations. ``anchor`` is the internal index of the pose put at the
-    identity (default 0). ``certificate_tol``: accept lambda_min(Q - Lambda) >= -tol
-    (SE-Sync's 1e-3). ``precond_max_cond`` caps the condition number of the base
-    preconditioner (Q + delta I)^{-1}; ``adaptive_precond`` (relative shift s / ||C||) turns
-    on the (Q - Lambda + s I)^{-1} preconditioner, None disables it; it is refactored at an
-    iterate only when the last truncated-CG run needed more than ``refactor_hvps`` Hessian-vector
-    products (None: at every accepted iterate).
-    ``tuning`` goes to :class:`TROptions` (e.g. decrement_tol, max_inner); the options are
-    documented on :class:`SolverOptions`, whose defaults must match these. Raises
-    DisconnectedGraph for a disconnected graph, UsageError for bad ranks/anchor/init.
-    """
+def _solve(graph: PoseGraph, options: SolverOptions) -> SolveResult:
+    """Certifiably correct maximum-likelihood estimate of a pose graph (``solve``; the options
+    are documented on :class:`SolverOptions`). Raises DisconnectedGraph for a disconnected
+    graph, UsageError for bad ranks, anchor or init."""
     t_start = time.perf_counter()
     graph.require_connected()
     d, n = graph.dim, graph.n
-    anchor = 0 if anchor is None else int(anchor)
+    anchor = 0 if options.anchor is None else int(options.anchor)
     if not 0 <= anchor < n:
         raise UsageError(f"anchor index {anchor} out of range 0..{n - 1}")
-    r0 = d + 1 if r0 is None else int(r0)
+    r0 = d + 1 if options.r0 is None else int(options.r0)
+    rmax, init, certificate_tol = options.rmax, options.init, options.certificate_tol
     if r0 < d or rmax < r0:
         raise UsageError(f"need d <= r0 <= rmax (d={d}, r0={r0}, rmax={rmax})")
-    if verbose:
+    if options.verbose:
         log.setLevel(min(log.level or logging.INFO, logging.INFO))
-    rng = np.random.default_rng(seed)
-    opts = TROptions(max_iterations=max_iterations, **tuning)
+    rng = np.random.default_rng(options.seed)
+    opts = TROptions(max_iterations=options.max_iterations, **options.trust_region)
 
     # ---- initialisation --------------------------------------------------
     t0 = time.perf_counter()
@@ -186,19 +249,20 @@ def _solve(graph: PoseGraph, *, r0: int | None = None, rmax: int = 10, init: str
         rot0 = chordal_rotations(problem)
     elif init == "vertices":
         if not graph.has_vertices:
-            raise PosecrbError(f"{graph.path}: --init vertices needs VERTEX lines in the file")
+            raise PosecrbError(f"{graph.path}: the file has no VERTEX lines to initialise the solver from")
         rot0 = np.asarray(graph.vertex_rot, float)
     else:
-        raise UsageError(f"unknown init {init!r} (chordal|vertices)")
+        raise ArgumentError("init", init, "is not 'chordal', 'vertices' or an (n, d, d) array of rotations")
     precond = None
-    if precondition:
+    if options.precondition:
         # Regularised Schur-complement preconditioner (Q + delta I)^{-1}; delta caps the
         # condition number near precond_max_cond (SE-Sync's regularised Cholesky, section 4.3).
-        delta = problem.gershgorin_max() / precond_max_cond
+        delta = problem.gershgorin_max() / options.precond_max_cond
         precond = problem.factor_full(None, delta, name="preconditioner M_red(delta)")
     model = RelaxedModel(problem, precond,
-                         None if adaptive_precond is None else adaptive_precond * problem.gershgorin_max(),
-                         refactor_hvps=refactor_hvps)
+                         None if options.adaptive_precond is None
+                         else options.adaptive_precond * problem.gershgorin_max(),
+                         refactor_hvps=options.refactor_hvps)
     model.certificate_tol = certificate_tol
     Z = lift(np.ascontiguousarray(np.swapaxes(rot0, 1, 2)), r0)
     times = {"init": time.perf_counter() - t0, "optimize": 0.0, "verify": 0.0}
@@ -256,9 +320,8 @@ def _solve(graph: PoseGraph, *, r0: int | None = None, rmax: int = 10, init: str
     times["total"] = time.perf_counter() - t_start
     certified = bool(cert is not None and cert.certified)
     return SolveResult(
-        rot=rot, trans=trans, objective=objective, relaxation_value=float(state.f),
-        duality_gap=float(objective - state.f),
-        lambda_min=float(cert.lambda_min) if cert is not None else float("nan"),
-        certified=certified, status="certified" if certified else "uncertified", reason=reason,
+        dataset=graph.name, dim=d, poses=n, edges=graph.m, anchor=int(graph.ids[anchor]),
+        objective=float(objective), relaxation_value=float(state.f), duality_gap=float(objective - state.f),
+        lambda_min=float(cert.lambda_min) if cert is not None else None, certified=certified, reason=reason,
         rank=int(state.Z.shape[2]), iterations=iterations, hessian_vector_products=model.hvps,
-        times=times, anchor=anchor)
+        quaternions=graph.quaternions, times=times, rot=rot, trans=trans, ids=graph.ids.copy())

@@ -5,16 +5,15 @@ import logging
 
 import click
 
+from ...api.functions import bounds
 from ...core.errors import PosecrbError, status_of
-from ...core.status import log_status
-from ...metrics.evaluate import EvaluationSettings, evaluate
+from ...core.status import log_statuses
 from ...report.render import print_rows
 from ..options import (
     anchor_option,
     data_dir_option,
     fim_variant_option,
     format_option,
-    load_dataset,
     make_estimate_option,
     ordering_option,
     repeat_option,
@@ -28,24 +27,6 @@ TABLE_COLUMNS = ["dataset", "poses", "edges", "fim_logdet", "fim_variant", "time
 HEADERS = {"times.lb": "lb time [s]", "times.ub": "ub time [s]", "ub_lambda": "ub (λ∞)",
            "gap_bound": "Lemma 4 gap ≤", "t_opt_graph": "T-opt (73)", "fim_logdet": "FIM logdet",
            "times.fim_logdet": "FIM time [s]", "estimate.source": "estimate", "fim_variant": "FIM variant"}
-
-
-def bounds_row(name_or_path: str, data_dir: str | None, anchor_id: int | None, repeat: int,
-               rotation_model: str, estimate: str = "none", fim_variant: str | None = None,
-               ordering: str = "auto") -> dict:
-    graph, t_parse = load_dataset(name_or_path, data_dir, repeat)
-    anchor = graph.anchor_index(anchor_id)
-    m = evaluate(graph, EvaluationSettings(anchor=anchor, rotation_model=rotation_model,
-                                           fim_variant=fim_variant or "consistent", repeat=repeat, estimate=estimate,
-                                           solver={"anchor": anchor} if estimate == "solve" else {},
-                                           ordering=ordering))
-    b = m.bounds
-    log_status(log, f"{graph.name}: ub", b.ub_status)
-    log_status(log, f"{graph.name}: lambda_min(L_w)", b.lambda_min_rot_status)
-    log_status(log, f"{graph.name}: Lemma 4 gap bound", b.gap_bound_status)
-    row = m.to_row(times={"parse": t_parse})
-    row["ordering"] = {"requested": ordering, **m.ordering}
-    return row
 
 
 @click.command("bounds")
@@ -75,7 +56,10 @@ def command(files, anchor, repeat, rotation_model, estimate, fim_variant, orderi
     rows, failures = [], []
     for f in files:
         try:
-            rows.append(bounds_row(f, data_dir, anchor, repeat, rotation_model, estimate, fim_variant, ordering))
+            res = bounds(f, anchor=anchor, repeat=repeat, rotation_weight=rotation_model, estimate=estimate,
+                         fim_variant=fim_variant, ordering=ordering, data_dir=data_dir)
+            log_statuses(log, res.dataset, res.statuses())
+            rows.append(res.to_dict())
         except PosecrbError as exc:
             if len(files) == 1:
                 raise

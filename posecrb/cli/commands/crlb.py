@@ -1,73 +1,24 @@
-"""`posecrb crlb FILE`: Cramér-Rao lower bounds at an estimate, paper or thesis model."""
+"""`posecrb crlb FILE`: Cramér-Rao lower bounds at an estimate, paper or sed model."""
 from __future__ import annotations
 
 import logging
-import re
 
 import click
 
-from ...core.errors import UsageError
-from ...models import cramer_rao_bound
+from ...api.functions import crlb
+from ...core.status import log_statuses
 from ...report.render import key_value_rows, print_rows
 from ..options import (
-    INT64_MAX,
     POSE_ID,
     data_dir_option,
     estimate_option,
     format_option,
-    load_with_estimate,
     model_option,
     model_settings_options,
     ordering_option,
-    resolve_model_settings,
 )
 
 log = logging.getLogger("posecrb")
-
-
-def parse_pose_ids(text: str | None) -> bool | list[int]:
-    """``--poses``: ``all`` or a comma-separated list of ids and ranges (``3,7,10-12``)."""
-    if text is None:
-        return False
-    text = text.strip()
-    if text.lower() == "all":
-        return True
-    out: list[int] = []
-    for part in text.split(","):
-        part = part.strip()
-        # digits only (int() would take 1_0 and non-ASCII digits), ids that fit int64
-        if re.fullmatch(r"[0-9]+(?:-[0-9]+)?", part) is None or max(map(int, part.split("-"))) > INT64_MAX:
-            raise UsageError(f"--poses: {part!r} is not a pose id or an id range a-b")
-        if "-" in part[1:]:
-            lo_i, hi_i = map(int, part.split("-", 1))   # both digits only (checked above)
-            if hi_i < lo_i or hi_i - lo_i > 10 ** 7:     # (a huge range would exhaust memory)
-                raise UsageError(f"--poses: {part!r} is not a pose id or an id range a-b")
-            out.extend(range(lo_i, hi_i + 1))
-        else:
-            out.append(int(part))
-    return out
-
-
-def crlb_result(file: str, data_dir: str | None, model: str, source: str, anchor_ids: tuple[int, ...],
-                quotient: bool, poses: bool | list[int], rotation_model: str,
-                fim_variant: str | None = None, frame: str | None = None,
-                ordering: str = "auto") -> tuple[dict, list[dict]]:
-    """The JSON-ready result and, when per-pose blocks were asked, one row per pose.
-    ``fim_variant``: None (default: consistent, the model's Fisher information), "eq64" or
-    "consistent". ``frame``: sed only, None/"world" or "body" (``posecrb.models.thesis.frames``).
-    Doubtful numbers carry a ``<key>_status`` and a warning on stderr."""
-    variant, frame = resolve_model_settings(model, fim_variant, frame)
-    graph, est, est_info, times = load_with_estimate(file, data_dir, source)
-    row: dict = {"dataset": graph.name, "model": model, "dim": graph.dim, "poses": graph.n,
-                 "edges": graph.m, "components": graph.n_components}
-    crb = cramer_rao_bound(graph, est.rot, est.trans, model=model, anchor_ids=anchor_ids, quotient=quotient,
-                           poses=poses, rotation_model=rotation_model, variant=variant, frame=frame,
-                           ordering=ordering)
-    times.update(crb.times)
-    row.update(crb.to_row())
-    row["estimate"] = est_info
-    row["times"] = times
-    return row, crb.pose_rows
 
 
 @click.command("crlb")
@@ -105,8 +56,11 @@ def command(file, model, quotient, anchors, poses, estimate_source, rotation_mod
     `coordinates`; `frame` and `coordinates_description` say what they mean (JSON: full matrices).
     --ordering: the factorization's fill-reducing ordering (cost only; JSON key ordering).
     """
-    row, per_rows = crlb_result(file, data_dir, model, estimate_source, anchors, quotient,
-                                parse_pose_ids(poses), rotation_model, fim_variant, frame, ordering)
+    res = crlb(file, model=model, quotient=quotient, anchor=list(anchors), poses=poses, estimate=estimate_source,
+               rotation_weight=rotation_model, fim_variant=fim_variant, frame=frame, ordering=ordering,
+               data_dir=data_dir)
+    log_statuses(log, res.dataset, res.statuses())
+    row, per_rows = res.to_dict(), res.pose_rows()
     if fmt == "json":
         print_rows([row], "json")
         return

@@ -1,58 +1,24 @@
-"""`posecrb fim FILE`: the Fisher information matrix at an estimate, paper or thesis model."""
+"""`posecrb fim FILE`: the Fisher information matrix at an estimate, paper or sed model."""
 from __future__ import annotations
 
 import logging
 
 import click
 
-from ...datasets import search as datasets
-from ...io import check_output_file
-from ...io.npz import npz_path
-from ...models import fisher_information
-from ...models.thesis.frames import coordinates_description
+from ...api.functions import fim
+from ...core.status import log_statuses
 from ...report.render import key_value_rows, print_rows
 from ..options import (
     POSE_ID,
     data_dir_option,
-    estimate_inputs,
     estimate_option,
     format_option,
-    load_with_estimate,
     model_option,
     model_settings_options,
     ordering_option,
-    resolve_model_settings,
 )
 
 log = logging.getLogger("posecrb")
-
-
-def fim_row(file: str, data_dir: str | None, model: str, source: str, anchor_id: int | None,
-            rotation_model: str, save: str | None, fim_variant: str | None = None,
-            frame: str | None = None, ordering: str = "auto") -> dict:
-    variant, frame = resolve_model_settings(model, fim_variant, frame)
-    if save:
-
-        save = npz_path(save)   # the file really written (and reported as `saved`)
-        check_output_file(save, [datasets.resolve(file, data_dir), *estimate_inputs(source)], option="--save")
-    graph, est, est_info, times = load_with_estimate(file, data_dir, source)
-    row: dict = {"dataset": graph.name, "model": model, "dim": graph.dim, "poses": graph.n,
-                 "edges": graph.m, "components": graph.n_components}
-    fim = fisher_information(graph, est.rot, est.trans, model=model, anchor_id=anchor_id,
-                             rotation_model=rotation_model, variant=variant,
-                             frame=frame if model == "sed" else "world", ordering=ordering)
-    times.update(fim.times)
-    row.update(fim.to_row())
-    row["ordering"] = fim.ordering
-    if save:
-        fim.save(save)
-    row["frame"] = frame
-    row["coordinates_description"] = coordinates_description(graph.dim, frame)
-    if save:
-        row["saved"] = save
-    row["estimate"] = est_info
-    row["times"] = times
-    return row
 
 
 @click.command("fim")
@@ -84,8 +50,10 @@ def command(file, model, estimate_source, anchor, rotation_model, fim_variant, f
     log-det, rank and nullity do not. JSON: frame, coordinates_description, ordering (the
     log-det factorization's fill-reducing ordering, --ordering: cost only).
     """
-    row = fim_row(file, data_dir, model, estimate_source, anchor, rotation_model, save, fim_variant, frame,
-                  ordering)
+    res = fim(file, model=model, estimate=estimate_source, anchor=anchor, rotation_weight=rotation_model,
+              fim_variant=fim_variant, frame=frame, ordering=ordering, save=save, data_dir=data_dir)
+    log_statuses(log, res.dataset, res.statuses())
+    row = res.to_dict()
     if fmt != "json":
         row = {k: (",".join(map(str, v)) if isinstance(v, list) else v) for k, v in row.items()}
     if fmt == "table":

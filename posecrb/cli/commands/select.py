@@ -5,10 +5,11 @@ import logging
 
 import click
 
+from ...api.functions import select
 from ...core.errors import UsageError
+from ...core.status import log_statuses
 from ...report.render import print_rows
-from ...selection.select import select_edges, write_pruned
-from ..options import FiniteFloat, anchor_option, data_dir_option, format_option, load_dataset
+from ..options import FiniteFloat, anchor_option, data_dir_option, format_option
 
 log = logging.getLogger("posecrb")
 
@@ -94,14 +95,12 @@ def command(file, budget, objective, method, fixed, certify, max_iter, tol, lazy
 
     if jl and exact:
         raise UsageError("--jl and --exact exclude each other")
-    graph, _ = load_dataset(file, data_dir)
-    res = select_edges(graph, budget, objective=objective, method=method, fixed=fixed, certify=certify, seed=seed,
-                       anchor=graph.anchor_index(anchor), estimate=estimate,
-                       gains="jl" if jl else ("exact" if exact else "auto"), max_iter=max_iter, tol=tol,
-                       strategy="lazy" if (lazy or jl) else "auto")
-    if out_path:
-        write_pruned(graph, res, out_path)
-        log.info("wrote %s (%d edges)", out_path, res.kept_edges.size)
+    res = select(file, budget=budget, objective=objective, method=method, fixed=fixed, certify=certify,
+                 max_iter=max_iter, tol=tol, lazy=lazy, jl=jl, exact=exact, estimate=estimate, seed=seed, out=out_path,
+                 anchor=anchor, data_dir=data_dir)
+    log_statuses(log, res.dataset, res.statuses())
+    if res.saved:
+        log.info("wrote %s (%d edges)", res.saved, res.fixed["edges"] + res.budget)
     d = res.to_dict()
     if fmt == "json":
         print_rows([d], fmt)

@@ -3,12 +3,9 @@ from __future__ import annotations
 
 import click
 
+from ...api.functions import solve
 from ...core.errors import SolverError
-from ...core.timing import timed
-from ...datasets import search as datasets
-from ...io import check_output_file, load, write_g2o
 from ...report.render import print_rows
-from ...solver import SolverOptions, solve
 from ..options import POSE_ID, FiniteFloat, data_dir_option, format_option
 
 # Compact column set for the human-readable formats; json/csv carry every key.
@@ -46,23 +43,12 @@ def command(file, out, fmt, r0, rmax, init, anchor, certificate_tol, sesync_comp
     With --sesync-compat the rotation term is SE-Sync's kappa(2d - 2 tr(R_j^T R_i R~)) with
     R~ from the unnormalised quaternions (posecrb.io.load(..., quaternions="raw")).
     """
-    quaternions = "raw" if sesync_compat else "normalize"
-    path = datasets.resolve(file, data_dir)
-    if out:
-        check_output_file(out, [path], option="--out")   # before the work, not after a long solve
-    graph, parse_time = timed(lambda: load(path, quaternions=quaternions))
-    anchor_idx = graph.anchor_index(anchor)
-    res = solve(graph, SolverOptions(r0=r0, rmax=rmax, init=init, anchor=anchor_idx, certificate_tol=certificate_tol))
-    if out:
-        # Edges as the normalised reading: a raw, non-orthogonal R~ has no quaternion of its own.
-        write_g2o(load(path) if sesync_compat else graph, out, res.rot, res.trans)
-    times = {"parse": parse_time, **{k: res.times[k] for k in ("init", "optimize", "verify", "round")},
-             "total": parse_time + res.times["total"]}
-    row = {"dataset": graph.name, "dim": graph.dim, "poses": graph.n, "edges": graph.m, **res.to_row(),
-           "quaternions": quaternions, "times": times}
+    res = solve(file, r0=r0, rmax=rmax, init=init, anchor=anchor, certificate_tol=certificate_tol,
+                sesync_compat=sesync_compat, out=out, data_dir=data_dir)
+    row = res.to_dict()
     human = fmt in ("table", "markdown")
     if human:   # the table formatter keeps 5 digits; the objective deserves all of SE-Sync's
         row = {**row, "objective": f"{res.objective:.11g}"}
     print_rows([row], fmt, columns=TABLE_COLUMNS if human else None, headers=HEADERS if human else None)
     if not res.certified:
-        raise SolverError(f"{graph.name}: {res.status}: {res.reason}")
+        raise SolverError(f"{res.dataset}: uncertified: {res.reason}")

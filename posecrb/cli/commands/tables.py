@@ -24,8 +24,8 @@ from ...metrics.tables import (
     failed,
     footnote,
     published_settings,
-    run_record,
     table_rows,
+    tables_run_record,
 )
 from ...report.latex import to_latex
 from ...report.render import to_csv, to_json, to_markdown, to_rich_table
@@ -192,7 +192,7 @@ def command(all_, tables, names, repeat, jobs, fmt, out_dir, compare_paper, rota
             write_text(stem.with_suffix(".tex"), to_latex(trs, cols, TITLES[t], HEADERS))
         write_text(out / "rows.csv", to_csv(rows))
         write_text(out / "rows.json", to_json(rows))
-        write_run_record(out, run_record(settings, rows, sys.argv))
+        write_run_record(out, tables_run_record(settings, rows, sys.argv))
         log.info("wrote %s", os.fspath(out))
 
     if plot_path:

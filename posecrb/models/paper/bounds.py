@@ -214,7 +214,7 @@ def block_diagonal(blocks: np.ndarray) -> sp.csc_matrix:
 
 
 @dataclass(frozen=True)
-class BoundsResult:
+class GraphBounds:
     dim: int
     anchor: int                   # internal index
     anchor_id: int                # id as in the file
@@ -252,7 +252,7 @@ class BoundsResult:
 
 
 def compute_bounds(graph: PoseGraph, anchor: int | None = None, rotation_model: str = "eq59",
-                   repeat: int = 1, *, ordering: str = "auto") -> BoundsResult:
+                   repeat: int = 1, *, ordering: str = "auto") -> GraphBounds:
     """All graph-only metrics; ``anchor`` is an internal index (default 0 = smallest id).
 
     Timed regions (median of ``repeat`` after one warm-up): ``laplacians`` = weights from the
@@ -330,7 +330,7 @@ def compute_bounds(graph: PoseGraph, anchor: int | None = None, rotation_model: 
                                                    f"(lambda_inf {lam_inf:.3g}, lower bound {lower:.3g})")
     t_graph, t_approx = t_optimality(graph, anchor, rotation_model)
     total_degree = int(graph.degree.sum() - graph.degree[anchor])
-    return BoundsResult(
+    return GraphBounds(
         dim=d, anchor=anchor, anchor_id=int(graph.ids[anchor]), rotation_model=rotation_model,
         logdet_l_tau=float(ld_tau), logdet_l_w=float(ld_w),
         lb=d * float(ld_tau) + dr * float(ld_w), ub=None if ld_psi is None else d * float(ld_tau) + float(ld_psi),

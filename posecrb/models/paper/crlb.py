@@ -36,13 +36,15 @@ Statuses (``posecrb.core.status``), never a silent number:
 from __future__ import annotations
 
 import time
-from collections.abc import Callable, Sequence
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, field
+from typing import Any
 
 import numpy as np
 import scipy.sparse as sp
 
 from ...core.graph import PoseGraph
+from ...core.result import Result, plain
 from ...core.status import OK, Status
 from ...linalg.cholesky import Factor
 from ...linalg.ordering import block_cholesky
@@ -63,7 +65,7 @@ ACCURACY_COLUMNS = 4
 
 
 @dataclass(frozen=True)
-class InverseAccuracy:
+class InverseAccuracy(Result):
     """How far the computed inverse of a sparse SPD matrix can be trusted.
 
     ``residual``: max over ``columns`` sampled unit vectors e_k (``numpy.random.default_rng(seed)``)
@@ -72,7 +74,16 @@ class InverseAccuracy:
     ``H = D^{-1/2} A D^{-1/2}`` (``D = diag A``; Hager-Higham estimate of ``||H^{-1}||_1``), which
     governs the accuracy of Cholesky-based inverses. ``error_bound = condition_estimate * eps``:
     estimated relative error of the computed inverse (normwise, in the scaled coordinates).
-    ``condition_unscaled``: the same for A itself (what other tools print).
+    ``condition_unscaled``: the same for A itself (what other tools print). ``status`` is a
+    warning above an estimated relative error of 1e-6 and unavailable when no digit is
+    guaranteed; ``to_dict()`` is the ``accuracy`` object of the ``crlb`` JSON.
+
+    Examples
+    --------
+    >>> import posecrb
+    >>> acc = posecrb.crlb("intel").accuracy
+    >>> acc.status.ok, acc.columns, acc.error_bound < 1e-6
+    (True, 4, True)
     """
 
     residual: float
@@ -82,10 +93,23 @@ class InverseAccuracy:
     columns: int
     status: Status = OK
 
-    def as_json(self) -> dict:
-        return {"residual": self.residual, "condition_estimate": self.condition_estimate,
-                "condition_unscaled": self.condition_unscaled, "error_bound": self.error_bound,
-                "columns": self.columns, **self.status.as_json()}
+    def to_dict(self) -> dict[str, Any]:
+        """The ``accuracy`` object of the ``crlb`` JSON: the numbers, then the status flattened
+        in (``status``, ``reason``[, ``hint``])."""
+        out: dict[str, Any] = plain({
+            "residual": self.residual, "condition_estimate": self.condition_estimate,
+            "condition_unscaled": self.condition_unscaled, "error_bound": self.error_bound,
+            "columns": self.columns, **self.status.as_json()})
+        return out
+
+    @classmethod
+    def from_dict(cls, d: Mapping[str, Any]) -> InverseAccuracy:
+        """The inverse of ``to_dict``."""
+        return cls(d["residual"], d["condition_estimate"], d["condition_unscaled"], d["error_bound"], d["columns"],
+                   Status.from_json(d))
+
+    def statuses(self) -> dict[str, Status]:
+        return {"CRLB": self.status}
 
 
 def _onenorm_inverse(solve: Callable[[np.ndarray], np.ndarray], n: int) -> float:
@@ -159,7 +183,7 @@ def inverse_accuracy(a: sp.spmatrix, factor: Factor, name: str = "matrix", colum
 
 
 @dataclass(frozen=True, eq=False, kw_only=True)
-class CrlbResult:
+class PaperCrlb:
     """CRLB of the paper model at one estimate.
 
     ``trace_crlb = trace(F^{-1})`` (the whole bound in 2D, the flat leading term in 3D) and
@@ -231,7 +255,7 @@ def _requested_ids(graph: PoseGraph, per_pose: bool | Sequence[int]) -> np.ndarr
 
 
 def crlb_from_fim(fim: PaperFim, graph: PoseGraph, per_pose: bool | Sequence[int] = False, *,
-                  ordering: str = "auto") -> CrlbResult:
+                  ordering: str = "auto") -> PaperCrlb:
     """CRLB (eq. 67 / 68) from an already built paper FIM of ``graph``, with its accuracy
     estimate and the validity of the curvature term (module docstring). ``ordering``: the FIM
     factorization's fill-reducing ordering (posecrb.linalg.ordering; cost only)."""
@@ -284,7 +308,7 @@ def crlb_from_fim(fim: PaperFim, graph: PoseGraph, per_pose: bool | Sequence[int
         pp = {int(i): (blocks[r] if f else zero) for i, r, f in zip(ids, row, free)}
         if curv_blocks is not None:
             ppc = {int(i): (curv_blocks[r] if f else zero) for i, r, f in zip(ids, row, free)}
-    return CrlbResult(model="paper", dim=d, poses=graph.n, n_free=npf, anchor_id=fim.anchor_id, trace_crlb=trace,
+    return PaperCrlb(model="paper", dim=d, poses=graph.n, n_free=npf, anchor_id=fim.anchor_id, trace_crlb=trace,
                       mse_bound=trace / npf if npf else 0.0, trace_translation=tr_t, trace_rotation=tr_r,
                       trace_crlb_curvature=trace_curv, mse_bound_curvature=mse_curv,
                       coordinates=coordinate_names(d), per_pose=pp, per_pose_curvature=ppc, times=times,
@@ -294,7 +318,7 @@ def crlb_from_fim(fim: PaperFim, graph: PoseGraph, per_pose: bool | Sequence[int
 
 def paper_crlb(graph: PoseGraph, rot: np.ndarray, trans: np.ndarray, anchor: int = 0,
                per_pose: bool | Sequence[int] = False, rotation_model: str = "eq59",
-               variant: str = "consistent", *, ordering: str = "auto") -> CrlbResult:
+               variant: str = "consistent", *, ordering: str = "auto") -> PaperCrlb:
     """CRLB of the paper model at the estimate ``(rot, trans)`` with pose ``anchor``
     (internal index) fixed: 2D eq. (67), 3D eq. (68). ``per_pose``: True for every pose,
     or a sequence of pose ids (as in the file). ``variant``: the FIM it inverts,

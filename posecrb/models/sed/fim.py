@@ -1,4 +1,4 @@
-"""The thesis model on SE(d)^n: right-invariant Fisher information, gauge, anchored and quotient CRBs.
+"""The sed model (the thesis's, on SE(d)^n): right-invariant Fisher information, gauge, anchored and quotient CRLBs.
 
 Bertini, "On Intrinsic Cramér-Rao Bounds on the Lie Group SE(d)^n" (the thesis), chapters 4-5;
 docs/design.md#thesis-fim.
@@ -302,7 +302,7 @@ def sed_fim(graph: PoseGraph, rot: np.ndarray, trans: np.ndarray, *, indefinite:
     poses are their inverses (module docstring). ``information`` optionally replaces the
     converted file matrices by (m, q, q) left-noise information, rotation first. Works on
     disconnected graphs: rank and nullity are certified by one Cholesky factorization of F on
-    the poses left after removing the smallest index of each component (reused by ``sed_crb``;
+    the poses left after removing the smallest index of each component (reused by ``sed_crlb``;
     its log-determinant is ``logdet_anchored``). If that factorization fails (nullity above
     ``q c``: singular or extremely ill-conditioned information), the rank is computed per
     component from dense eigenvalues (``rank_method="dense-eig"``, components of at most 3000

@@ -1,6 +1,6 @@
-"""World- and body-frame coordinates of the thesis model (SE(d)^n), GTSAM's and g2o's convention.
+"""World- and body-frame coordinates of the sed model (the thesis's, on SE(d)^n), GTSAM's and g2o's convention.
 
-The thesis model (``posecrb.models.thesis.fim``, thesis 4.5-4.6) perturbs ``T_i = X_i^{-1}`` on the right,
+The sed model (``posecrb.models.sed.fim``, thesis 4.5-4.6) perturbs ``T_i = X_i^{-1}`` on the right,
 ``T_i Exp(delta_i)``, with ``delta_i = (omega, v)`` rotation first. For the file's pose
 ``X_i = (R_i, t_i)`` (body to world) that is ``X_i -> Exp(-delta_i) X_i``: a perturbation
 about the **world** origin, so a pose's block carries lever-arm terms (rotation
@@ -43,7 +43,7 @@ import scipy.sparse as sp
 from ...core.errors import InternalError, UsageError
 from ...core.graph import PoseGraph
 from ...lie.se import se_adjoint, se_inverse
-from .crb import SedCrbResult, sed_crb
+from .crlb import SedCrlb, sed_crlb
 
 FRAMES = ("world", "body")
 
@@ -138,19 +138,19 @@ def convert_information(matrix: sp.spmatrix, rot: np.ndarray, trans: np.ndarray,
     return ((out + out.T) * 0.5).tocsc()
 
 
-def sed_crb_in_frame(graph: PoseGraph, rot: np.ndarray, trans: np.ndarray, frame: str = "world", *,
+def sed_crlb_in_frame(graph: PoseGraph, rot: np.ndarray, trans: np.ndarray, frame: str = "world", *,
                      anchors: Sequence[int] | None = None, quotient: bool = False,
-                     per_pose: bool | Sequence[int] = False, **sed_options: Any) -> SedCrbResult:
-    """``posecrb.models.thesis.crb.sed_crb`` with traces and per-pose blocks in ``frame`` ("world" or "body").
+                     per_pose: bool | Sequence[int] = False, **sed_options: Any) -> SedCrlb:
+    """``posecrb.models.sed.crlb.sed_crlb`` with traces and per-pose blocks in ``frame`` ("world" or "body").
 
-    "world" is ``sed_crb`` unchanged. "body" converts every per-pose block (5.1 / 5.5) with
+    "world" is ``sed_crlb`` unchanged. "body" converts every per-pose block (5.1 / 5.5) with
     ``B_i C_i B_i^T`` (module docstring); the trace (hence ``mse_bound``) is the sum of the
     converted blocks' traces, so all blocks are computed whatever ``per_pose`` asks for.
-    ``sed_options`` go to ``sed_crb`` (``fim``, ``indefinite``, ``information``).
+    ``sed_options`` go to ``sed_crlb`` (``fim``, ``indefinite``, ``information``).
     """
 
     if check_frame(frame) == "world":
-        return sed_crb(graph, rot, trans, anchors=anchors, quotient=quotient, per_pose=per_pose, **sed_options)
+        return sed_crlb(graph, rot, trans, anchors=anchors, quotient=quotient, per_pose=per_pose, **sed_options)
     if per_pose is True:
         want: np.ndarray | None = np.arange(graph.n)
     elif per_pose is False or per_pose is None:
@@ -159,12 +159,12 @@ def sed_crb_in_frame(graph: PoseGraph, rot: np.ndarray, trans: np.ndarray, frame
         want = np.unique(np.asarray(list(per_pose), dtype=np.int64))
         if want.size and (want[0] < 0 or want[-1] >= graph.n):
             raise UsageError(f"pose index out of range 0..{graph.n - 1}")
-    res = sed_crb(graph, rot, trans, anchors=anchors, quotient=quotient, per_pose=True, **sed_options)
+    res = sed_crlb(graph, rot, trans, anchors=anchors, quotient=quotient, per_pose=True, **sed_options)
     if res.per_pose is None:  # per_pose=True asks for every block
-        raise InternalError("sed_crb returned no per-pose blocks")
+        raise InternalError("sed_crlb returned no per-pose blocks")
     keys = np.fromiter(res.per_pose.keys(), np.int64, res.n)
     if not np.array_equal(keys, np.arange(res.n)):  # the stacking below relies on pose order
-        raise InternalError("sed_crb returned per-pose blocks out of pose order")
+        raise InternalError("sed_crlb returned per-pose blocks out of pose order")
     blocks = np.stack(list(res.per_pose.values())) if res.n else np.zeros((0, res.q, res.q))
     body = convert_covariance_blocks(blocks, rot, trans, "body")
     trace = float(np.trace(body, axis1=1, axis2=2).sum())

@@ -7,8 +7,8 @@ left-multiplicative noise (4.3) in (omega, v_x, v_y) coordinates, and anchors ``
 
 The thesis' poses ``T_i`` (sec. 6.2) are stored as the graph's vertices ``X_i = T_i^{-1}`` so that
 the file convention ``X_i^{-1} X_j = T_i T_j^{-1}`` holds (docs/design.md#thesis-example), and each arc's
-information is stored in g2o convention such that ``posecrb.models.thesis.fim`` recovers exactly
-``Omega_ij = Sigma_ij^{-1}`` (``posecrb.models.thesis.fim.right_information_from_left``).
+information is stored in g2o convention such that ``posecrb.models.sed.fim`` recovers exactly
+``Omega_ij = Sigma_ij^{-1}`` (``posecrb.models.sed.fim.right_information_from_left``).
 Pose ids are the thesis' labels 1..5; internal indices are 0..4.
 """
 from __future__ import annotations

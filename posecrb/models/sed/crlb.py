@@ -1,5 +1,5 @@
 """The thesis's intrinsic Cramér-Rao bounds on SE(d)^n: anchored (thesis 5.1) and quotient (5.5), from the
-Fisher information of posecrb.models.thesis.fim (docs/design.md#anchored-crb, #quotient-crb).
+Fisher information of posecrb.models.sed.fim (docs/design.md#anchored-crb, #quotient-crb).
 """
 from __future__ import annotations
 
@@ -19,8 +19,8 @@ from .fim import SedFim, _free_matrix, _resolve_anchors, sed_fim
 
 
 @dataclass(frozen=True, eq=False)
-class SedCrbResult:
-    """Anchored (5.1) or quotient (5.5) intrinsic CRB of the thesis model, curvature neglected."""
+class SedCrlb:
+    """Anchored (5.1) or quotient (5.5) intrinsic CRLB of the sed model, curvature neglected."""
 
     model: str                     # "sed"
     kind: str                      # "anchored" | "quotient"
@@ -34,14 +34,14 @@ class SedCrbResult:
     anchors: list[int]             # internal indices; "quotient": the one per component used for G
     per_pose: dict[int, np.ndarray] | None  # internal index -> (q, q) covariance bound block
     times: dict[str, float]
-    frame: str = "world"           # coordinates of trace and blocks (posecrb.models.thesis.frames): "world" | "body"
+    frame: str = "world"           # coordinates of trace and blocks (posecrb.models.sed.frames): "world" | "body"
     accuracy: Any = None           # posecrb.models.paper.crlb.InverseAccuracy of the anchored inverse G
 
 
-def sed_crb(graph: PoseGraph, rot: np.ndarray, trans: np.ndarray, anchors: Sequence[int] | None = None,
+def sed_crlb(graph: PoseGraph, rot: np.ndarray, trans: np.ndarray, anchors: Sequence[int] | None = None,
             quotient: bool = False, per_pose: bool | Sequence[int] = False, *,
             fim: SedFim | None = None, indefinite: str = "blocks",
-            information: np.ndarray | None = None, ordering: str = "auto") -> SedCrbResult:
+            information: np.ndarray | None = None, ordering: str = "auto") -> SedCrlb:
     """Intrinsic CRB of the SE(d)^n model at an estimate, exact from one sparse factorization.
 
     * anchored (default): ``(Pi F Pi)^+`` (5.1), the inverse of F on the free poses, zero on
@@ -82,7 +82,7 @@ def sed_crb(graph: PoseGraph, rot: np.ndarray, trans: np.ndarray, anchors: Seque
         fac = block_cholesky(ff, ordering, dim=graph.dim, poses=graph.n, matrix="crlb", block=q, name=name)
     else:
         fac = None
-    times["crb_factor"] = time.perf_counter() - t0
+    times["crlb_factor"] = time.perf_counter() - t0
 
     if per_pose is True:
         want = np.arange(n)
@@ -105,7 +105,7 @@ def sed_crb(graph: PoseGraph, rot: np.ndarray, trans: np.ndarray, anchors: Seque
         trace_g = float(np.trace(blocks, axis1=-2, axis2=-1).sum())
     else:
         trace_g = float(selinv.trace_inverse(ff, name, factor=fac))
-    times["crb_selinv"] = time.perf_counter() - t0
+    times["crlb_selinv"] = time.perf_counter() - t0
     t0 = time.perf_counter()
 
     accuracy = inverse_accuracy(ff, fac, "SE(d) FIM on the free poses") if fac is not None else None
@@ -136,13 +136,13 @@ def sed_crb(graph: PoseGraph, rot: np.ndarray, trans: np.ndarray, anchors: Seque
         if need_blocks:
             yy = s_inv[:, None, None] * (y + np.swapaxes(y, 1, 2))
             out = g_blocks - yy + m_c[labels] / sizes[labels][:, None, None]
-        times["crb_quotient"] = time.perf_counter() - t0
+        times["crlb_quotient"] = time.perf_counter() - t0
         kind = "quotient"
 
     per = None
     if want is not None and out is not None:  # need_blocks
         per = {int(i): out[i] for i in want}
-    return SedCrbResult(
+    return SedCrlb(
         model="sed", kind=kind, dim=fim.dim, q=q, n=n, trace_crlb=trace,
         mse_bound=trace / n_err if n_err > 0 else float("nan"),
         nullity=fim.nullity, components=c, anchors=anchors_, per_pose=per, times=times, accuracy=accuracy)

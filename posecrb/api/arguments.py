@@ -1,0 +1,245 @@
+"""The arguments of the public functions, checked once, in Python terms.
+
+Every check raises ``ArgumentError`` naming the keyword as the caller wrote it
+(``anchor=-1 is not a pose id ...``); the command line shows the same error with its option
+(``--anchor -1 ...``). Library keywords are the command-line options in snake case, so the
+checks here are the library's side of the options' click types.
+"""
+from __future__ import annotations
+
+import math
+import numbers
+import os
+import re
+from collections.abc import Sequence
+from typing import TYPE_CHECKING, Any
+
+import numpy as np
+
+from ..core.errors import ArgumentError, UsageError
+from ..core.graph import PoseGraph
+from ..core.timing import timed
+from ..datasets import search
+from ..io import load as read_graph
+from ..io import parse_bytes, parse_text
+
+if TYPE_CHECKING:
+    from ..solver.estimate import Estimate
+
+INT64_MAX = 2 ** 63 - 1
+
+
+def choice(parameter: str, value: Any, choices: Sequence[str]) -> str:
+    """``value`` when it is one of ``choices`` (strings)."""
+    if not isinstance(value, str) or value not in choices:
+        raise ArgumentError(parameter, value, f"is not one of {', '.join(map(repr, choices))}")
+    return value
+
+
+def flag(parameter: str, value: Any) -> bool:
+    """``value`` when it is a bool (``numpy.bool_`` included)."""
+    if not isinstance(value, (bool, np.bool_)):
+        raise ArgumentError(parameter, value, "is not True or False")
+    return bool(value)
+
+
+def integer(parameter: str, value: Any, low: int, high: int = INT64_MAX) -> int:
+    """``value`` when it is an integer (not a bool, not a float such as 1.5) in [low, high]."""
+    if isinstance(value, (bool, np.bool_)) or not isinstance(value, numbers.Integral):
+        raise ArgumentError(parameter, value, "is not an integer")
+    if not low <= int(value) <= high:
+        raise ArgumentError(parameter, value, f"is not in {low}..{high}")
+    return int(value)
+
+
+def finite(parameter: str, value: Any, low: float, high: float = math.inf, *, low_open: bool = False) -> float:
+    """``value`` when it is a finite real number in [low, high] (``(low, high]`` with ``low_open``)."""
+    if isinstance(value, (bool, np.bool_)) or not isinstance(value, numbers.Real):
+        raise ArgumentError(parameter, value, "is not a number")
+    x = float(value)
+    if not math.isfinite(x):
+        raise ArgumentError(parameter, value, "is not a finite number")
+    if x < low or (low_open and x == low) or x > high:
+        span = f"{'(' if low_open else '['}{low:g}, {high:g}]"
+        raise ArgumentError(parameter, value, f"is not in {span}")
+    return x
+
+
+def path_or_none(parameter: str, value: Any) -> str | None:
+    """A non-empty ``str`` / ``os.PathLike`` as a string, or None."""
+    if value is None:
+        return None
+    if not isinstance(value, (str, os.PathLike)) or not os.fspath(value):
+        raise ArgumentError(parameter, value, "is not a path (a non-empty str or os.PathLike)")
+    return str(os.fspath(value))
+
+
+# ---- graphs -----------------------------------------------------------------------------
+def _shown(value: Any) -> Any:
+    """A short form of a long value for a message (the first bytes of a file's content)."""
+    if isinstance(value, (bytes, bytearray, memoryview)):
+        data = bytes(value)
+        return data[:24] + (b"..." if len(data) > 24 else b"")
+    if isinstance(value, str) and len(value) > 60:
+        return value[:40] + "..."
+    return value
+
+
+def resolve_source(source: Any, data_dir: Any = None) -> str:
+    """The file a path or a bare dataset name names, resolved as the command line does: an
+    existing path as is, else the name on the search path (``data_dir``, ``$POSECRB_DATA``,
+    ``./datasets``, ``~/.cache/posecrb``) and the manifest's names."""
+    if isinstance(source, (bytes, bytearray, memoryview)):
+        raise ArgumentError("source", _shown(source), "is bytes: pass a path or a dataset name, or the "
+                            "file's content to posecrb.parse")
+    if not isinstance(source, (str, os.PathLike)) or not os.fspath(source):
+        raise ArgumentError("source", _shown(source), "is not a pose graph, a path or a dataset name")
+    directory = path_or_none("data_dir", data_dir)
+    return str(search.resolve(os.fspath(source), directory))
+
+
+def load_graph(source: Any, data_dir: Any = None, *, quaternions: str = "normalize",
+               repeat: int = 1) -> tuple[PoseGraph, dict[str, float]]:
+    """``(graph, times)``: ``source`` itself when it is a ``PoseGraph`` (no time), else the file
+    it names read with ``quaternions``, and ``{"parse": seconds}`` (median of ``repeat``)."""
+    if isinstance(source, PoseGraph):
+        return source, {}
+    path = resolve_source(source, data_dir)
+    graph, t_parse = timed(lambda: read_graph(path, quaternions=quaternions), repeat=repeat)
+    return graph, {"parse": t_parse}
+
+
+def parse_content(text: Any) -> PoseGraph:
+    """A pose graph from a file's content: ``str`` or ``bytes`` (UTF-8)."""
+    if isinstance(text, str):
+        return parse_text(text)
+    if isinstance(text, (bytes, bytearray, memoryview)):
+        return parse_bytes(bytes(text))
+    raise ArgumentError("text", _shown(text), "is not a file's content (str or bytes)")
+
+
+# ---- poses ------------------------------------------------------------------------------
+def anchor_ids(value: Any) -> tuple[int, ...]:
+    """``anchor``: None, a pose id, or a sequence of pose ids -> a tuple of ids (types checked;
+    membership is checked against the graph by ``PoseGraph.index_of``)."""
+    if value is None:
+        return ()
+    items = list(value) if isinstance(value, (list, tuple, np.ndarray)) else [value]
+    for a in items:
+        if isinstance(a, (bool, np.bool_)) or not isinstance(a, numbers.Integral):
+            raise ArgumentError("anchor", value, "is not a pose id or a sequence of pose ids (integers)")
+    return tuple(int(a) for a in items)
+
+
+def check_anchors(graph: PoseGraph, anchors: Sequence[int]) -> None:
+    """Every id in ``anchors`` is a pose id of ``graph`` (``ArgumentError`` naming ``anchor``)."""
+    for a in anchors:
+        graph.index_of(a, "anchor")
+
+
+def pose_request(value: Any) -> bool | list[int]:
+    """``poses``: None or False (no per-pose blocks), True or ``"all"``, a sequence of pose ids,
+    or the command line's text ``"3,7,10-12"`` (ids and ranges)."""
+    if value is None or value is False:
+        return False
+    if value is True:
+        return True
+    if isinstance(value, str):
+        text = value.strip()
+        if text.lower() == "all":
+            return True
+        out: list[int] = []
+        for part in text.split(","):
+            part = part.strip()
+            # digits only (int() would take 1_0 and non-ASCII digits), ids that fit int64
+            if re.fullmatch(r"[0-9]+(?:-[0-9]+)?", part) is None or max(map(int, part.split("-"))) > INT64_MAX:
+                raise ArgumentError("poses", part, "is not a pose id or an id range a-b")
+            if "-" in part:
+                lo, hi = map(int, part.split("-", 1))
+                if hi < lo or hi - lo > 10 ** 7:     # (a huge range would exhaust memory)
+                    raise ArgumentError("poses", part, "is not a pose id or an id range a-b")
+                out.extend(range(lo, hi + 1))
+            else:
+                out.append(int(part))
+        return out
+    if isinstance(value, (list, tuple, np.ndarray, range)):
+        ids = list(value)
+        for p in ids:
+            if isinstance(p, (bool, np.bool_)) or not isinstance(p, numbers.Integral):
+                raise ArgumentError("poses", _shown(value), "is not 'all' or a sequence of pose ids (integers)")
+        return [int(p) for p in ids]
+    raise ArgumentError("poses", _shown(value), "is not 'all', a sequence of pose ids or a text such as '0,5,10-12'")
+
+
+# ---- estimates --------------------------------------------------------------------------
+def is_pose_object(value: Any) -> bool:
+    """Whether ``value`` carries poses itself (a ``SolveResult`` or an ``Estimate``)."""
+    from ..solver.estimate import Estimate  # noqa: PLC0415 -- lazy: start-up time (scipy)
+    from ..solver.solve import SolveResult  # noqa: PLC0415 -- lazy: start-up time (scipy)
+
+    return isinstance(value, (SolveResult, Estimate))
+
+
+def estimate_spec(value: Any, *, allow_none: bool = False) -> str:
+    """``estimate`` given as text: ``"solve"``, ``"vertices"``, a path, or (``allow_none``)
+    None / ``"none"`` -> ``"none"``."""
+    if value is None and allow_none:
+        return "none"
+    if isinstance(value, (str, os.PathLike)) and os.fspath(value):
+        text = str(os.fspath(value))
+        if text != "none" or allow_none:
+            return text
+    raise ArgumentError("estimate", _shown(value), "is not 'solve', 'vertices', a path, a SolveResult or an "
+                        "Estimate" + (" (or None)" if allow_none else ""))
+
+
+def resolve_estimate(graph: PoseGraph, estimate: Any, *, allow_none: bool = False,
+                     solver_options: dict[str, Any] | None = None) -> Estimate | None:
+    """The poses ``estimate`` names: ``"solve"`` (the certified solver, with ``solver_options``),
+    ``"vertices"`` (the file's VERTEX lines), a path (another file's vertices with the same
+    ids), a ``SolveResult`` or an ``Estimate`` of this graph; ``None`` / ``"none"`` when
+    ``allow_none`` (graph-only results)."""
+    from ..solver.estimate import Estimate, get_estimate  # noqa: PLC0415 -- lazy: start-up time (scipy)
+    from ..solver.solve import SolveResult  # noqa: PLC0415 -- lazy: start-up time (scipy)
+
+    if estimate is None or (isinstance(estimate, str) and estimate == "none"):
+        if allow_none:
+            return None
+        raise ArgumentError("estimate", estimate, "is not 'solve', 'vertices', a path, a SolveResult or an Estimate")
+    if isinstance(estimate, SolveResult):
+        if estimate.rot.size == 0:
+            raise ArgumentError("estimate", f"SolveResult of {estimate.dataset}", "carries no poses (it was rebuilt "
+                                "from a dict); SolveResult.load of a saved result has them", sep=": ")
+        if estimate.ids.size and not np.array_equal(estimate.ids, graph.ids):
+            raise ArgumentError("estimate", f"SolveResult of {estimate.dataset}",
+                                f"is the estimate of another graph (its pose ids are not those of {graph.name})",
+                                sep=": ")
+        return _checked(graph, Estimate(estimate.rot, estimate.trans, "solve", estimate.certified, estimate.objective))
+    if isinstance(estimate, Estimate):
+        if not estimate.has_poses:
+            raise ArgumentError("estimate", f"Estimate from {estimate.source}", "carries no poses", sep=": ")
+        return _checked(graph, estimate)
+    if isinstance(estimate, (str, os.PathLike)) and os.fspath(estimate):
+        source = str(os.fspath(estimate))
+        if source == "solve":
+            return get_estimate(graph, "solve", **(solver_options or {}))
+        return get_estimate(graph, source)
+    raise ArgumentError("estimate", _shown(estimate),
+                        "is not 'solve', 'vertices', a path, a SolveResult or an Estimate")
+
+
+def _checked(graph: PoseGraph, estimate: Estimate) -> Estimate:
+    from ..solver.estimate import Estimate  # noqa: PLC0415 -- lazy: start-up time (scipy)
+
+    """``estimate`` with its poses as float arrays of the graph's shapes (``check_estimate``),
+    without a solve time (this call did not run the solver)."""
+    try:
+        rot, trans = graph.check_estimate(estimate.rot, estimate.trans)
+    except UsageError as exc:
+        raise ArgumentError("estimate", f"Estimate from {estimate.source}", str(exc), sep=": ") from None
+    return Estimate(rot, trans, estimate.source, estimate.certified, estimate.objective)
+
+
+def estimate_times(estimate: Estimate | None) -> dict[str, float]:
+    """``{"solve": seconds}`` when the call ran the solver, else ``{}`` (the commands' ``times``)."""
+    return {} if estimate is None or estimate.solve_time is None else {"solve": float(estimate.solve_time)}
