@@ -65,8 +65,8 @@ _HTML_ANCHOR = re.compile(r'\s*<a id="([A-Za-z0-9_-]+)">(</a>)?\s*')
 
 
 class HtmlAnchors(Transform):
-    """Replace each raw ``<a id="name"></a>`` by a target with that id (before MyST resolves
-    ``#name`` links, which then find it among the page's ids)."""
+    """Replace each raw ``<a id="name"></a>`` by an explicit target of that name (before MyST
+    resolves ``#name`` links; other pages' ``page.md#name`` links find it among the labels)."""
 
     default_priority = 700
 
@@ -75,12 +75,15 @@ class HtmlAnchors(Transform):
             m = _HTML_ANCHOR.fullmatch(raw.astext())
             if not m or "html" not in raw.get("format", "").split():
                 continue
-            target = nodes.target("", "", ids=[m[1]])
-            if m[1] not in self.document.ids:
-                self.document.ids[m[1]] = target
             closing = raw.next_node(descend=False, siblings=True)
             if not m[2] and isinstance(closing, nodes.raw) and closing.astext().strip() == "</a>":
                 closing.parent.remove(closing)     # MyST parses the inline tag pair as two raw nodes
+            if m[1] in self.document.ids:          # the heading's own anchor has that name already
+                raw.parent.remove(raw)
+                continue
+            target = nodes.target("", "", ids=[m[1]], names=[m[1]])
+            # explicit: ``page.md#name`` links from other pages resolve through Sphinx's labels
+            self.document.note_explicit_target(target, target)
             raw.replace_self(target)
 
 
