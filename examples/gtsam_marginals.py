@@ -35,7 +35,7 @@ def posecrb(*args: str) -> str:
 
 def gtsam_marginals(path: Path, dim: int) -> dict[int, np.ndarray]:
     """GTSAM's marginal covariance of every pose but the first, which a constrained prior fixes."""
-    import gtsam
+    import gtsam  # noqa: PLC0415 -- optional: the script exits 77 without it
 
     is3d = dim == 3
     graph, initial = gtsam.readG2o(str(path), is3d)

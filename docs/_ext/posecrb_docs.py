@@ -21,11 +21,11 @@ from sphinx.application import Sphinx
 from sphinx.util.docutils import SphinxDirective
 from sphinx.util.nodes import nested_parse_with_titles
 
+import posecrb  # conf.py puts the checkout first on sys.path
+
 
 def public_api() -> list[tuple[str, str]]:
     """``(name, autodoc directive)`` for every name in ``posecrb.__all__``."""
-    import posecrb
-
     entries = []
     for name in posecrb.__all__:
         obj = getattr(posecrb, name)
