@@ -33,17 +33,30 @@ PAGES = page_paths()
 IDS = [str(p.relative_to(ROOT)) for p in PAGES]
 
 
+def _runnable_pages() -> list[object]:
+    """The pages with a block to run; those on the real datasets are marked slow (minutes in all)."""
+    params = []
+    for page, page_id in zip(PAGES, IDS):
+        try:
+            blocks = [b for b in page_blocks(page) if b.lang in ("console", "python") and b.skip is None]
+        except DocBlockError:
+            blocks = []     # reported by test_page_follows_conventions; still run below, and fail
+            params.append(pytest.param(page, id=page_id))
+            continue
+        if blocks:
+            marks = [pytest.mark.slow] if needs_real_data(blocks) else []
+            params.append(pytest.param(page, id=page_id, marks=marks))
+    return params
+
+
 @pytest.mark.parametrize("page", PAGES, ids=IDS)
 def test_page_follows_conventions(page: Path) -> None:
     page_blocks(page)
 
 
-@pytest.mark.parametrize("page", PAGES, ids=IDS)
+@pytest.mark.parametrize("page", _runnable_pages())
 def test_page_blocks_run(page: Path, tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
-    blocks = [b for b in page_blocks(page) if b.lang in ("console", "python")]
-    run = [b for b in blocks if b.skip is None]
-    if not run:
-        pytest.skip("no code block to run on this page")
+    run = [b for b in page_blocks(page) if b.lang in ("console", "python") and b.skip is None]
     data = os.environ.get("POSECRB_DATA", "")
     if needs_real_data(run) and not (data and Path(data.split(os.pathsep)[0]).is_dir()):
         pytest.skip("the page uses the real datasets: set POSECRB_DATA to their directory")

@@ -36,7 +36,9 @@ def test_there_are_examples() -> None:
     assert EXAMPLES, "examples/ has no script"
 
 
-@pytest.mark.parametrize("script", EXAMPLES, ids=[p.name for p in EXAMPLES])
+@pytest.mark.parametrize("script", [
+    pytest.param(p, id=p.name, marks=[pytest.mark.slow] if _names_a_dataset(p.read_text()) else [])
+    for p in EXAMPLES])
 def test_example_runs(script: Path, tmp_path: Path) -> None:
     data = os.environ.get("POSECRB_DATA", "")
     if _names_a_dataset(script.read_text()) and not (data and Path(data.split(os.pathsep)[0]).is_dir()):
