@@ -52,7 +52,6 @@ def test_example_runs(script: Path, tmp_path: Path) -> None:
     if proc.returncode == SKIPPED:
         pytest.skip(f"{script.name}: {proc.stderr.strip()}")
     assert proc.returncode == 0, f"{script.name} exited {proc.returncode}:\n{proc.stdout}\n{proc.stderr}"
-    assert proc.stdout.strip(), f"{script.name} printed nothing"
     after = {f.name: f.stat().st_mtime_ns for f in figures.iterdir()}
     assert after == before, f"{script.name} wrote into docs/figures without being asked"
 
