@@ -39,7 +39,7 @@ endif
 SHELL := /bin/bash
 .SHELLFLAGS := -euo pipefail -c
 .ONESHELL:
-.PHONY: system install run lint test test-fast test-latest lock regress bench clean
+.PHONY: system install run lint test test-fast test-latest lock regress bench docs clean
 
 # What apt must provide. A Debian-packaged interpreter needs python3.X-venv (ensurepip) for a venv and
 # python3.X-dev (Python.h) to compile scikit-sparse; any other interpreter brings its own.
@@ -174,5 +174,14 @@ regress: install
 bench: install
 	@for f in benchmarks/*.py; do $(PY) $$f; done
 
+# The documentation site into docs/_build/html: Sphinx with warnings as errors, offline (no
+# intersphinx, nothing fetched at build time). Its packages are the `docs` extra, installed here
+# when one of them is missing.
+docs: install
+	@$(PY) -c 'import sphinx, myst_parser, pydata_sphinx_theme, numpydoc, sphinx_click' 2>/dev/null \
+	  || { echo "make: installing the docs extra" >&2; $(PY) -m pip install -q -e '.[docs]'; }
+	$(PY) -m sphinx -W --keep-going -E -q -b html docs docs/_build/html
+	echo "make: the site is in docs/_build/html/index.html" >&2
+
 clean:
-	@rm -rf build dist *.egg-info .pytest_cache
+	@rm -rf build dist *.egg-info .pytest_cache docs/_build

@@ -33,7 +33,7 @@ exactly as the library runs them (posecrb.linalg.ordering): per dataset and choi
   ub   ordering of L_w (x) I_dr + blkdiag(Psi) (pose graph: L_w) + its factorization;
   FIM  ordering of the anchored paper FIM ("blocks" layout, as bounds/tables) + factorization + log-det;
 with the ordering actually used, the time (median of --repeat after a warm-up), nnz(L), and the spread
-of the log-dets over the choices (they must agree to rounding). This is the README's Orderings table.
+of the log-dets over the choices (they must agree to rounding). This is the Orderings table of docs/performance.md.
 
 Usage: python benchmarks/orderings.py [--repeat K] [--huge] [--grids3 N,N] [--grids2 N,N]
                                       [--no-real] [--data-dir DIR] [--slow S] [--options [--markdown]]
@@ -177,7 +177,7 @@ def _nnz(k: int) -> str:
 
 
 def markdown_tables(results: list[dict], orderings: list[str]) -> None:
-    """The README's Orderings tables: per matrix, time (s) and nnz(L) per explicit choice, and
+    """The Orderings tables of docs/performance.md: per matrix, time (s) and nnz(L) per explicit choice, and
     what auto used."""
     shown = [o for o in orderings if o != "auto"]
     for matrix in ("lb", "ub", "FIM"):

@@ -11,7 +11,7 @@ from .helpers import make_random_graph
 
 @pytest.fixture(scope="session")
 def shared_datasets() -> Path:
-    """The first directory of $POSECRB_DATA: the real datasets (see README, Setup); skip without it."""
+    """The first directory of $POSECRB_DATA: the real datasets (see docs/getting-started.md); skip without it."""
     first = os.environ.get("POSECRB_DATA", "").split(os.pathsep)[0]
     if not first or not Path(first).is_dir():
         pytest.skip("real-data tests need $POSECRB_DATA pointing at the datasets directory")

@@ -156,7 +156,7 @@ def test_curvature_term_outside_its_domain_is_unavailable(variant):
     assert res.trace_crlb_curvature is None and res.mse_bound_curvature is None
     assert res.per_pose_curvature is None
     assert res.trace_crlb == pytest.approx(np.trace(finv), rel=trace_inverse_rtol(f))
-    assert np.trace(bound) < res.trace_crlb  # what the old output printed instead
+    assert np.trace(bound) < res.trace_crlb  # eq. (68) evaluated anyway: below the first-order bound
 
 
 def test_curvature_status_thresholds():

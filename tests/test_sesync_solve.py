@@ -173,8 +173,8 @@ def test_cli_uncertified_exit_code(shared_datasets, tmp_path, monkeypatch):
     import posecrb.cli.commands.solve as solve_cmd
     from posecrb.cli import main
 
-    # An uncertified result (negative tolerances, the old way to force one, are now rejected
-    # as usage errors): exit 1, estimate still written.
+    # An uncertified result, forced by replacing the solver's answer (a negative tolerance is a
+    # usage error): exit 1, estimate still written.
     real = solve_cmd.solve
     monkeypatch.setattr(solve_cmd, "solve", lambda *a, **k: replace(real(*a, **k), certified=False))
     out = tmp_path / "est.g2o"

@@ -53,7 +53,7 @@ TABLE_II_FOOTNOTE = (
 TABLE_II_PUBLISHED_FOOTNOTE = (
     "Table II as published: eq. (64) exactly as printed (rotation coupling -w I) with the EMPIRICAL rotation "
     "weight 0.5515*kappa^2 (not eq. 59). It reproduces the printed FIM and lb columns; the printed ub column "
-    "is not reproduced (README, Table II upper bound). These are not the model's quantities: drop "
+    "is not reproduced (docs/findings.md, Table II upper bound). These are not the model's quantities: drop "
     "--as-published for them."
 )
 TABLE_II_FIT_FOOTNOTE = (

@@ -1,0 +1,54 @@
+"""Sphinx configuration of the posecrb documentation (``make docs``).
+
+The build is offline (no intersphinx, no remote images or fonts) and runs with warnings as errors
+(``sphinx -W``), here and in the test suite (tests/test_docs.py).
+"""
+from __future__ import annotations
+
+import os
+import sys
+
+HERE = os.path.dirname(os.path.abspath(__file__))
+sys.path.insert(0, os.path.join(HERE, "_ext"))
+sys.path.insert(0, os.path.dirname(HERE))   # the checkout's posecrb, also without an install
+
+import posecrb  # noqa: E402
+
+project = "posecrb"
+author = "The posecrb maintainers"
+copyright = "2026, The posecrb maintainers"
+version = release = posecrb.__version__
+
+extensions = [
+    "myst_parser",
+    "sphinx.ext.autodoc",
+    "numpydoc",
+    "sphinx_click",
+    "posecrb_docs",
+]
+
+source_suffix = {".rst": "restructuredtext", ".md": "markdown"}
+root_doc = "index"
+exclude_patterns = ["_build", "Thumbs.db", ".DS_Store"]
+templates_path: list[str] = []
+html_static_path: list[str] = []
+
+# MyST: heading anchors for in-page links such as [noise model](#noise-model) and
+# [a section](getting-started.md#reading-a-status).
+myst_heading_anchors = 4
+myst_enable_extensions = ["deflist"]
+
+# autodoc + numpydoc (API reference generated from posecrb.__all__ by posecrb_docs)
+autodoc_typehints = "none"          # numpydoc's Parameters sections carry the types
+autodoc_member_order = "bysource"
+numpydoc_show_class_members = False
+numpydoc_class_members_toctree = False
+
+html_theme = "pydata_sphinx_theme"
+html_title = f"posecrb {release}"
+html_theme_options = {
+    "navigation_with_keys": False,
+    "show_toc_level": 2,
+    "secondary_sidebar_items": ["page-toc"],
+}
+html_sidebars = {"**": ["sidebar-nav-bs"]}
