@@ -7,7 +7,7 @@ from pathlib import Path
 import posecrb
 
 ORDER = ["core", "lie", "io", "datasets", "linalg", "models", "solver", "sim", "selection", "experiments",
-         "metrics", "report", "cli"]
+         "evaluation", "report", "cli"]
 ROOT = Path(posecrb.__file__).resolve().parent
 
 

@@ -7,7 +7,7 @@ import click
 
 from ...core.errors import PosecrbError, status_of
 from ...core.status import log_status
-from ...metrics.evaluate import EvaluationSettings, evaluate
+from ...evaluation.evaluate import EvaluationSettings, evaluate
 from ...report.render import print_rows
 from ..options import (
     anchor_option,
