@@ -19,8 +19,7 @@ from ..core.errors import UsageError
 from ..core.graph import PoseGraph
 from ..core.status import OK, Status, log_status, put
 from ..io.npz import save_npz
-from ..linalg.cholesky import anchored_logdet
-from ..linalg.ordering import resolve_ordering
+from ..linalg.ordering import anchored_logdet, resolve_ordering
 from .paper.bounds import t_optimality
 from .paper.crlb import CrlbResult, InverseAccuracy, paper_crlb
 from .paper.fim import fim_symbolic_choice, paper_fim, trace_fim
