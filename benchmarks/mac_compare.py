@@ -34,7 +34,7 @@ import numpy as np
 from posecrb import load
 from posecrb.datasets import search as datasets
 from posecrb.experiments.sparsify import _evaluate, trajectory_error
-from posecrb.selection.select import (
+from posecrb.selection import (
     FiedlerObjective,
     parse_budget,
     select_edges,

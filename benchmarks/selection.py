@@ -22,7 +22,7 @@ from _common import median_time
 from posecrb import load
 from posecrb.core.timing import timed
 from posecrb.datasets import search as datasets
-from posecrb.selection.select import select_edges, split_edges, tree_objective
+from posecrb.selection import select_edges, split_edges, tree_objective
 from posecrb.solver.estimate import get_estimate
 
 TREE_DATASETS = ("intel", "city10000", "sphere2500")

@@ -18,7 +18,7 @@ from scipy.special import ive
 
 from posecrb.core.errors import DisconnectedGraph, ParseError, UsageError
 from posecrb.core.graph import PoseGraph
-from posecrb.selection.select import (
+from posecrb.selection import (
     DisconnectedFixedSet,
     fim_objective,
     frank_wolfe,
@@ -200,7 +200,7 @@ def test_objectives_match_dense_values_on_random_subsets(dim):
 
 
 def test_fiedler_value_by_lanczos_on_a_large_graph_matches_eigvalsh():
-    from posecrb.selection.select import FiedlerObjective
+    from posecrb.selection import FiedlerObjective
 
     rng = np.random.default_rng(6)
     g = chain_graph(rng, n=420, extra=300, dim=2)
@@ -293,7 +293,7 @@ def test_fused_single_laplacian_greedy_agrees_with_the_other_engines(seed):
 
 @pytest.mark.parametrize("uniform", [False, True])
 def test_incremental_greedy_refresh_does_not_change_the_choice(monkeypatch, uniform):
-    import posecrb.selection.select as sel
+    import posecrb.selection.greedy as sel
 
     g = chain_graph(np.random.default_rng(3), n=14, extra=40, dim=2, uniform=uniform)
     if uniform:
