@@ -205,13 +205,26 @@ def test_fiedler_value_by_lanczos_on_a_large_graph_matches_eigvalsh():
     rng = np.random.default_rng(6)
     g = chain_graph(rng, n=420, extra=300, dim=2)
     obj = FiedlerObjective(g, rot_weight(precisions(g.info, 2)[1], 2))
-    assert obj._block is not None            # the sparse (shift-invert Lanczos) path
+    assert obj._block is not None            # the sparse path: Lanczos on the pseudo-inverse
     x = (rng.random(g.m) < 0.6).astype(float)
     x[:g.n - 1] = 1.0
     ref = dense_value("fiedler", g, np.flatnonzero(x))
     st = obj.evaluate(x)
     assert st.value == pytest.approx(ref, rel=1e-9)
     assert st.value >= ref * (1 - 1e-12)     # a Rayleigh quotient never undershoots lambda_2
+
+
+def test_fiedler_value_raises_when_lanczos_does_not_converge(monkeypatch):
+    """An unconverged eigensolve is an error naming its residual, never a value."""
+    import posecrb.selection.objectives as objectives
+    from posecrb.core.errors import NumericalError
+
+    g = chain_graph(np.random.default_rng(6), n=420, extra=300, dim=2)
+    obj = objectives.FiedlerObjective(g, rot_weight(precisions(g.info, 2)[1], 2))
+    monkeypatch.setattr(objectives, "_EIG_TOL", 1e-300)
+    monkeypatch.setattr(objectives, "_EIG_RESTARTS", 2)
+    with pytest.raises(NumericalError, match="did not converge"):
+        obj.evaluate(np.ones(g.m))
 
 
 def test_tree_objective_merges_proportional_weights_exactly():

@@ -15,7 +15,6 @@ from dataclasses import dataclass
 
 import numpy as np
 import scipy.sparse as sp
-from scipy.sparse.csgraph import minimum_spanning_tree
 
 from ..core.errors import ParseError, PosecrbError, UsageError
 from ..core.files import read_regular_file
@@ -71,6 +70,9 @@ def _connecting_edges(graph: PoseGraph, fixed_mask: np.ndarray, weight: np.ndarr
     nc, labels = connected_components(graph.n, graph.src[fixed_mask], graph.dst[fixed_mask])
     if nc == 1:
         return np.zeros(0, dtype=np.int64)
+    # scipy.sparse.csgraph loads scipy.sparse.linalg and scipy.linalg (~0.1 s): only a broken chain pays
+    from scipy.sparse.csgraph import minimum_spanning_tree  # noqa: PLC0415 -- lazy: start-up time
+
     cand = np.flatnonzero(~fixed_mask)
     a, b = labels[graph.src[cand]], labels[graph.dst[cand]]
     cross = a != b

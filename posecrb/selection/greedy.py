@@ -17,14 +17,16 @@ from __future__ import annotations
 import heapq
 import math
 from dataclasses import dataclass
-from typing import Any
+from types import ModuleType
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
 from ..core.errors import NumericalError, UsageError
-from ..linalg.pathchol import PathFactor, logdet_eye_plus
-from ._kernels import scalar_greedy_steps, woodbury_downdate, woodbury_downdate1
 from .objectives import FiedlerObjective, LogDetObjective
+
+if TYPE_CHECKING:
+    from ..linalg.pathchol import PathFactor
 
 GAINS = ("auto", "exact", "jl")
 STRATEGIES = ("auto", "incremental", "lazy")
@@ -44,6 +46,15 @@ JL_PROJECTIONS = 64
 # "auto" greedy strategy: incremental (every gain exact at every step, O(candidates) per step)
 # unless candidates x budget x (per-edge work) exceeds this, then lazy.
 _INCREMENTAL_WORK = 2e9
+
+
+def _compiled() -> tuple[ModuleType, ModuleType]:
+    """``posecrb.linalg.pathchol`` and ``posecrb.selection._kernels``, imported on first use: they
+    load numba (0.2-0.5 s of start-up), which the fiedler objective never needs."""
+    from ..linalg import pathchol  # noqa: PLC0415 -- lazy: start-up time (numba)
+    from . import _kernels  # noqa: PLC0415 -- lazy: start-up time (numba)
+
+    return pathchol, _kernels
 
 
 @dataclass(frozen=True)
@@ -66,11 +77,12 @@ class UpdateEngine:
         self.obj, self.kind = obj, kind
         if kind == "path":
 
-            self.factors: list[Any] = [PathFactor(f) for f in factors]  # CHOLMOD Factors otherwise
+            self.factors: list[Any] = [_compiled()[0].PathFactor(f) for f in factors]  # CHOLMOD Factors otherwise
         else:
             self.factors = factors
 
     def gains(self, edges: np.ndarray) -> np.ndarray:
+        logdet_eye_plus = _compiled()[0].logdet_eye_plus
         total = np.zeros(edges.size)
         for b, f in zip(self.obj.blocks, self.factors):
             h = f.h(b.rows[edges], b.valid[edges], b.U[edges]) if self.kind == "path" else b.h_solve(f, edges)
@@ -109,6 +121,8 @@ def incremental_greedy(obj: LogDetObjective, x: np.ndarray, cand: np.ndarray, k:
     refresh_every = refresh_every or REFRESH_EVERY
     if engine == "path" and len(obj.blocks) == 1 and obj.blocks[0].U.shape[2] == 1:
         return incremental_greedy_scalar(obj, x, cand, k, refresh_every)
+    pathchol, kernels = _compiled()
+    logdet_eye_plus = pathchol.logdet_eye_plus
     state = obj.evaluate(x)
     hs = [b.h_selected(f, cand) for b, f in zip(obj.blocks, state.data)]
     local = [(np.ascontiguousarray(b.U[cand]), np.ascontiguousarray(b.rows[cand]),
@@ -168,7 +182,7 @@ def incremental_greedy(obj: LogDetObjective, x: np.ndarray, cand: np.ndarray, k:
             solves += 1
             he = h_e[i]
             inv = np.linalg.inv(np.eye(he.shape[0]) + 0.5 * (he + he.T))
-            (woodbury_downdate1 if inv.shape[0] == 1 else woodbury_downdate)(
+            (kernels.woodbury_downdate1 if inv.shape[0] == 1 else kernels.woodbury_downdate)(
                 h, uc, rc, vc, alive, np.ascontiguousarray(z), inv)
         eng.add(e)
     return np.array(chosen, dtype=np.int64), GreedyStats(solves, refreshes, len(chosen), "exact", online)
@@ -180,6 +194,7 @@ def incremental_greedy_scalar(obj: LogDetObjective, x: np.ndarray, cand: np.ndar
     stretch fused into one compiled call (``posecrb.selection._kernels.scalar_greedy_steps``); Python only
     between stretches: Minoux's bound on ~64 prefixes and a refresh every ``refresh_every`` steps."""
 
+    pathchol, kernels = _compiled()
     b = obj.blocks[0]
     uc = np.ascontiguousarray(b.U[cand][:, :, 0])
     rc = b.rows[cand]
@@ -201,7 +216,7 @@ def incremental_greedy_scalar(obj: LogDetObjective, x: np.ndarray, cand: np.ndar
             h = np.full(cand.size, -np.inf)
             idx = np.flatnonzero(alive)
             h[idx] = b.h_selected(state.data[0], cand[idx])[:, 0, 0]
-            pf = PathFactor(state.data[0])
+            pf = pathchol.PathFactor(state.data[0])
             prow = np.ascontiguousarray(pf.iperm[rc])
             refreshes += 1
         if step % every == 0:
@@ -211,7 +226,7 @@ def incremental_greedy_scalar(obj: LogDetObjective, x: np.ndarray, cand: np.ndar
         stop = min(k, (step // every + 1) * every, (step // refresh_every + 1) * refresh_every)
         update_last = stop < k and stop % refresh_every != 0
         pf._mark[:] = 0
-        pos, gains = scalar_greedy_steps(pf.indptr, pf.indices, pf.lval, pf.parent, prow, vc, uc, h, alive,
+        pos, gains = kernels.scalar_greedy_steps(pf.indptr, pf.indices, pf.lval, pf.parent, prow, vc, uc, h, alive,
                                          stop - step, b.mult, update_last, pf._mark, np.zeros(pf.n))
         pf._mark[:] = 0
         x[cand[pos]] = 1.0

@@ -31,14 +31,13 @@ from typing import Any, Literal
 
 import numpy as np
 import scipy.sparse as sp
-from scipy.sparse.linalg import LinearOperator, eigsh
 
-from ..core.errors import InternalError, UsageError
+from ..core.errors import InternalError, NumericalError, UsageError
 from ..core.graph import PoseGraph
 from ..core.noise import isotropic_precisions, rotation_weight
 from ..linalg.cholesky import Factor, SymbolicCholesky
+from ..linalg.lanczos import largest_eigenpair
 from ..linalg.laplacian import laplacian, reduced_index
-from ..linalg.pathchol import logdet_eye_plus
 from ..linalg.selinv import SelectedInverse
 from ..models.paper.fim import rotation_jacobians
 from ..solver.estimate import Estimate
@@ -48,6 +47,10 @@ OBJECTIVES = ("tree", "fim", "fiedler")
 _METIS_FROM = 4000
 # Dense eigensolver for lambda_2 up to this many poses.
 _DENSE_EIG_UP_TO = 300
+# lambda_2 beyond that: Lanczos on L^+ to this relative residual (ARPACK's criterion), at most this
+# many bases of 20 vectors.
+_EIG_TOL = 1e-10
+_EIG_RESTARTS = 250
 
 
 @dataclass(eq=False)
@@ -180,6 +183,8 @@ class LogDetObjective:
 
     def gains(self, state: ObjectiveState, edges: np.ndarray) -> np.ndarray:
         """Exact marginal gains ``sum_b mult_b logdet(I + H_be)`` (one selected inversion per block)."""
+        from ..linalg.pathchol import logdet_eye_plus  # noqa: PLC0415 -- lazy: start-up time (numba)
+
         return sum((b.mult * logdet_eye_plus(h) for b, h in zip(self.blocks, self._h(state, edges))),
                    np.zeros(edges.size))
 
@@ -188,6 +193,9 @@ class LogDetObjective:
         return sum(b.mult * np.trace(h, axis1=1, axis2=2) for b, h in zip(self.blocks, self._h(state, edges)))
 
     def gains_projected(self, state: ObjectiveState, edges: np.ndarray, k: int, rng: np.random.Generator) -> np.ndarray:
+        """Marginal gains from the random-projection estimates of ``H_e`` (``LogDetBlock.h_projected``)."""
+        from ..linalg.pathchol import logdet_eye_plus  # noqa: PLC0415 -- lazy: start-up time (numba)
+
         return sum((b.mult * logdet_eye_plus(b.h_projected(f, state.x, edges, k, rng))
                     for b, f in zip(self.blocks, state.data)), np.zeros(edges.size))
 
@@ -312,12 +320,18 @@ class FiedlerObjective:
             out[free] = factor.solve_A(y[free])
             return out - out.mean()
 
-        op = LinearOperator((n, n), matvec=apply, dtype=float)
         # deterministic start: the previous Fiedler vector, else the slowest cosine along the ids
         start = np.cos(np.linspace(0.0, np.pi, n)) if v0 is None else np.asarray(v0, float).copy()
         start -= start.mean()
-        _, vec = eigsh(op, k=1, which="LA", v0=start, tol=1e-10, maxiter=5000)
-        val, v = self._rayleigh(x, vec[:, 0])
+        # apply is L^+ (the grounded inverse, centred), whose largest eigenvalue is 1 / lambda_2.
+        # Lanczos tests convergence after every product: from the previous Fiedler vector (a
+        # warm start after a small change of x) it stops after ~10 solves where ARPACK, which
+        # tests only when its basis of 20 is full, needed 21.
+        ritz = largest_eigenpair(apply, start, tol=_EIG_TOL, max_restarts=_EIG_RESTARTS)
+        if not ritz.converged:
+            raise NumericalError(f"lambda_2: Lanczos did not converge (residual {ritz.residual:.2g} after "
+                                 f"{ritz.matvecs} solves with the {self._block.name})")
+        val, v = self._rayleigh(x, ritz.vector)
         return ObjectiveState(np.array(x, float), val, v)
 
     def value(self, x: np.ndarray) -> float:
