@@ -14,6 +14,7 @@ from dataclasses import dataclass, field
 from typing import Any
 
 import numpy as np
+from threadpoolctl import threadpool_limits
 
 from ..core.errors import UsageError
 from ..core.graph import PoseGraph
@@ -241,7 +242,25 @@ def select_edges(graph: PoseGraph, budget: str | int, *, objective: str = "tree"
     after the rounding (``polish_fiedler``; default POLISH_SOLVES, 0 = none); the polished set is
     kept only if its recomputed lambda_2 is larger. ``max_iter``/``tol``: Frank-Wolfe limits (default 100 for the
     log-dets, 20 for fiedler as MAC). ``split``: precomputed fixed/candidate edges.
+
+    BLAS runs single-threaded inside, as in the solver: the work is many small products (vectors
+    of the graph's size, selected inversions of Laplacians), for which OpenBLAS's threads cost more
+    than they save and collapse when another process holds the other core (city10000, fiedler
+    relax on a loaded 2-core machine: about 3x the time with two threads). threadpoolctl scans the
+    libraries loaded at the call; a library loaded later (scipy's BLAS, on the first selected
+    inversion) is limited by that inversion's own call (posecrb.linalg.selinv).
     """
+    with threadpool_limits(limits=1, user_api="blas"):
+        return _select_edges(graph, budget, objective=objective, method=method, fixed=fixed, certify=certify,
+                             seed=seed, anchor=anchor, estimate=estimate, gains=gains, max_iter=max_iter, tol=tol,
+                             fiedler_weight=fiedler_weight, split=split, reference=reference, engine=engine,
+                             strategy=strategy, polish=polish)
+
+
+def _select_edges(graph: PoseGraph, budget: str | int, *, objective: str, method: str, fixed: str, certify: bool,
+                  seed: int, anchor: int | None, estimate: str, gains: str, max_iter: int | None, tol: float,
+                  fiedler_weight: str, split: EdgeSplit | None, reference: Estimate | None, engine: str,
+                  strategy: str, polish: int | None) -> SelectionResult:
     t_total = time.perf_counter()
     _check_names(objective, method, gains)
     p = _prepare(graph, budget, objective, fixed, anchor, estimate, fiedler_weight, split, reference, max_iter)
