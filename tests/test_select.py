@@ -29,6 +29,7 @@ from posecrb.selection import (
     split_edges,
     tree_objective,
 )
+from posecrb.selection.relaxation import project_capped_simplex, projected_gradient
 from posecrb.solver.estimate import from_vertices
 
 from .helpers import dense_model_fisher, random_rotations, random_spd
@@ -275,6 +276,10 @@ def test_greedy_and_relaxation_against_exhaustive_search(dim, objective, seed):
         if objective != "fiedler":
             assert greedy.value - base >= (1 - 1 / math.e) * (opt - base) - 1e-9 * abs(opt)
             assert greedy.certificate.submodular_bound >= opt - 1e-9 * abs(opt)
+            # relax keeps the greedy selection unless a rounding of the relaxation beats it
+            assert relax.value >= greedy.value
+            assert (relax.rounding == "greedy") == (relax.value == greedy.value
+                                                    and relax.selected.tolist() == greedy.selected.tolist())
 
 
 @pytest.mark.parametrize("dim", [2, 3])
@@ -360,6 +365,69 @@ def test_frank_wolfe_bound_brackets_the_relaxation_optimum_from_slsqp():
     assert abs(fw.weights.sum() - k) < 1e-9 and fw.weights.min() >= 0 and fw.weights.max() <= 1
 
 
+def test_projected_gradient_bound_brackets_the_relaxation_optimum_from_slsqp():
+    """The log-det relaxation by spectral projected gradient (what relax and --certify run) against
+    SLSQP's optimum: its bound is above, its value below, and they close within ``tol``."""
+    from scipy.optimize import minimize
+
+    for seed, dim in ((12, 2), (13, 3)):
+        g = chain_graph(np.random.default_rng(seed), n=8, extra=9, dim=dim)
+        obj = tree_objective(g)
+        split = split_edges(g)
+        cand, k = split.candidates, 4
+        x0 = np.zeros(g.m)
+        x0[split.fixed] = 1.0
+        tau, kappa = precisions(g.info, dim)
+        terms = [(dim, dense_laplacian_terms(g, tau)),
+                 (1 if dim == 2 else 3, dense_laplacian_terms(g, rot_weight(kappa, dim)))]
+
+        def f(pi, x0=x0, cand=cand, terms=terms):
+            x = x0.copy()
+            x[cand] = pi
+            return -sum(c * chol_logdet(np.tensordot(x, t, 1)) for c, t in terms)
+
+        opt = minimize(f, np.full(cand.size, k / cand.size), method="SLSQP", bounds=[(0, 1)] * cand.size,
+                       constraints=[{"type": "eq", "fun": lambda p, k=k: p.sum() - k}],
+                       options={"ftol": 1e-14, "maxiter": 500})
+        relax_opt = -opt.fun
+        base = obj.value(x0)
+        spg = projected_gradient(obj, x0, cand, k, np.full(cand.size, k / cand.size), max_iter=200, tol=1e-6,
+                                 base_value=base)
+        assert spg.converged and spg.step == "spg"
+        assert spg.bound >= relax_opt - 1e-9 * abs(relax_opt)
+        assert spg.value <= relax_opt + 1e-9 * abs(relax_opt)
+        assert spg.bound - relax_opt <= 1e-6 * (spg.bound - base) + 1e-9 * abs(relax_opt)
+        assert abs(spg.weights.sum() - k) < 1e-9 and spg.weights.min() >= 0 and spg.weights.max() <= 1
+
+
+def test_capped_simplex_projection_against_bisection_and_a_quadratic_program():
+    """``project_capped_simplex`` (the kinks of the piecewise-linear sum, sorted) against the same
+    minimiser's threshold found by plain bisection, its form (KKT: ``y - x`` is one constant on the
+    entries strictly inside (0, 1)), and SLSQP on ``min ||x - y||^2`` (never better than ours)."""
+    from scipy.optimize import minimize
+
+    rng = np.random.default_rng(31)
+    for n, k in ((6, 2), (40, 7), (25, 24.5), (30, 0.5), (50, 10)):
+        y = 3.0 * rng.normal(size=n)
+        if n == 50:
+            y = np.round(y)                  # ties among the kinks
+        x = project_capped_simplex(y, k)
+        assert x.sum() == pytest.approx(k, abs=1e-12 * n) and x.min() >= 0.0 and x.max() <= 1.0
+        lo, hi = y.min() - 1.0, y.max()
+        for _ in range(200):                 # sum(clip(y - tau, 0, 1)) is non-increasing in tau
+            mid = 0.5 * (lo + hi)
+            lo, hi = (mid, hi) if np.clip(y - mid, 0, 1).sum() > k else (lo, mid)
+        assert np.abs(x - np.clip(y - 0.5 * (lo + hi), 0, 1)).max() <= 1e-12 * max(1.0, np.abs(y).max())
+        inside = (x > 1e-12) & (x < 1 - 1e-12)
+        if inside.sum() > 1:
+            assert np.ptp((y - x)[inside]) <= 1e-12 * max(1.0, np.abs(y).max())
+        ref = minimize(lambda z, y=y: ((z - y) ** 2).sum(), np.full(n, k / n), jac=lambda z, y=y: 2 * (z - y),
+                       method="SLSQP", bounds=[(0, 1)] * n,
+                       constraints=[{"type": "eq", "fun": lambda z, k=k: z.sum() - k}],
+                       options={"ftol": 1e-15, "maxiter": 1000})
+        assert ((x - y) ** 2).sum() <= ((ref.x - y) ** 2).sum() + 1e-9 * max(1.0, (y ** 2).sum())
+
+
 def test_madow_sampling_has_the_requested_inclusion_probabilities():
     p = np.array([0.9, 0.1, 0.5, 0.5, 1.0, 0.25, 0.75])
     k = 4                     # = p.sum()
@@ -422,6 +490,27 @@ def test_fixed_file_pairs_unknown_pair_and_disconnected_set(tmp_path):
     f.write_text("0 10\n20 30\n")
     with pytest.raises(DisconnectedFixedSet, match="pieces"):
         split_edges(g, str(f))
+
+
+def test_fixed_file_is_read_with_the_readers_line_rules(tmp_path):
+    """Lines end at \\n, \\r\\n and \\r only, fields are separated by ASCII blanks, and the file must
+    be a regular UTF-8 file: the rules of the g2o reader (``str.splitlines`` would also break at
+    U+2028 and form feed, shifting every later line number)."""
+    g = chain_graph(np.random.default_rng(0), n=6, extra=4, dim=2, ids=np.arange(6) * 10)
+    f = tmp_path / "fixed.txt"
+    f.write_bytes(b"0 10\r10 20\r\n20 30#c\n30 40\t# tab\r\n40 50")
+    assert split_edges(g, str(f)).fixed.tolist() == list(range(5))
+    f.write_bytes("0 10\r10 20\r\n20 30\u202830 40\n40 50\n".encode())
+    with pytest.raises(ParseError, match=r"fixed.txt:3: expected two pose ids"):
+        split_edges(g, str(f))
+    f.write_bytes(b"0 10\x0c10 20\n20 x\n")          # form feed separates fields, it ends no line
+    with pytest.raises(ParseError, match=r"fixed.txt:1: expected two pose ids"):
+        split_edges(g, str(f))
+    f.write_bytes(b"0 10\n\xff\xfe 20\n")
+    with pytest.raises(ParseError, match=r"fixed.txt:2: not a text file"):
+        split_edges(g, str(f))
+    with pytest.raises(ParseError, match="not a regular file"):
+        split_edges(g, str(tmp_path))
 
 
 def test_disconnected_graph_is_reported():

@@ -1,12 +1,14 @@
 """The continuous relaxation ``x in [0, 1]^C, sum x = K`` and its rounding to a K-subset.
 
 Both objectives are concave in x, so at any point ``f(x) + max_s grad^T (s - x)`` (the Frank-Wolfe
-duality gap added to the value) bounds the relaxation's optimum, hence the best K-subset
-(``frank_wolfe``). The relaxed weights are rounded by top-K and by seeded Madow draws
-(``madow``: systematic sampling, edge e kept with probability x_e), the best kept
-(``round_relaxation``). For fiedler the rounded set is then polished by swaps
-(``polish_fiedler``), MAC's relaxation being otherwise the same: the naive start (heaviest edges),
-step ``2/(t+2)``, 20 iterations.
+duality gap added to the value) bounds the relaxation's optimum, hence the best K-subset. The
+log-det objectives are smooth and their relaxation is solved by spectral projected gradient
+ascent (``projected_gradient``), which on intel and city10000 reaches a smaller bound in 10
+iterations than Frank-Wolfe in 100; lambda_2 is not differentiable where it is multiple, and its
+relaxation keeps MAC's Frank-Wolfe (``frank_wolfe``: the naive start, step ``2/(t+2)``, 20
+iterations). The relaxed weights are rounded by top-K and by seeded Madow draws (``madow``:
+systematic sampling, edge e kept with probability x_e), the best kept (``round_relaxation``).
+For fiedler the rounded set is then polished by swaps (``polish_fiedler``).
 """
 from __future__ import annotations
 
@@ -27,7 +29,7 @@ POLISH_WIDTH = 16
 
 @dataclass(frozen=True)
 class Relaxation:
-    """A Frank-Wolfe run on the concave relaxation ``x in [0, 1]^C, sum x = K``."""
+    """A run of an ascent method on the concave relaxation ``x in [0, 1]^C, sum x = K``."""
 
     weights: np.ndarray        # (c,) last iterate, per candidate
     value: float               # f at the last iterate
@@ -35,7 +37,7 @@ class Relaxation:
     gap: float                 # duality gap at the last iterate
     iterations: int
     converged: bool
-    step: str                  # "backtracking" | "2/(t+2)"
+    step: str                  # "spg" (projected_gradient) | "2/(t+2)" (frank_wolfe)
     history: list = field(default_factory=list)   # (iteration, value, bound)
 
 
@@ -45,24 +47,26 @@ def top_k(scores: np.ndarray, k: int, tiebreak: np.ndarray | None = None) -> np.
     return np.lexsort(keys)[:k]
 
 
+def _gap(g: np.ndarray, xc: np.ndarray, k: int) -> float:
+    """The Frank-Wolfe duality gap ``max_s g^T (s - x)`` over the K-subsets s (the top K of g)."""
+    return float(g[top_k(g, k)].sum() - np.dot(g, xc))
+
+
 def frank_wolfe(obj: LogDetObjective | FiedlerObjective, x_full: np.ndarray, cand: np.ndarray, k: int,
-                start: np.ndarray, *, max_iter: int,
-                tol: float, base_value: float, step: str = "backtracking") -> Relaxation:
-    """Frank-Wolfe ascent on ``f(x)`` over ``{0 <= x <= 1, sum x = K}`` (candidates only).
+                start: np.ndarray, *, max_iter: int, tol: float, base_value: float) -> Relaxation:
+    """Frank-Wolfe ascent with MAC's step ``2/(t+2)`` on ``f(x)`` over ``{0 <= x <= 1, sum x = K}``
+    (candidates only).
 
     The linear maximisation oracle is the indicator of the K largest gradient entries; the
     duality gap ``g^T (s - x)`` added to ``f(x)`` bounds the relaxation's maximum (f concave),
     and the smallest such bound over the iterates is returned. Stops when the gap is below
     ``tol * (bound - base_value)`` (the gain is known to a relative ``tol``) or after
-    ``max_iter`` iterations. ``step="backtracking"``: the adaptive step of Pedregosa et al.
-    (2020), sufficient increase against a local quadratic model whose curvature is
-    doubled on failure; ``"2/(t+2)"``: the classical rule (MAC's).
+    ``max_iter`` iterations. lambda_2's evaluations start from the previous Fiedler vector.
     """
     x = x_full.copy()
     x[cand] = start
     state = obj.evaluate(x)
     best = math.inf
-    lip = None
     hist = []
     gap = math.inf
     converged = False
@@ -78,27 +82,104 @@ def frank_wolfe(obj: LogDetObjective | FiedlerObjective, x_full: np.ndarray, can
         if gap <= tol * max(best - base_value, 1e-300):
             converged = True
             break
-        dd = float(np.dot(d, d))
-        if step == "2/(t+2)":
-            gamma = 2.0 / (it + 2.0)
-            x[cand] += gamma * d
-            state = obj.evaluate(x, v0=state.data) if obj.kind == "fiedler" else obj.evaluate(x)
-            continue
-        if lip is None:
-            lip = gap / dd
-        for _ in range(60):
-            gamma = min(1.0, gap / (lip * dd))
-            trial = x.copy()
-            trial[cand] += gamma * d
-            new = obj.evaluate(trial)
-            if new.value >= state.value + gamma * gap - 0.5 * gamma * gamma * lip * dd - 1e-12 * abs(state.value):
-                break
-            lip *= 2.0
-        x, state = trial, new
-        lip *= 0.5
+        x[cand] += 2.0 / (it + 2.0) * d
+        state = obj.evaluate(x, v0=state.data) if isinstance(obj, FiedlerObjective) else obj.evaluate(x)
     np.clip(x, 0.0, 1.0, out=x)
     return Relaxation(weights=x[cand].copy(), value=state.value, bound=best, gap=gap, iterations=it,
-                      converged=converged, step=step, history=hist)
+                      converged=converged, step="2/(t+2)", history=hist)
+
+
+def project_capped_simplex(y: np.ndarray, k: float) -> np.ndarray:
+    """Euclidean projection of ``y`` onto ``{0 <= x <= 1, sum x = k}`` (0 < k < len(y)):
+    ``x = clip(y - tau, 0, 1)`` with the tau where the sum is k. The sum is piecewise linear and
+    non-increasing in tau with kinks at ``y_i`` and ``y_i - 1``: the interval between two
+    consecutive kinks that holds k is found by sorting them, then tau by linear interpolation."""
+    kinks = np.unique(np.concatenate([y, y - 1.0]))
+    sums = _capped_sums(y, kinks)
+    # sums decreases from len(y) (at the smallest kink) to 0 (at the largest); find sums[i] >= k > sums[i+1]
+    i = int(np.searchsorted(-sums, -k, side="right")) - 1
+    i = min(max(i, 0), kinks.size - 2)
+    lo, hi = kinks[i], kinks[i + 1]
+    s_lo, s_hi = sums[i], sums[i + 1]
+    tau = lo if s_lo == s_hi else lo + (s_lo - k) * (hi - lo) / (s_lo - s_hi)
+    return np.clip(y - tau, 0.0, 1.0)
+
+
+def _capped_sums(y: np.ndarray, taus: np.ndarray) -> np.ndarray:
+    """``sum_i clip(y_i - tau, 0, 1)`` for every tau in the sorted ``taus``, in O((n + t) log n):
+    ``clip(u, 0, 1) = max(u, 0) - max(u - 1, 0)``, and ``sum_i max(y_i - tau, 0)`` is a suffix sum
+    over the sorted y."""
+    ys = np.sort(y)
+    suffix = np.concatenate([np.cumsum(ys[::-1])[::-1], [0.0]])       # suffix[j] = sum(ys[j:])
+
+    def relu_sum(t: np.ndarray) -> np.ndarray:
+        j = np.searchsorted(ys, t, side="right")                       # ys[j:] > t
+        return suffix[j] - (ys.size - j) * t
+
+    return relu_sum(taus) - relu_sum(taus + 1.0)
+
+
+def projected_gradient(obj: LogDetObjective, x_full: np.ndarray, cand: np.ndarray, k: int, start: np.ndarray, *,
+                       max_iter: int, tol: float, base_value: float, memory: int = 10) -> Relaxation:
+    """Spectral projected gradient ascent (Birgin, Martinez & Raydan 2000) on ``f(x)`` over
+    ``{0 <= x <= 1, sum x = K}`` (candidates only), for the smooth log-det objectives.
+
+    Each iteration moves along ``d = P(x + alpha g) - x`` (P: ``project_capped_simplex``) with
+    the Barzilai-Borwein step ``alpha = s^T s / s^T y`` of the last move, halving the step until
+    ``f`` rises above the largest of the last ``memory`` values by ``1e-4`` of the predicted rise
+    (Grippo's non-monotone rule, which lets BB steps through). The bound and the stopping rule are
+    Frank-Wolfe's (``frank_wolfe``): at every iterate ``f(x) + max_s g^T (s - x)`` bounds the
+    relaxation's maximum, the smallest is returned, and the run stops when the gap is below
+    ``tol * (bound - base_value)`` or after ``max_iter`` iterations (one gradient each: a selected
+    inversion). An iteration whose step has shrunk below 1e-12 of the first ends the run: the
+    iterate is stationary to working precision.
+    """
+    x = x_full.copy()
+    x[cand] = start
+    state = obj.evaluate(x)
+    g = obj.gradient(state, cand)
+    values = [state.value]
+    best = math.inf
+    hist = []
+    gap = math.inf
+    converged = False
+    first = project_capped_simplex(x[cand] + g, k) - x[cand]
+    alpha = 1.0 / max(float(np.abs(first).max()), 1e-300)
+    it = 0
+    for it in range(1, max_iter + 1):
+        xc = x[cand]
+        gap = _gap(g, xc, k)
+        best = min(best, state.value + max(gap, 0.0))
+        hist.append((it, state.value, best))
+        if gap <= tol * max(best - base_value, 1e-300):
+            converged = True
+            break
+        if it == max_iter:
+            break
+        d = project_capped_simplex(xc + alpha * g, k) - xc
+        rise = float(np.dot(g, d))
+        if rise <= 0.0:                      # P(x + alpha g) = x: stationary
+            break
+        reference = max(values[-memory:])
+        lam = 1.0
+        while True:
+            trial = x.copy()
+            trial[cand] = xc + lam * d
+            new = obj.evaluate(trial)
+            if new.value >= reference + 1e-4 * lam * rise or lam < 1e-12:
+                break
+            lam *= 0.5
+        if lam < 1e-12:
+            break
+        g_new = obj.gradient(new, cand)
+        step = lam * d
+        curvature = -float(np.dot(step, g_new - g))     # s^T y for the convex -f
+        alpha = float(np.dot(step, step)) / curvature if curvature > 0 else 1e30
+        alpha = min(max(alpha, 1e-30), 1e30)
+        x, state, g = trial, new, g_new
+        values.append(state.value)
+    return Relaxation(weights=x[cand].copy(), value=state.value, bound=best, gap=gap, iterations=it,
+                      converged=converged, step="spg", history=hist)
 
 
 def heaviest(weights: np.ndarray, k: int, rng: np.random.Generator) -> np.ndarray:

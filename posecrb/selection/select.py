@@ -23,7 +23,15 @@ from .budget import EdgeSplit, parse_budget, split_edges
 from .certificate import RatioCertificate, ratio_certificate, submodular_bound, supergradient_bound
 from .greedy import GAINS, JL_FROM_CANDIDATES, greedy_fiedler, incremental_greedy, lazy_greedy, pick_strategy
 from .objectives import OBJECTIVES, FiedlerObjective, LogDetObjective, ObjectiveState, make_objective
-from .relaxation import POLISH_SOLVES, Relaxation, frank_wolfe, heaviest, polish_fiedler, round_relaxation
+from .relaxation import (
+    POLISH_SOLVES,
+    Relaxation,
+    frank_wolfe,
+    heaviest,
+    polish_fiedler,
+    projected_gradient,
+    round_relaxation,
+)
 from .result import SelectionResult, pruned_graph, write_pruned
 
 __all__ = ["METHODS", "SelectionResult", "pruned_graph", "select_edges", "write_pruned"]
@@ -71,6 +79,7 @@ class _Choice:
     rounding: str | None = None            # relax: which rounding was kept
     relax: Relaxation | None = None
     stats: dict[str, Any] = field(default_factory=dict)
+    online_bound: float | None = None      # the greedy's smallest Minoux bound (log-det objectives)
 
 
 def _check_names(objective: str, method: str, gains: str) -> None:
@@ -132,7 +141,8 @@ def _greedy_logdet(p: _Problem, gains: str, strategy: str, engine: str, rng: np.
         order, gstats = incremental_greedy(obj, p.base.copy(), p.cand, p.k, engine)
     else:
         order, gstats = lazy_greedy(obj, p.base.copy(), p.cand, p.k, mode, rng, engine)
-    return _Choice(np.sort(order), order=order, stats={**vars(gstats), "strategy": strategy, "engine": engine})
+    return _Choice(np.sort(order), order=order, stats={**vars(gstats), "strategy": strategy, "engine": engine},
+                   online_bound=gstats.online_bound)
 
 
 def _greedy_fiedler(p: _Problem) -> _Choice:
@@ -145,23 +155,40 @@ def _greedy_fiedler(p: _Problem) -> _Choice:
     return _Choice(np.sort(order), order=order, stats=dict(fstats))
 
 
+def _relax_logdet(p: _Problem, tol: float, gains: str, strategy: str, engine: str,
+                  rng: np.random.Generator) -> _Choice:
+    """The relaxation by projected gradient from the uniform point (its bound), rounded by top-K and
+    Madow; the greedy selection competes with the roundings and is kept when it is at least as good.
+
+    The relaxation's optimum is fractional (on intel and city10000 at 20%: no candidate at 1, and
+    fewer than 2% at 0), so its roundings lose to the greedy (by 31 and 378 in the tree objective);
+    what the relaxation adds is its bound, within ``tol`` of the relaxation's optimum."""
+    assert p.base_state is not None and isinstance(p.obj, LogDetObjective)
+    greedy = _greedy_logdet(p, gains, strategy, engine, rng)
+    relax = projected_gradient(p.obj, p.base, p.cand, p.k, np.full(p.cand.size, p.k / p.cand.size),
+                               max_iter=p.max_iter, tol=tol, base_value=p.base_state.value)
+    rounding, pick, values = round_relaxation(p.obj, p.base, p.cand, p.k, relax.weights, p.w_rot[p.cand], rng)
+    greedy_value = p.obj.value(p.weights(greedy.chosen))
+    values = {"greedy": greedy_value, **values}
+    stats = {"rounding_values": values, "greedy": greedy.stats}
+    if greedy_value >= values[rounding]:
+        return _Choice(greedy.chosen, order=greedy.order, rounding="greedy", relax=relax, stats=stats,
+                       online_bound=greedy.online_bound)
+    return _Choice(np.sort(p.cand[pick]), rounding=rounding, relax=relax, stats=stats,
+                   online_bound=greedy.online_bound)
+
+
 def _relax(p: _Problem, tol: float, polish: int | None, rng: np.random.Generator) -> _Choice:
-    """Frank-Wolfe, rounding (top-K and Madow), and for fiedler the swap polish."""
+    """fiedler: MAC's Frank-Wolfe from the naive selection, rounding (top-K and Madow), the swap polish."""
     obj, cand, k = p.obj, p.cand, p.k
-    assert p.base_state is not None
-    if obj.kind == "fiedler":
-        start = np.zeros(cand.size)
-        start[heaviest(p.w_rot[cand], k, rng)] = 1.0   # MAC's initial point: the naive selection
-        relax = frank_wolfe(obj, p.base, cand, k, start, max_iter=p.max_iter, tol=tol,
-                            base_value=p.base_state.value, step="2/(t+2)")
-    else:
-        start = np.full(cand.size, k / cand.size)
-        relax = frank_wolfe(obj, p.base, cand, k, start, max_iter=p.max_iter, tol=tol,
-                            base_value=p.base_state.value)
+    assert p.base_state is not None and isinstance(obj, FiedlerObjective)
+    start = np.zeros(cand.size)
+    start[heaviest(p.w_rot[cand], k, rng)] = 1.0   # MAC's initial point: the naive selection
+    relax = frank_wolfe(obj, p.base, cand, k, start, max_iter=p.max_iter, tol=tol, base_value=p.base_state.value)
     rounding, pick, values = round_relaxation(obj, p.base, cand, k, relax.weights, p.w_rot[cand], rng)
     choice = _Choice(np.sort(cand[pick]), rounding=rounding, relax=relax, stats={"rounding_values": values})
     n_polish = POLISH_SOLVES if polish is None else int(polish)
-    if isinstance(obj, FiedlerObjective) and n_polish > 0:
+    if n_polish > 0:
         pos, _, pstats = polish_fiedler(obj, p.base, cand, pick, max_solves=n_polish)
         polished = obj.value(p.weights(cand[pos]))   # recomputed from a cold start, as every reported value
         # keep the rounded set unless the recomputed value confirms the search's improvement
@@ -183,6 +210,8 @@ def _choose(p: _Problem, method: str, *, gains: str, strategy: str, engine: str,
         return _Choice(np.sort(p.cand[heaviest(p.w_rot[p.cand], p.k, rng)]))
     if method == "greedy":
         return _greedy_logdet(p, gains, strategy, engine, rng) if p.obj.kind == "logdet" else _greedy_fiedler(p)
+    if p.obj.kind == "logdet":
+        return _relax_logdet(p, tol, gains, strategy, engine, rng)
     return _relax(p, tol, polish, rng)
 
 
@@ -191,19 +220,22 @@ def _evaluate(p: _Problem, choice: _Choice) -> tuple[ObjectiveState | None, floa
     xs = p.weights(choice.chosen)
     if isinstance(p.obj, LogDetObjective):
         value, sub = submodular_bound(p.obj, xs, p.cand, p.k)
-        if choice.stats.get("online_bound") is not None:
-            sub = min(sub, choice.stats["online_bound"])
+        if choice.online_bound is not None:
+            sub = min(sub, choice.online_bound)
         return None, value, sub
     final = p.obj.evaluate(xs)
     return final, final.value, None
 
 
 def _certify(p: _Problem, choice: _Choice, tol: float) -> Relaxation:
-    """Frank-Wolfe warm-started at the selection itself: the bound is then at most value + gap there."""
+    """The relaxation warm-started at the selection itself: the bound is then at most value + gap there."""
     assert p.base_state is not None
-    return frank_wolfe(p.obj, p.base, p.cand, p.k, p.weights(choice.chosen)[p.cand].copy(), max_iter=p.max_iter,
-                       tol=tol, base_value=p.base_state.value,
-                       step="2/(t+2)" if p.obj.kind == "fiedler" else "backtracking")
+    start = p.weights(choice.chosen)[p.cand].copy()
+    if isinstance(p.obj, LogDetObjective):
+        return projected_gradient(p.obj, p.base, p.cand, p.k, start, max_iter=p.max_iter, tol=tol,
+                                  base_value=p.base_state.value)
+    return frank_wolfe(p.obj, p.base, p.cand, p.k, start, max_iter=p.max_iter, tol=tol,
+                       base_value=p.base_state.value)
 
 
 def _certificate(p: _Problem, choice: _Choice, relax: Relaxation | None, final: ObjectiveState | None,
@@ -227,8 +259,10 @@ def select_edges(graph: PoseGraph, budget: str | int, *, objective: str = "tree"
     """Choose ``budget`` candidate edges maximising ``objective`` (``posecrb.selection``).
 
     ``budget``: K or "P%" of the candidates. ``method``: ``greedy`` (exact greedy; MAC's
-    GreedyEig for fiedler), ``relax`` (Frank-Wolfe on the relaxation, rounded by top-K and by
-    MADOW_DRAWS seeded Madow draws, the best kept), ``random`` (seeded), ``naive`` (the K
+    GreedyEig for fiedler), ``relax`` (the relaxation: spectral projected gradient for the
+    log-dets, MAC's Frank-Wolfe for fiedler; rounded by top-K and by MADOW_DRAWS seeded Madow
+    draws, the best kept; the log-dets keep the greedy selection unless a rounding beats it),
+    ``random`` (seeded), ``naive`` (the K
     heaviest by rotation weight, MAC's baseline; ties at random). ``certify``: also run the
     relaxation for a bound (greedy, random, naive; relax always has one). Log-det objectives always
     report the submodular bound.
@@ -240,8 +274,8 @@ def select_edges(graph: PoseGraph, budget: str | int, *, objective: str = "tree"
     ``engine``: "path" (posecrb.linalg.pathchol) or "cholmod" (CHOLMOD update_inplace and whole-factor
     solves, for comparison). ``polish`` (fiedler relax): at most this many eigensolves of swap search
     after the rounding (``polish_fiedler``; default POLISH_SOLVES, 0 = none); the polished set is
-    kept only if its recomputed lambda_2 is larger. ``max_iter``/``tol``: Frank-Wolfe limits (default 100 for the
-    log-dets, 20 for fiedler as MAC). ``split``: precomputed fixed/candidate edges.
+    kept only if its recomputed lambda_2 is larger. ``max_iter``/``tol``: the relaxation's limits (default 100 for
+    the log-dets, 20 for fiedler as MAC). ``split``: precomputed fixed/candidate edges.
 
     BLAS runs single-threaded inside, as in the solver: the work is many small products (vectors
     of the graph's size, selected inversions of Laplacians), for which OpenBLAS's threads cost more
