@@ -2,7 +2,7 @@
 
 Prints, for intel, city10000 and sphere2500 at 10%, 20% and 50% of the loop closures: the tree
 objective's greedy time (median of REPEAT after a warm-up), its value, the certified ratio from
-the submodular bound alone and with the Frank-Wolfe relaxation (--certify) and that run's time;
+the submodular bound alone and with the relaxation bound (--certify) and that run's time;
 then, at 20%, the greedy engines side by side (incremental/lazy x path/CHOLMOD), exact initial
 gains by selected inversion against random projections, and the fim objective on sphere2500
 (greedy, with and without the certified solve of the full graph that fixes the estimate).
