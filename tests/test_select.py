@@ -513,6 +513,15 @@ def test_fixed_file_is_read_with_the_readers_line_rules(tmp_path):
         split_edges(g, str(tmp_path))
 
 
+@pytest.mark.parametrize("keywords", [{"tol": float("nan")}, {"tol": 0.0}, {"tol": -1e-3}, {"tol": float("inf")},
+                                      {"max_iter": 0}, {"max_iter": 2.5}, {"objective": "trees"},
+                                      {"method": "exact"}, {"gains": "approx"}])
+def test_invalid_options_are_usage_errors(keywords):
+    g = chain_graph(np.random.default_rng(0), n=6, extra=4, dim=2)
+    with pytest.raises(UsageError):
+        select_edges(g, 2, **keywords)
+
+
 def test_disconnected_graph_is_reported():
     g = chain_graph(np.random.default_rng(0), n=6, extra=2, dim=2)
     keep = [e for e in range(g.m) if not (g.src[e] <= 2 < g.dst[e] or g.dst[e] <= 2 < g.src[e])]

@@ -131,8 +131,8 @@ def projected_gradient(obj: LogDetObjective, x_full: np.ndarray, cand: np.ndarra
     Frank-Wolfe's (``frank_wolfe``): at every iterate ``f(x) + max_s g^T (s - x)`` bounds the
     relaxation's maximum, the smallest is returned, and the run stops when the gap is below
     ``tol * (bound - base_value)`` or after ``max_iter`` iterations (one gradient each: a selected
-    inversion). An iteration whose step has shrunk below 1e-12 of the first ends the run: the
-    iterate is stationary to working precision.
+    inversion). A line search that shrinks the step below 1e-12 of ``d`` ends the run: the iterate
+    is stationary to working precision.
     """
     x = x_full.copy()
     x[cand] = start

@@ -1,6 +1,6 @@
 """The selection driver: ``select_edges`` choose K candidate edges by one method and certify them.
 
-Its steps, one small function each: check the names (``_check_names``), set the problem up (fixed
+Its steps, one small function each: check the options (``_check_options``), set the problem up (fixed
 edges and candidates, budget, anchor, estimate, objective, the fixed edges' value:
 ``_prepare``), choose by the method (``_choose``: greedy, relaxation, random or naive), evaluate
 the chosen set with its bounds (``_evaluate``), optionally run the relaxation for a bound
@@ -9,6 +9,8 @@ the chosen set with its bounds (``_evaluate``), optionally run the relaxation fo
 from __future__ import annotations
 
 import logging
+import math
+import numbers
 import time
 from dataclasses import dataclass, field
 from typing import Any
@@ -82,11 +84,16 @@ class _Choice:
     online_bound: float | None = None      # the greedy's smallest Minoux bound (log-det objectives)
 
 
-def _check_names(objective: str, method: str, gains: str) -> None:
+def _check_options(objective: str, method: str, gains: str, tol: float, max_iter: int | None) -> None:
     for value, allowed, what in ((objective, OBJECTIVES, "objective"), (method, METHODS, "method"),
                                  (gains, GAINS, "gains mode")):
         if value not in allowed:
             raise UsageError(f"unknown {what} {value!r}; choose from {', '.join(allowed)}")
+    if isinstance(tol, bool) or not (isinstance(tol, numbers.Real) and math.isfinite(tol) and tol > 0):
+        raise UsageError(f"tol must be a finite number > 0, not {tol!r}")
+    if max_iter is not None and (isinstance(max_iter, bool) or not (isinstance(max_iter, numbers.Integral)
+                                                                     and max_iter >= 1)):
+        raise UsageError(f"max_iter must be an integer >= 1, not {max_iter!r}")
 
 
 def _prepare(graph: PoseGraph, budget: str | int, objective: str, fixed: str, anchor: int | None,
@@ -296,7 +303,7 @@ def _select_edges(graph: PoseGraph, budget: str | int, *, objective: str, method
                   fiedler_weight: str, split: EdgeSplit | None, reference: Estimate | None, engine: str,
                   strategy: str, polish: int | None) -> SelectionResult:
     t_total = time.perf_counter()
-    _check_names(objective, method, gains)
+    _check_options(objective, method, gains, tol, max_iter)
     p = _prepare(graph, budget, objective, fixed, anchor, estimate, fiedler_weight, split, reference, max_iter)
     times = p.times
     rng = np.random.default_rng(seed)
