@@ -13,7 +13,8 @@ Speed (always printed), on intel and city10000 unless NAMEs are given:
   ``solve`` inside one process): each side runs in its own worker process that loads the problem,
   makes one untimed call (page cache, numba's cache, first imports), then times --reps calls;
   workers of the two sides alternate (order flipped every round) for --rounds rounds and the
-  figure is the median of all timed calls. MAC's call = ``MAC(...)`` + ``NaiveGreedy.subset`` +
+  figure is the median of all timed calls (wall, and CPU time of the process: with one thread per
+  pool, the cost without the other processes' share of the cores). MAC's call = ``MAC(...)`` + ``NaiveGreedy.subset`` +
   ``MAC.solve`` (20 Frank-Wolfe iterations, nearest rounding: its example's protocol) with
   ``fiedler_method="tracemin_cholesky"``; posecrb's = ``select_edges(graph, budget,
   objective="fiedler", method="relax", fiedler_weight="kappa")``, the odometry split included.
@@ -82,18 +83,20 @@ kw = dict(objective=objective, method=method, certify=certify == "1")
 if objective == "fiedler":
     kw["fiedler_weight"] = "kappa"
 select_edges(g, budget, **kw)
-times = []
+times, cpu = [], []
 for _ in range(int(reps)):
-    t0 = time.perf_counter()
+    t0, c0 = time.perf_counter(), time.process_time()
     r = select_edges(g, budget, **kw)
     times.append(time.perf_counter() - t0)
-print(json.dumps({"times": times, "value": r.value, "upper": r.upper_bound, "selected": r.selected.tolist()}))
+    cpu.append(time.process_time() - c0)
+print(json.dumps({"times": times, "cpu": cpu, "value": r.value, "upper": r.upper_bound,
+                  "selected": r.selected.tolist()}))
 """
 
 # MAC's in-process worker (runs in MAC's interpreter): the problem from an npz file, one untimed
 # call, then REPS timed calls of MAC(...) + NaiveGreedy.subset + MAC.solve, as its g2o example.
 MAC_WORKER = r"""
-import contextlib, io, json, sys
+import contextlib, io, json, sys, time
 from timeit import default_timer as timer
 import numpy as np
 from mac.solvers import MAC, NaiveGreedy
@@ -105,23 +108,24 @@ fixed = [Edge(int(i), int(j), float(w)) for i, j, w in zip(d["fi"], d["fj"], d["
 cand = [Edge(int(i), int(j), float(w)) for i, j, w in zip(d["ci"], d["cj"], d["cw"])]
 
 def run():
-    t0 = timer()
+    t0, c0 = timer(), time.process_time()
     mac = MAC(fixed, cand, n, fiedler_method="tracemin_cholesky")
     with contextlib.redirect_stdout(io.StringIO()):
         w_init = NaiveGreedy(cand).subset(k)
     t1 = timer()
     result, unrounded, upper = mac.solve(k, w_init, max_iters=20, rounding="nearest", use_cache=True)
     t2 = timer()
-    return mac, result, upper, t2 - t0, t2 - t1
+    return mac, result, upper, t2 - t0, t2 - t1, time.process_time() - c0
 
 run()
-times, solve_times = [], []
+times, solve_times, cpu = [], [], []
 for _ in range(reps):
-    mac, result, upper, t, ts = run()
+    mac, result, upper, t, ts, c = run()
     times.append(t)
     solve_times.append(ts)
-ours = np.asarray(d["posecrb"], dtype=float)
-print(json.dumps({"times": times, "solve_times": solve_times, "selected": np.flatnonzero(result).tolist(),
+    cpu.append(c)
+ours = np.asarray(d["posecrb"][0], dtype=float)
+print(json.dumps({"times": times, "solve_times": solve_times, "cpu": cpu, "selected": np.flatnonzero(result).tolist(),
                   "upper": float(upper), "l2": float(mac.evaluate_objective(result)),
                   "l2_posecrb": float(mac.evaluate_objective(ours))}))
 """
@@ -157,13 +161,15 @@ def _goal(ok: bool) -> str:
     return "met" if ok else "MISSED"
 
 
-def write_problem(g, split, k: int, ours_selected: np.ndarray, path: Path) -> None:
-    """The problem as MAC takes it: fixed and candidate edges (internal indices) with kappa."""
+def write_problem(g, split, ks: list[int], ours: list[np.ndarray], path: Path) -> None:
+    """The problem as MAC takes it: fixed and candidate edges (internal indices) with kappa, the
+    budgets ``ks`` (``k``: the first) and posecrb's selection at each (edge indices -> 0/1 rows)."""
     cand = split.candidates
-    sel = np.zeros(cand.size)
-    sel[np.searchsorted(cand, ours_selected)] = 1.0
-    np.savez(path, n=g.n, k=k, fi=g.src[split.fixed], fj=g.dst[split.fixed], fw=g.kappa[split.fixed],
-             ci=g.src[cand], cj=g.dst[cand], cw=g.kappa[cand], posecrb=sel)
+    sel = np.zeros((len(ks), cand.size))
+    for row, selected in enumerate(ours):
+        sel[row, np.searchsorted(cand, selected)] = 1.0
+    np.savez(path, n=g.n, k=ks[0], ks=np.array(ks), fi=g.src[split.fixed], fj=g.dst[split.fixed],
+             fw=g.kappa[split.fixed], ci=g.src[cand], cj=g.dst[cand], cw=g.kappa[cand], posecrb=sel)
 
 
 def in_process(programs: dict, rounds: int) -> dict[str, list[dict]]:
@@ -189,8 +195,9 @@ def speed(names: list[str], budget: str, args, mac_py: str | None) -> None:
           f"alternating worker processes x {args.reps} timed calls; whole process: median of {args.rounds} "
           "alternating runs after one untimed run each")
     print(f"{'dataset':10s} {'K':>5s} | {'MAC [s]':>8s} {'(solve)':>8s} {'ours [s]':>8s} {'ratio':>6s} | "
-          f"{'MAC proc':>8s} {'ours proc':>9s} {'ratio':>6s} | {'λ2 MAC':>12s} {'λ2 ours':>12s} "
-          f"{'(MAC eval)':>12s} {'(ours by MAC)':>13s} | {'ub MAC':>10s} {'ub ours':>10s} | goal")
+          f"{'MAC cpu':>8s} {'ours cpu':>8s} | {'MAC proc':>8s} {'ours proc':>9s} {'ratio':>6s} | "
+          f"{'λ2 MAC':>12s} {'λ2 ours':>12s} {'(MAC eval)':>12s} {'(ours by MAC)':>13s} | {'ub MAC':>10s} "
+          f"{'ub ours':>10s} | goal")
     for name in names:
         g = load(datasets.resolve(name))
         split = split_edges(g)
@@ -199,7 +206,7 @@ def speed(names: list[str], budget: str, args, mac_py: str | None) -> None:
         lam = FiedlerObjective(g, g.kappa, 0)
         with tempfile.TemporaryDirectory() as tmp:
             prob = Path(tmp) / "problem.npz"
-            write_problem(g, split, k, ours.selected, prob)
+            write_problem(g, split, [k], [ours.selected], prob)
             programs = {"posecrb": lambda: run_process([py, "-c", OURS_WORKER, name, budget, "fiedler", "relax", "0",
                                                         str(args.reps)], env=env)}
             whole = {"posecrb": lambda: run_process([*cmd, "select", name, "--budget", budget, "--objective",
@@ -210,15 +217,17 @@ def speed(names: list[str], budget: str, args, mac_py: str | None) -> None:
             inproc = in_process(programs, args.rounds)
             procs = alternate(whole, args.rounds)
         t_ours = _median([t for w in inproc["posecrb"] for t in w["times"]])
+        c_ours = _median([t for w in inproc["posecrb"] for t in w["cpu"]])
         p_ours = median_wall(procs["posecrb"])
         if not mac_py:
-            print(f"{name:10s} {k:5d} | {'-':>8s} {'-':>8s} {t_ours:8.3f} {'-':>6s} | {'-':>8s} {p_ours:9.3f} "
-                  f"{'-':>6s} | {'-':>12s} {ours.value:12.8g} {'-':>12s} {'-':>13s} | {'-':>10s} "
-                  f"{ours.upper_bound:10.6g} | -")
+            print(f"{name:10s} {k:5d} | {'-':>8s} {'-':>8s} {t_ours:8.3f} {'-':>6s} | {'-':>8s} {c_ours:8.3f} | "
+                  f"{'-':>8s} {p_ours:9.3f} {'-':>6s} | {'-':>12s} {ours.value:12.8g} {'-':>12s} {'-':>13s} | "
+                  f"{'-':>10s} {ours.upper_bound:10.6g} | -")
             continue
         m = inproc["MAC"][-1]
         t_mac = _median([t for w in inproc["MAC"] for t in w["times"]])
         t_mac_solve = _median([t for w in inproc["MAC"] for t in w["solve_times"]])
+        c_mac = _median([t for w in inproc["MAC"] for t in w["cpu"]])
         p_mac = median_wall(procs["MAC"])
         x = np.zeros(g.m)
         x[np.union1d(split.fixed, split.candidates[m["selected"]])] = 1.0
@@ -226,7 +235,8 @@ def speed(names: list[str], budget: str, args, mac_py: str | None) -> None:
         ok = t_ours <= t_mac and ours.value >= l2_mac * (1 - 1e-9)
         tally.append(ok)
         print(f"{name:10s} {k:5d} | {t_mac:8.3f} {t_mac_solve:8.3f} {t_ours:8.3f} {t_ours / t_mac:6.2f} | "
-              f"{p_mac:8.3f} {p_ours:9.3f} {p_ours / p_mac:6.2f} | {l2_mac:12.8g} {ours.value:12.8g} "
+              f"{c_mac:8.3f} {c_ours:8.3f} | {p_mac:8.3f} {p_ours:9.3f} {p_ours / p_mac:6.2f} | "
+              f"{l2_mac:12.8g} {ours.value:12.8g} "
               f"{m['l2']:12.8g} {m['l2_posecrb']:13.8g} | {m['upper']:10.6g} {ours.upper_bound:10.6g} | "
               f"{_goal(ok)}", flush=True)
     if tally:
@@ -236,8 +246,9 @@ def speed(names: list[str], budget: str, args, mac_py: str | None) -> None:
     print(f"\ntree relax against its own greedy at {budget} (and greedy --certify: the same two outputs, value and "
           "a relaxation bound); in-process and whole process as above")
     print(f"{'dataset':10s} {'K':>5s} | {'greedy':>8s} {'certify':>8s} {'relax':>8s} {'ratio':>6s} | "
-          f"{'greedy proc':>11s} {'certify proc':>12s} {'relax proc':>10s} | {'value greedy':>14s} "
-          f"{'value relax':>14s} | {'ub greedy':>12s} {'ub certify':>12s} {'ub relax':>12s} | goal")
+          f"{'cpu greedy':>10s} {'certify':>8s} {'relax':>8s} | {'greedy proc':>11s} {'certify proc':>12s} "
+          f"{'relax proc':>10s} | {'value greedy':>14s} {'value relax':>14s} | {'ub greedy':>12s} "
+          f"{'ub certify':>12s} {'ub relax':>12s} | goal")
     tally = []
     for name in names:
         g = load(datasets.resolve(name))
@@ -252,12 +263,14 @@ def speed(names: list[str], budget: str, args, mac_py: str | None) -> None:
         inproc = in_process(programs, args.rounds)
         procs = alternate(whole, args.rounds)
         t = {label: _median([x for w in ws for x in w["times"]]) for label, ws in inproc.items()}
+        c = {label: _median([x for w in ws for x in w["cpu"]]) for label, ws in inproc.items()}
         p = {label: median_wall(rs) for label, rs in procs.items()}
         last = {label: ws[-1] for label, ws in inproc.items()}
         ok = t["relax"] <= t["greedy"] and last["relax"]["value"] >= last["greedy"]["value"]
         tally.append(ok)
         print(f"{name:10s} {k:5d} | {t['greedy']:8.3f} {t['certify']:8.3f} {t['relax']:8.3f} "
-              f"{t['relax'] / t['greedy']:6.2f} | {p['greedy']:11.3f} {p['certify']:12.3f} {p['relax']:10.3f} | "
+              f"{t['relax'] / t['greedy']:6.2f} | {c['greedy']:10.3f} {c['certify']:8.3f} {c['relax']:8.3f} | "
+              f"{p['greedy']:11.3f} {p['certify']:12.3f} {p['relax']:10.3f} | "
               f"{last['greedy']['value']:14.10g} {last['relax']['value']:14.10g} | {last['greedy']['upper']:12.8g} "
               f"{last['certify']['upper']:12.8g} {last['relax']['upper']:12.8g} | {_goal(ok)}", flush=True)
     print(f"goal, tree relax at most tree greedy's in-process time with a value at least greedy's: "
@@ -317,11 +330,7 @@ def quality(names: list[str], budgets: list[str], mac_py: str, env: dict) -> Non
                 for b in budgets]
         with tempfile.TemporaryDirectory() as tmp:
             prob = Path(tmp) / "problem.npz"
-            sel = np.zeros((len(ks), cand.size))
-            for row, r in enumerate(ours):
-                sel[row, np.searchsorted(cand, r.selected)] = 1.0
-            np.savez(prob, n=g.n, fi=g.src[split.fixed], fj=g.dst[split.fixed], fw=g.kappa[split.fixed],
-                     ci=g.src[cand], cj=g.dst[cand], cw=g.kappa[cand], ks=np.array(ks), posecrb=sel)
+            write_problem(g, split, ks, [r.selected for r in ours], prob)
             run = run_process([mac_py, "-c", QUALITY_DRIVER, str(prob)], env=env)
             if not run.ok:
                 raise RuntimeError(f"MAC failed ({run.status}): {run.stderr[-2000:]}")
