@@ -55,7 +55,7 @@ class _Problem:
     obj: LogDetObjective | FiedlerObjective
     base: np.ndarray
     w_rot: np.ndarray                      # the naive method's weights (and top-K's tie-break)
-    max_iter: int                          # Frank-Wolfe iterations
+    max_iter: int                          # relaxation iterations
     estimate: dict | None = None
     base_state: ObjectiveState | None = None
     full_value: float = float("nan")
@@ -269,8 +269,8 @@ def select_edges(graph: PoseGraph, budget: str | int, *, objective: str = "tree"
     GreedyEig for fiedler), ``relax`` (the relaxation: spectral projected gradient for the
     log-dets, MAC's Frank-Wolfe for fiedler; rounded by top-K and by MADOW_DRAWS seeded Madow
     draws, the best kept; the log-dets keep the greedy selection unless a rounding beats it),
-    ``random`` (seeded), ``naive`` (the K
-    heaviest by rotation weight, MAC's baseline; ties at random). ``certify``: also run the
+    ``random`` (seeded), ``naive`` (the K heaviest by rotation weight, MAC's baseline; ties at
+    random). ``certify``: also run the
     relaxation for a bound (greedy, random, naive; relax always has one). Log-det objectives always
     report the submodular bound.
     ``estimate`` (fim only): "solve" (certified optimum of the full graph), "vertices" or a
