@@ -1,16 +1,22 @@
-"""Other programs run side by side with posecrb: SE-Sync's C++ command-line example.
+"""Other programs run side by side with posecrb: SE-Sync's C++ command-line example, and MAC.
 
-SE-Sync is not installable from a package registry; it is built separately (never part of this
-repository) and found through environment variables:
+Neither is installable from a package registry; each is built or installed separately (never
+part of this repository) and found through environment variables:
 
   SESYNC_BIN         path of SE-Sync's example executable (C++/build/bin/SE-Sync), which reads a
                      g2o file and prints its results with 6 significant digits;
   SESYNC_BUILD       one line saying how it was built (commit, build type, OpenMP, Eigen, BLAS), or
   SESYNC_BUILD_INFO  a file holding that description (its "Summary:" line is printed); without
                      either, a file SE-Sync-BUILD.md in a parent directory of the binary is used.
+  POSECRB_MAC_PYTHON a Python interpreter that can ``import mac`` (Doherty et al.'s MAC, installed
+                     from its repository into its own virtual environment, e.g.
+                     ``python -m venv --system-site-packages mac-venv; mac-venv/bin/pip install -e
+                     ./mac scikit-sparse``: an editable install, because MAC's setup.py misses its
+                     subpackages without ``__init__.py``); benchmarks/mac_compare.py runs it.
 """
 from __future__ import annotations
 
+import json
 import math
 import os
 import re
@@ -18,6 +24,10 @@ from dataclasses import dataclass
 from pathlib import Path
 
 from _common import ProcRun, run_process
+
+# What mac_build_info asks MAC's interpreter: its version and where the package lives.
+_MAC_WHERE = ("import json, os; from importlib import metadata; import mac; "
+              "print(json.dumps([metadata.version('mac'), os.path.dirname(list(mac.__path__)[0])]))")
 
 
 def sesync_binary() -> tuple[Path | None, str]:
@@ -102,3 +112,29 @@ def run_sesync(binary: Path, g2o: Path, env: dict, timeout: float | None = None,
                max_rss: float | None = None, cwd: str | os.PathLike | None = None) -> ProcRun:
     """One whole-process run (SE-Sync writes nothing but stdout with its defaults)."""
     return run_process([str(binary), str(g2o)], env=env, timeout=timeout, max_rss=max_rss, cwd=cwd)
+
+
+def mac_python() -> tuple[str | None, str]:
+    """(interpreter, "") when $POSECRB_MAC_PYTHON names one that imports MAC, else (None, why not)."""
+    spec = os.environ.get("POSECRB_MAC_PYTHON")
+    if not spec:
+        return None, "POSECRB_MAC_PYTHON is not set (a Python interpreter that can `import mac`)"
+    if not (Path(spec).is_file() and os.access(spec, os.X_OK)):
+        return None, f"POSECRB_MAC_PYTHON={spec} is not an executable file"
+    run = run_process([spec, "-c", "import mac.solvers"], timeout=120)
+    if not run.ok:
+        return None, f"POSECRB_MAC_PYTHON={spec} cannot import mac.solvers: {run.stderr.strip().splitlines()[-1:]}"
+    return spec, ""
+
+
+def mac_build_info(python: str) -> str:
+    """MAC's version, source directory and git commit (when the source is a git checkout)."""
+    run = run_process([python, "-c", _MAC_WHERE], timeout=120)
+    try:
+        ver, where = json.loads(run.stdout.strip().splitlines()[-1])
+    except (ValueError, IndexError):
+        return f"{python} (version unknown)"
+    commit = run_process(["git", "-C", where, "log", "-1", "--format=%h %cs"], timeout=30)
+    return f"mac {ver} from {where}" + (f" @ {commit.stdout.strip()}" if commit.ok and commit.stdout.strip() else "") \
+        + f", run by {python}"
+

@@ -2,7 +2,7 @@
 
 Prints, for intel, city10000 and sphere2500 at 10%, 20% and 50% of the loop closures: the tree
 objective's greedy time (median of REPEAT after a warm-up), its value, the certified ratio from
-the submodular bound alone and with the Frank-Wolfe relaxation (--certify) and that run's time;
+the submodular bound alone and with the relaxation bound (--certify) and that run's time;
 then, at 20%, the greedy engines side by side (incremental/lazy x path/CHOLMOD), exact initial
 gains by selected inversion against random projections, and the fim objective on sphere2500
 (greedy, with and without the certified solve of the full graph that fixes the estimate).
@@ -22,7 +22,7 @@ from _common import median_time
 from posecrb import load
 from posecrb.core.timing import timed
 from posecrb.datasets import search as datasets
-from posecrb.selection.select import select_edges, split_edges, tree_objective
+from posecrb.selection import select_edges, split_edges, tree_objective
 from posecrb.solver.estimate import get_estimate
 
 TREE_DATASETS = ("intel", "city10000", "sphere2500")

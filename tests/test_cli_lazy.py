@@ -15,7 +15,7 @@ import posecrb
 from posecrb.cli import _EXPLICIT_SHORT_HELP, COMMANDS, cli
 from posecrb.io import write_g2o
 
-from .helpers import make_random_graph
+from .helpers import make_random_graph, random_pose_graph
 
 
 @pytest.mark.parametrize("name", sorted(COMMANDS))
@@ -140,6 +140,22 @@ def test_solve_json_imports_only_what_it_needs(solvable_g2o):
     assert _loaded(modules, "numpy", "scipy.sparse", "sksparse") == ["numpy", "scipy.sparse", "sksparse"]
     # The certificate's eigenvalue estimate is numpy-only: ARPACK would load scipy.linalg (~45 ms).
     assert _loaded(modules, "scipy.sparse.linalg", "scipy.linalg") == []
+
+
+def test_select_fiedler_imports_no_numba(tmp_path):
+    """lambda_2 needs no compiled kernel: numba (0.2-0.5 s) and scipy's graph and eigen modules stay
+    unloaded (320 poses: the sparse path, Lanczos on the pseudo-inverse); the log-det objectives
+    load numba when their greedy first runs."""
+    path = tmp_path / "chain.g2o"
+    write_g2o(random_pose_graph(320, 2, np.random.default_rng(5), loop_closures=60)[0], path)
+    out, modules = _run(["select", str(path), "--budget", "20%", "--objective", "fiedler", "--method", "relax",
+                         "--format", "json"], listing=True)
+    assert out.returncode == 0, out.stderr
+    assert json.loads(out.stdout)["fixed"]["added_for_connectivity"] == []
+    assert _loaded(modules, "numba", "scipy.sparse.csgraph", "scipy.sparse.linalg", "scipy.linalg") == []
+    out, modules = _run(["select", str(path), "--budget", "2", "--format", "json"], listing=True)
+    assert out.returncode == 0, out.stderr
+    assert _loaded(modules, "numba") == ["numba"]
 
 
 def test_tables_json_off_a_terminal_loads_no_rich(solvable_g2o):

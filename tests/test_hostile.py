@@ -427,8 +427,8 @@ def test_output_locations_are_checked_before_the_work(tmp_path, capsys, monkeypa
     """A 70 s solve ended in `internal error: FileNotFoundError`: now exit 2 at once."""
     import importlib
 
-    import posecrb.metrics.regress
-    import posecrb.metrics.tables
+    import posecrb.evaluation.regress
+    import posecrb.evaluation.tables
     import posecrb.solver.estimate
 
     sweep = importlib.import_module("posecrb.experiments.crlb_sweep")
@@ -436,8 +436,8 @@ def test_output_locations_are_checked_before_the_work(tmp_path, capsys, monkeypa
     def forbidden(*a, **k):
         pytest.fail("work started before the output location was checked")
 
-    for mod, name in ((posecrb.solver.estimate, "from_solver"), (posecrb.metrics.tables, "build_rows"),
-                      (sweep, "crlb_sweep"), (posecrb.metrics.regress, "compute_metrics")):
+    for mod, name in ((posecrb.solver.estimate, "from_solver"), (posecrb.evaluation.tables, "build_rows"),
+                      (sweep, "crlb_sweep"), (posecrb.evaluation.regress, "compute_metrics")):
         monkeypatch.setattr(mod, name, forbidden)
     import posecrb.cli.commands.regress as regress_cmd
     import posecrb.solver

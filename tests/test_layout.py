@@ -4,10 +4,12 @@ from __future__ import annotations
 import ast
 from pathlib import Path
 
+import pytest
+
 import posecrb
 
 ORDER = ["core", "lie", "io", "datasets", "linalg", "solver", "models", "sim", "selection", "experiments",
-         "metrics", "api", "report", "cli"]
+         "evaluation", "api", "report", "cli"]
 ROOT = Path(posecrb.__file__).resolve().parent
 
 
@@ -42,3 +44,83 @@ def test_no_module_imports_from_a_package_below_it():
 def test_every_package_is_in_the_order():
     packages = {p.name for p in ROOT.iterdir() if p.is_dir() and (p / "__init__.py").exists()}
     assert packages == set(ORDER) | {"experiments"}
+
+
+def _module_graph() -> dict[str, set[str]]:
+    """Every posecrb module -> the posecrb modules it imports, at module level or inside functions
+    (an import inside a function still runs before the function's work: a cycle through it is a cycle).
+    ``from package import name`` points at the submodule ``package.name`` when there is one, else at the
+    package's ``__init__``."""
+    files = {}
+    for path in ROOT.rglob("*.py"):
+        parts = path.relative_to(ROOT.parent).with_suffix("").parts
+        files[".".join(parts[:-1] if parts[-1] == "__init__" else parts)] = path
+    graph: dict[str, set[str]] = {}
+    for name, path in files.items():
+        is_package = path.name == "__init__.py"
+        package = name.split(".") if is_package else name.split(".")[:-1]
+        targets: set[str] = set()
+        for node in ast.walk(ast.parse(path.read_text())):
+            if isinstance(node, ast.ImportFrom):
+                base = (package[: len(package) - node.level + 1] + (node.module.split(".") if node.module else [])
+                        if node.level else (node.module or "").split("."))
+                mod = ".".join(base)
+                for a in node.names:
+                    sub = f"{mod}.{a.name}"
+                    targets.add(sub if sub in files else mod)
+            elif isinstance(node, ast.Import):
+                targets.update(a.name for a in node.names)
+        graph[name] = {t for t in targets if t in files and t != name}
+    return graph
+
+
+def test_no_import_cycle():
+    """No chain of imports leads from a posecrb module back to itself (Tarjan's strongly connected
+    components of the module graph: every component must be a single module)."""
+    graph = _module_graph()
+    index: dict[str, int] = {}
+    low: dict[str, int] = {}
+    stack: list[str] = []
+    on_stack: set[str] = set()
+    cycles = []
+
+    def visit(v: str) -> None:
+        index[v] = low[v] = len(index)
+        stack.append(v)
+        on_stack.add(v)
+        for w in sorted(graph[v]):
+            if w not in index:
+                visit(w)
+                low[v] = min(low[v], low[w])
+            elif w in on_stack:
+                low[v] = min(low[v], index[w])
+        if low[v] == index[v]:
+            comp = []
+            while True:
+                w = stack.pop()
+                on_stack.discard(w)
+                comp.append(w)
+                if w == v:
+                    break
+            if len(comp) > 1:
+                cycles.append(sorted(comp))
+
+    for v in sorted(graph):
+        if v not in index:
+            visit(v)
+    assert cycles == [], f"import cycles: {cycles}"
+
+
+def test_the_cycle_check_sees_function_level_imports(tmp_path, monkeypatch):
+    """The check is not vacuous: two modules importing each other, one of them inside a function, form a cycle."""
+    pkg = tmp_path / "posecrb" / "demo"
+    pkg.mkdir(parents=True)
+    (tmp_path / "posecrb" / "__init__.py").write_text("")
+    (pkg / "__init__.py").write_text("")
+    (pkg / "a.py").write_text("from .b import g\n")
+    (pkg / "b.py").write_text("def g():\n    from .a import x  # noqa\n")
+    monkeypatch.setattr(__import__(__name__, fromlist=["ROOT"]), "ROOT", tmp_path / "posecrb")
+    graph = _module_graph()
+    assert graph["posecrb.demo.a"] == {"posecrb.demo.b"} and graph["posecrb.demo.b"] == {"posecrb.demo.a"}
+    with pytest.raises(AssertionError):
+        test_no_import_cycle()

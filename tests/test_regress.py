@@ -6,7 +6,7 @@ import pytest
 
 from posecrb.cli import main
 from posecrb.core.errors import PosecrbError
-from posecrb.metrics.regress import compare, default_expected_path, load_expected
+from posecrb.evaluation.regress import compare, default_expected_path, load_expected
 
 # The CI subset (well under the 3-minute budget); `make regress` runs every dataset.
 CI_SUBSET = ["CSAIL", "intel", "MIT", "kitti_05", "tinyGrid3D", "smallGrid3D"]
@@ -81,7 +81,7 @@ def test_changed_fim_variant_is_reported_not_compared():
 
 
 def test_save_expected_is_atomic_and_leaves_no_temporary(tmp_path):
-    from posecrb.metrics.regress import save_expected
+    from posecrb.evaluation.regress import save_expected
 
     target = tmp_path / "expected.json"
     target.write_text("{}")
@@ -93,7 +93,7 @@ def test_save_expected_is_atomic_and_leaves_no_temporary(tmp_path):
 def test_trace_crlb_tolerance_follows_the_inverse_accuracy():
     """An ill-conditioned FIM cannot give trace(F^-1) to 1e-6: the tolerance is at least ten times
     the inverse's estimated relative error (cond x eps), and only for trace_crlb."""
-    from posecrb.metrics.regress import compare
+    from posecrb.evaluation.regress import compare
 
     expected = {"trace_crlb": 1.0, "fim_logdet": 1.0}
     drift = 1 + 8e-6

@@ -18,7 +18,7 @@ from scipy.special import ive
 
 from posecrb.core.errors import DisconnectedGraph, ParseError, UsageError
 from posecrb.core.graph import PoseGraph
-from posecrb.selection.select import (
+from posecrb.selection import (
     DisconnectedFixedSet,
     fim_objective,
     frank_wolfe,
@@ -29,6 +29,7 @@ from posecrb.selection.select import (
     split_edges,
     tree_objective,
 )
+from posecrb.selection.relaxation import project_capped_simplex, projected_gradient
 from posecrb.solver.estimate import from_vertices
 
 from .helpers import dense_model_fisher, random_rotations, random_spd
@@ -200,18 +201,31 @@ def test_objectives_match_dense_values_on_random_subsets(dim):
 
 
 def test_fiedler_value_by_lanczos_on_a_large_graph_matches_eigvalsh():
-    from posecrb.selection.select import FiedlerObjective
+    from posecrb.selection import FiedlerObjective
 
     rng = np.random.default_rng(6)
     g = chain_graph(rng, n=420, extra=300, dim=2)
     obj = FiedlerObjective(g, rot_weight(precisions(g.info, 2)[1], 2))
-    assert obj._block is not None            # the sparse (shift-invert Lanczos) path
+    assert obj._block is not None            # the sparse path: Lanczos on the pseudo-inverse
     x = (rng.random(g.m) < 0.6).astype(float)
     x[:g.n - 1] = 1.0
     ref = dense_value("fiedler", g, np.flatnonzero(x))
     st = obj.evaluate(x)
     assert st.value == pytest.approx(ref, rel=1e-9)
     assert st.value >= ref * (1 - 1e-12)     # a Rayleigh quotient never undershoots lambda_2
+
+
+def test_fiedler_value_raises_when_lanczos_does_not_converge(monkeypatch):
+    """An unconverged eigensolve is an error naming its residual, never a value."""
+    import posecrb.selection.objectives as objectives
+    from posecrb.core.errors import NumericalError
+
+    g = chain_graph(np.random.default_rng(6), n=420, extra=300, dim=2)
+    obj = objectives.FiedlerObjective(g, rot_weight(precisions(g.info, 2)[1], 2))
+    monkeypatch.setattr(objectives, "_EIG_TOL", 1e-300)
+    monkeypatch.setattr(objectives, "_EIG_RESTARTS", 2)
+    with pytest.raises(NumericalError, match="did not converge"):
+        obj.evaluate(np.ones(g.m))
 
 
 def test_tree_objective_merges_proportional_weights_exactly():
@@ -262,6 +276,10 @@ def test_greedy_and_relaxation_against_exhaustive_search(dim, objective, seed):
         if objective != "fiedler":
             assert greedy.value - base >= (1 - 1 / math.e) * (opt - base) - 1e-9 * abs(opt)
             assert greedy.certificate.submodular_bound >= opt - 1e-9 * abs(opt)
+            # relax keeps the greedy selection unless a rounding of the relaxation beats it
+            assert relax.value >= greedy.value
+            assert (relax.rounding == "greedy") == (relax.value == greedy.value
+                                                    and relax.selected.tolist() == greedy.selected.tolist())
 
 
 @pytest.mark.parametrize("dim", [2, 3])
@@ -293,7 +311,7 @@ def test_fused_single_laplacian_greedy_agrees_with_the_other_engines(seed):
 
 @pytest.mark.parametrize("uniform", [False, True])
 def test_incremental_greedy_refresh_does_not_change_the_choice(monkeypatch, uniform):
-    import posecrb.selection.select as sel
+    import posecrb.selection.greedy as sel
 
     g = chain_graph(np.random.default_rng(3), n=14, extra=40, dim=2, uniform=uniform)
     if uniform:
@@ -345,6 +363,69 @@ def test_frank_wolfe_bound_brackets_the_relaxation_optimum_from_slsqp():
     assert fw.value <= relax_opt + 1e-9 * abs(relax_opt)
     assert fw.bound - fw.value <= 1e-3 * (fw.bound - base)
     assert abs(fw.weights.sum() - k) < 1e-9 and fw.weights.min() >= 0 and fw.weights.max() <= 1
+
+
+def test_projected_gradient_bound_brackets_the_relaxation_optimum_from_slsqp():
+    """The log-det relaxation by spectral projected gradient (what relax and --certify run) against
+    SLSQP's optimum: its bound is above, its value below, and they close within ``tol``."""
+    from scipy.optimize import minimize
+
+    for seed, dim in ((12, 2), (13, 3)):
+        g = chain_graph(np.random.default_rng(seed), n=8, extra=9, dim=dim)
+        obj = tree_objective(g)
+        split = split_edges(g)
+        cand, k = split.candidates, 4
+        x0 = np.zeros(g.m)
+        x0[split.fixed] = 1.0
+        tau, kappa = precisions(g.info, dim)
+        terms = [(dim, dense_laplacian_terms(g, tau)),
+                 (1 if dim == 2 else 3, dense_laplacian_terms(g, rot_weight(kappa, dim)))]
+
+        def f(pi, x0=x0, cand=cand, terms=terms):
+            x = x0.copy()
+            x[cand] = pi
+            return -sum(c * chol_logdet(np.tensordot(x, t, 1)) for c, t in terms)
+
+        opt = minimize(f, np.full(cand.size, k / cand.size), method="SLSQP", bounds=[(0, 1)] * cand.size,
+                       constraints=[{"type": "eq", "fun": lambda p, k=k: p.sum() - k}],
+                       options={"ftol": 1e-14, "maxiter": 500})
+        relax_opt = -opt.fun
+        base = obj.value(x0)
+        spg = projected_gradient(obj, x0, cand, k, np.full(cand.size, k / cand.size), max_iter=200, tol=1e-6,
+                                 base_value=base)
+        assert spg.converged and spg.step == "spg"
+        assert spg.bound >= relax_opt - 1e-9 * abs(relax_opt)
+        assert spg.value <= relax_opt + 1e-9 * abs(relax_opt)
+        assert spg.bound - relax_opt <= 1e-6 * (spg.bound - base) + 1e-9 * abs(relax_opt)
+        assert abs(spg.weights.sum() - k) < 1e-9 and spg.weights.min() >= 0 and spg.weights.max() <= 1
+
+
+def test_capped_simplex_projection_against_bisection_and_a_quadratic_program():
+    """``project_capped_simplex`` (the kinks of the piecewise-linear sum, sorted) against the same
+    minimiser's threshold found by plain bisection, its form (KKT: ``y - x`` is one constant on the
+    entries strictly inside (0, 1)), and SLSQP on ``min ||x - y||^2`` (never better than ours)."""
+    from scipy.optimize import minimize
+
+    rng = np.random.default_rng(31)
+    for n, k in ((6, 2), (40, 7), (25, 24.5), (30, 0.5), (50, 10)):
+        y = 3.0 * rng.normal(size=n)
+        if n == 50:
+            y = np.round(y)                  # ties among the kinks
+        x = project_capped_simplex(y, k)
+        assert x.sum() == pytest.approx(k, abs=1e-12 * n) and x.min() >= 0.0 and x.max() <= 1.0
+        lo, hi = y.min() - 1.0, y.max()
+        for _ in range(200):                 # sum(clip(y - tau, 0, 1)) is non-increasing in tau
+            mid = 0.5 * (lo + hi)
+            lo, hi = (mid, hi) if np.clip(y - mid, 0, 1).sum() > k else (lo, mid)
+        assert np.abs(x - np.clip(y - 0.5 * (lo + hi), 0, 1)).max() <= 1e-12 * max(1.0, np.abs(y).max())
+        inside = (x > 1e-12) & (x < 1 - 1e-12)
+        if inside.sum() > 1:
+            assert np.ptp((y - x)[inside]) <= 1e-12 * max(1.0, np.abs(y).max())
+        ref = minimize(lambda z, y=y: ((z - y) ** 2).sum(), np.full(n, k / n), jac=lambda z, y=y: 2 * (z - y),
+                       method="SLSQP", bounds=[(0, 1)] * n,
+                       constraints=[{"type": "eq", "fun": lambda z, k=k: z.sum() - k}],
+                       options={"ftol": 1e-15, "maxiter": 1000})
+        assert ((x - y) ** 2).sum() <= ((ref.x - y) ** 2).sum() + 1e-9 * max(1.0, (y ** 2).sum())
 
 
 def test_madow_sampling_has_the_requested_inclusion_probabilities():
@@ -409,6 +490,36 @@ def test_fixed_file_pairs_unknown_pair_and_disconnected_set(tmp_path):
     f.write_text("0 10\n20 30\n")
     with pytest.raises(DisconnectedFixedSet, match="pieces"):
         split_edges(g, str(f))
+
+
+def test_fixed_file_is_read_with_the_readers_line_rules(tmp_path):
+    """Lines end at \\n, \\r\\n and \\r only, fields are separated by ASCII blanks, and the file must
+    be a regular UTF-8 file: the rules of the g2o reader (``str.splitlines`` would also break at
+    U+2028 and form feed, shifting every later line number)."""
+    g = chain_graph(np.random.default_rng(0), n=6, extra=4, dim=2, ids=np.arange(6) * 10)
+    f = tmp_path / "fixed.txt"
+    f.write_bytes(b"0 10\r10 20\r\n20 30#c\n30 40\t# tab\r\n40 50")
+    assert split_edges(g, str(f)).fixed.tolist() == list(range(5))
+    f.write_bytes("0 10\r10 20\r\n20 30\u202830 40\n40 50\n".encode())
+    with pytest.raises(ParseError, match=r"fixed.txt:3: expected two pose ids"):
+        split_edges(g, str(f))
+    f.write_bytes(b"0 10\x0c10 20\n20 x\n")          # form feed separates fields, it ends no line
+    with pytest.raises(ParseError, match=r"fixed.txt:1: expected two pose ids"):
+        split_edges(g, str(f))
+    f.write_bytes(b"0 10\n\xff\xfe 20\n")
+    with pytest.raises(ParseError, match=r"fixed.txt:2: not a text file"):
+        split_edges(g, str(f))
+    with pytest.raises(ParseError, match="not a regular file"):
+        split_edges(g, str(tmp_path))
+
+
+@pytest.mark.parametrize("keywords", [{"tol": float("nan")}, {"tol": 0.0}, {"tol": -1e-3}, {"tol": float("inf")},
+                                      {"max_iter": 0}, {"max_iter": 2.5}, {"objective": "trees"},
+                                      {"method": "exact"}, {"gains": "approx"}])
+def test_invalid_options_are_usage_errors(keywords):
+    g = chain_graph(np.random.default_rng(0), n=6, extra=4, dim=2)
+    with pytest.raises(UsageError):
+        select_edges(g, 2, **keywords)
 
 
 def test_disconnected_graph_is_reported():

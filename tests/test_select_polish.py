@@ -13,7 +13,7 @@ import itertools
 import numpy as np
 import pytest
 
-from posecrb.selection.select import (
+from posecrb.selection import (
     FiedlerObjective,
     polish_fiedler,
     select_edges,

@@ -9,8 +9,8 @@ from decimal import Decimal
 import pytest
 
 from posecrb.cli import main
-from posecrb.metrics.published import PAPER_NAME, TABLE_II
-from posecrb.metrics.tables import HEADERS, failed, published_settings, table_rows
+from posecrb.evaluation.published import PAPER_NAME, TABLE_II
+from posecrb.evaluation.tables import HEADERS, failed, published_settings, table_rows
 from posecrb.report.latex import tex_number as _tex_number
 
 from .numerics import EPS
@@ -211,7 +211,7 @@ def test_as_published_reproduces_table_two_fim_and_lb(shared_datasets):
     """`posecrb tables --as-published`: eq. (64) as printed with w = 0.5515 kappa^2 gives the printed
     FIM and lb columns of Table II to one unit of the last printed digit on every 3D dataset of the
     paper that is available (grid3D and rim are not in the shared folder)."""
-    from posecrb.metrics.tables import dataset_row
+    from posecrb.evaluation.tables import dataset_row
 
     settings = published_settings(repeat=1, data_dir=str(shared_datasets))
     checked = 0

@@ -3,8 +3,8 @@ local executor (every number except the timings), and says its timings are singl
 import numpy as np
 import pytest
 
+from posecrb.evaluation.tables import TableSettings, build_rows
 from posecrb.io import write_g2o
-from posecrb.metrics.tables import TableSettings, build_rows
 
 from .helpers import random_pose_graph
 

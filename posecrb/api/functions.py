@@ -21,7 +21,7 @@ from ..core.result import check_output_argument
 from . import arguments as arg
 
 if TYPE_CHECKING:
-    from ..metrics.evaluate import DatasetMetrics
+    from ..evaluation.evaluate import DatasetMetrics
     from ..models.results import CrlbResult, FimResult
     from ..solver.estimate import Estimate
     from ..solver.solve import SolveResult
@@ -252,7 +252,7 @@ def bounds(source: Source, *, anchor: int | None = None, repeat: int = 1, rotati
     (30155.231, 33537.021, True)
     """
     from ..linalg.ordering import ORDERINGS  # noqa: PLC0415 -- lazy: start-up time
-    from ..metrics.evaluate import EvaluationSettings, evaluate  # noqa: PLC0415 -- lazy: start-up time
+    from ..evaluation.evaluate import EvaluationSettings, evaluate  # noqa: PLC0415 -- lazy: start-up time
     from ..models.paper.fim import FIM_VARIANTS  # noqa: PLC0415 -- lazy: start-up time
 
     ids = _one_anchor(anchor)

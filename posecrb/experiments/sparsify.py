@@ -36,7 +36,7 @@ from ..core.status import put
 from ..linalg.cholesky import SymbolicCholesky
 from ..linalg.selinv import SelectedInverse
 from ..models.paper.fim import paper_fim
-from ..selection.select import (
+from ..selection import (
     METHODS,
     OBJECTIVES,
     FiedlerObjective,

@@ -119,8 +119,9 @@ class Tokens:
 # --------------------------------------------------------------------------------------------
 # Reference tokeniser: any text, exact error locations.
 
-def _split_lines(text: str) -> list[list[str]]:
-    """Fields of every line; lines end at \\n, \\r\\n, \\r only (see the module docstring)."""
+def split_lines(text: str) -> list[list[str]]:
+    """Fields of every line; lines end at \\n, \\r\\n, \\r only and fields are separated by ASCII
+    blanks (the module docstring). Every line-based input (formats, the selection's pair files) uses it."""
     lines = _LINE_END.split(text) if "\r" in text else text.split("\n")
     if _ODD_SPACE.search(text) is None and "\f" not in text and "\v" not in text:
         return [ln.split() for ln in lines]          # only ASCII blanks occur
@@ -170,7 +171,7 @@ def _numeric_block(path: str, rows: list[list[str]], lines: np.ndarray,
 
 def split_text(text: str) -> Tokens:
     """The reference tokeniser (module docstring): every input, every error located."""
-    rows = _split_lines(text)
+    rows = split_lines(text)
     groups: dict[str, list[int]] = {}
     for k, r in enumerate(rows):
         if r:

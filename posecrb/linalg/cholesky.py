@@ -232,19 +232,3 @@ def lambda_min(a: sp.spmatrix, factor: Factor | None = None, name: str = "matrix
                              f"(residual {ritz.residual:.2g} after {ritz.matvecs} products)")
     return 1.0 / ritz.value
 
-
-def anchored_logdet(matrix: sp.spmatrix, q: int, anchors: list[int], name: str, *, ordering: str = "auto",
-                    dim: int | None = None) -> float:
-    """log det of a pose-major (q per pose) FIM with the anchored poses' rows/columns removed,
-    factored with ``ordering`` (posecrb.linalg.ordering; ``dim`` defaults from q = 3 | 6)."""
-    from .ordering import block_cholesky  # noqa: PLC0415 -- import cycle: ordering builds on this module
-
-    n = matrix.shape[0] // q
-    keep = np.ones(n, bool)
-    keep[anchors] = False
-    dofs = (np.flatnonzero(keep)[:, None] * q + np.arange(q)).ravel()
-    a = matrix[dofs][:, dofs].tocsc()
-    if a.shape[0] == 0:
-        return 0.0
-    f = block_cholesky(a, ordering, dim=dim or (2 if q == 3 else 3), poses=n, matrix="fim", block=q, name=name)
-    return _checked_logdet(f, name)

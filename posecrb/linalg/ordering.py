@@ -172,6 +172,23 @@ def block_cholesky(a: sp.spmatrix, ordering: str, *, dim: int, poses: int, matri
     return sym.factor(a, name=name)
 
 
+def anchored_logdet(matrix: sp.spmatrix, q: int, anchors: list[int], name: str, *, ordering: str = "auto",
+                    dim: int | None = None) -> float:
+    """log det of a pose-major (q per pose) FIM with the anchored poses' rows/columns removed,
+    factored with ``ordering`` (``dim`` defaults from q = 3 | 6); raises NotPositiveDefinite."""
+    n = matrix.shape[0] // q
+    keep = np.ones(n, bool)
+    keep[anchors] = False
+    dofs = (np.flatnonzero(keep)[:, None] * q + np.arange(q)).ravel()
+    a = matrix[dofs][:, dofs].tocsc()
+    if a.shape[0] == 0:
+        return 0.0
+    nb = a.shape[0] // q
+    sym, _ = ordered_symbolic(a, ordering, dim=dim or (2 if q == 3 else 3), poses=n, matrix="fim",
+                              pose_of_row=np.repeat(np.arange(nb), q), n_poses=nb)
+    return sym.factor_logdet(a, name=name)[1]
+
+
 def solver_symbolic(pattern: sp.spmatrix, dim: int, n: int, mode: str = "auto") -> SymbolicCholesky:
     """The symbolic analysis of the solver's M_red = [[L_red, V_red], [V_red^T, C + ...]]
     (posecrb.solver.problem: n - 1 translation rows for poses 1..n-1, then d rotation rows per pose

@@ -16,8 +16,7 @@ import numpy as np
 from ..core.errors import ArgumentError
 from ..core.graph import PoseGraph
 from ..core.status import OK, Status
-from ..linalg.cholesky import anchored_logdet
-from ..linalg.ordering import resolve_ordering
+from ..linalg.ordering import anchored_logdet, resolve_ordering
 from ..solver.estimate import Estimate
 from .paper.bounds import t_optimality
 from .paper.crlb import InverseAccuracy, PaperCrlb, paper_crlb

@@ -19,7 +19,7 @@ import numpy as np
 
 from ..core.errors import UsageError
 from ..core.files import atomic_write
-from ..metrics.published import paper_row
+from ..evaluation.published import paper_row
 
 if TYPE_CHECKING:
     from matplotlib.figure import Figure
@@ -166,7 +166,7 @@ def plot_tables(rows: Sequence[dict], path: str | os.PathLike, note: str | None 
     Top: the FIM log-det and ub as their relative distance above lb, ``(x - lb)/lb``
     (log scale; lb itself is the floor, 0). Bottom: each measured time divided by the
     paper's printed time for the same quantity (log scale; 1 = as fast as printed, below
-    = faster), for the datasets the paper has. ``rows`` are ``posecrb.metrics.tables`` rows; rows
+    = faster), for the datasets the paper has. ``rows`` are ``posecrb.evaluation.tables`` rows; rows
     without lb/ub/FIM (not found, failed) are left out. Raises ValueError when none is left.
     """
 

@@ -40,8 +40,8 @@ HEADERS = {"budget_spec": "budget", "budget": "K", "upper_bound": "upper bound",
 @click.option("--objective", default="tree", show_default=True, metavar="tree|fim|fiedler",
               help="Objective of the methods named without one.")
 @click.option("--fixed", default="odometry", show_default=True, metavar="odometry|FILE", help="Fixed edges.")
-@click.option("--certify", is_flag=True, help="Frank-Wolfe bound for greedy, random and naive too.")
-@click.option("--max-iter", type=click.IntRange(1, 100000), default=None, help="Frank-Wolfe iterations.")
+@click.option("--certify", is_flag=True, help="Relaxation bound for greedy, random and naive too.")
+@click.option("--max-iter", type=click.IntRange(1, 100000), default=None, help="Relaxation iterations.")
 @click.option("--seed", type=click.IntRange(0, 2 ** 63 - 1), default=0, show_default=True,
               help="Seed of random selections and Madow rounding.")
 @click.option("--jobs", type=click.IntRange(1, 1024), default=1, show_default=True,

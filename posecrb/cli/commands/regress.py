@@ -7,8 +7,8 @@ from dataclasses import asdict
 import click
 
 from ...core.errors import DatasetNotFound, PosecrbError
+from ...evaluation.regress import Diff, compare, compute_metrics, default_expected_path, load_expected, save_expected
 from ...io import check_output_file
-from ...metrics.regress import Diff, compare, compute_metrics, default_expected_path, load_expected, save_expected
 from ...report.render import print_rows
 from ..options import data_dir_option, format_option
 

@@ -38,7 +38,7 @@ def _summary(d: dict) -> list[dict]:
     ]
     if b["iterations"]:
         stop = "converged" if b["converged"] else "stopped at --max-iter"
-        rows.append(("Frank-Wolfe iterations", f"{b['iterations']} ({stop})"))
+        rows.append(("relaxation iterations", f"{b['iterations']} ({stop})"))
     if d["estimate"]:
         e = d["estimate"]
         rows.append(("estimate", f"{e['source']}" + ("" if e["certified"] is None else
@@ -56,17 +56,18 @@ def _summary(d: dict) -> list[dict]:
                    "the anchored frame-consistent FIM at --estimate; fiedler: algebraic connectivity of the "
                    "rotation-weighted Laplacian (MAC's objective).")
 @click.option("--method", default="greedy", show_default=True, metavar="greedy|relax|random|naive",
-              help="greedy (exact greedy; MAC's GreedyEig for fiedler), relax (Frank-Wolfe on the convex "
-                   "relaxation, top-K and Madow rounding), random (seeded), naive (heaviest rotation weights).")
+              help="greedy (exact greedy; MAC's GreedyEig for fiedler), relax (the concave relaxation's bound, "
+                   "top-K and Madow rounding; tree and fim keep the greedy set unless a rounding beats it), "
+                   "random (seeded), naive (heaviest rotation weights).")
 @click.option("--fixed", default="odometry", show_default=True, metavar="odometry|FILE",
               help="Edges always kept: the odometry chain (consecutive ids, plus edges needed to connect it), "
                    "or a file of pose-id pairs 'i j'. Every other edge is a candidate.")
 @click.option("--certify", is_flag=True,
               help="Also run the relaxation for an upper bound (greedy, random, naive); relax always has it.")
 @click.option("--max-iter", type=click.IntRange(1, 100000), default=None,
-              help="Frank-Wolfe iterations (default 100; fiedler 20 as MAC).")
+              help="Relaxation iterations (default 100; fiedler: Frank-Wolfe, 20 as MAC).")
 @click.option("--tol", type=FiniteFloat(min=0, min_open=True, max=1), default=1e-3, show_default=True,
-              help="Stop Frank-Wolfe when the duality gap is below TOL x (bound - base value).")
+              help="Stop the relaxation when its duality gap is below TOL x (bound - base value).")
 @click.option("--lazy", is_flag=True,
               help="Lazy greedy with a priority queue instead of the incremental greedy (same choice, "
                    "different cost profile).")

@@ -13,8 +13,7 @@ import click
 from ...core.errors import PosecrbError
 from ...core.files import write_text
 from ...core.provenance import write_run_record
-from ...io import check_output_dir, write_g2o
-from ...metrics.tables import (
+from ...evaluation.tables import (
     HEADERS,
     TITLES,
     TableSettings,
@@ -27,6 +26,7 @@ from ...metrics.tables import (
     table_rows,
     tables_run_record,
 )
+from ...io import check_output_dir, write_g2o
 from ...report.latex import to_latex
 from ...report.render import to_csv, to_json, to_markdown, to_rich_table
 from ...sim.generators import builtin_demo
