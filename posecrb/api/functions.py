@@ -251,8 +251,8 @@ def bounds(source: Source, *, anchor: int | None = None, repeat: int = 1, rotati
     >>> round(b.lb, 3), round(b.ub_lambda, 3), b.fim_logdet is None
     (30155.231, 33537.021, True)
     """
-    from ..linalg.ordering import ORDERINGS  # noqa: PLC0415 -- lazy: start-up time
     from ..evaluation.evaluate import EvaluationSettings, evaluate  # noqa: PLC0415 -- lazy: start-up time
+    from ..linalg.ordering import ORDERINGS  # noqa: PLC0415 -- lazy: start-up time
     from ..models.paper.fim import FIM_VARIANTS  # noqa: PLC0415 -- lazy: start-up time
 
     ids = _one_anchor(anchor)
@@ -505,13 +505,9 @@ def select(source: Source, *, budget: int | str, objective: str = "tree", method
     >>> s.budget, s.method, s.upper_bound >= s.value
     (7, 'naive', True)
     """
-    from ..selection.select import (  # noqa: PLC0415 -- lazy: start-up time
-        FIXED_RULES,
-        METHODS,
-        OBJECTIVES,
-        select_edges,
-        write_pruned,
-    )
+    from ..selection.budget import FIXED_RULES  # noqa: PLC0415 -- lazy: start-up time
+    from ..selection.objectives import OBJECTIVES  # noqa: PLC0415 -- lazy: start-up time
+    from ..selection.select import METHODS, select_edges, write_pruned  # noqa: PLC0415 -- lazy: start-up time
     from .results import selection_from_driver  # noqa: PLC0415 -- lazy: start-up time
 
     if isinstance(budget, bool) or not isinstance(budget, (int, str)):
