@@ -5,6 +5,7 @@
     PosecrbError
     ├── UsageError (also a ValueError)   an argument the caller can fix
     ├── ParseError                       file:line and reason
+    ├── OutputError                      a result cannot be written: path and reason
     ├── DatasetNotFound
     ├── NumericalError
     │   └── NotPositiveDefinite
@@ -18,6 +19,7 @@ component sizes for disconnected graphs.
 """
 from __future__ import annotations
 
+import shlex
 from dataclasses import dataclass
 
 
@@ -32,13 +34,23 @@ class ParseError(PosecrbError):
         super().__init__(f"{where}: {reason}")
 
 
+class OutputError(PosecrbError):
+    """A result file cannot be written (disk full, permission denied, read-only file system):
+    the path and the system's reason (exit 1). Nothing was written: the previous file, if any,
+    is intact (``posecrb.core.files.atomic_write``)."""
+
+    def __init__(self, path: str, reason: str):
+        self.path, self.reason = str(path), reason
+        super().__init__(f"cannot write {self.path}: {reason}")
+
+
 class DatasetNotFound(PosecrbError):
     def __init__(self, name: str, searched: list[str]):
         self.name, self.searched = name, searched
         hint = "; searched: " + ", ".join(searched) if searched else ""
         super().__init__(
             f"dataset {name!r} not found{hint}. "
-            f"Pass a path, set --data-dir or $POSECRB_DATA, or run `posecrb datasets fetch {name}`."
+            f"Pass a path, set --data-dir or $POSECRB_DATA, or run `posecrb datasets fetch {shlex.quote(name)}`."
         )
 
 
