@@ -5,7 +5,6 @@ import logging
 import math
 import re
 from collections.abc import Callable
-from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
 import click
@@ -13,6 +12,7 @@ import click
 from ..core.errors import UsageError
 from ..core.timing import timed
 from ..datasets import search as datasets
+from .paths import InputDir, InputFile
 
 if TYPE_CHECKING:
     from ..core.graph import PoseGraph
@@ -89,8 +89,12 @@ TABLE_FORMATS = ("table", "markdown", "csv", "json", "latex")   # `tables` adds 
 
 
 data_dir_option = click.option(
-    "--data-dir", type=click.Path(file_okay=False), default=None,
-    help="Directory searched first for bare dataset names.")
+    "--data-dir", type=InputDir(), default=None,
+    help="Directory searched first for bare dataset names (must exist).")
+
+# Seeds go to numpy.random.SeedSequence (any non-negative integer) and are recorded in run.json and
+# in int64 arrays: non-negative and within int64.
+SEED_RANGE = click.IntRange(0, 2 ** 63 - 1)
 
 anchor_option = click.option(
     "--anchor", type=POSE_ID, default=None,
@@ -122,9 +126,14 @@ def executor_settings(executor: str, jobs: int, scheduler: str | None) -> dict:
 
 
 def plot_target(plot_path: str | None, out_dir: str | None, name: str) -> str | None:
+    """Where the figure goes: ``--plot``, else ``--out DIR``/NAME.png (the directory is created)."""
     if plot_path:
         return plot_path
-    return str(Path(out_dir) / f"{name}.png") if out_dir else None
+    if not out_dir:
+        return None
+    from ..core.files import make_output_dir  # noqa: PLC0415 -- only when writing
+
+    return str(make_output_dir(out_dir) / f"{name}.png")
 
 
 
@@ -151,6 +160,7 @@ def make_estimate_option(dest: str = "estimate_source", *, allow_none: bool = Fa
     """``--estimate``: where the poses come from; ``allow_none`` adds ``none`` (graph-only columns)."""
     return click.option(
         "--estimate", dest, default="solve", show_default=True,
+        type=InputFile(("solve", "vertices", "none") if allow_none else ("solve", "vertices")),
         metavar="solve|vertices|none|FILE" if allow_none else "solve|vertices|FILE",
         help="Where the poses (at which the FIM is evaluated) come from: the certified solver (global "
              "optimum), the file's own VERTEX lines, "

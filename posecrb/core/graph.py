@@ -148,7 +148,8 @@ class PoseGraph(PoseDimensions):
         starts = np.searchsorted(labels[order], np.arange(self.n_components))
         sizes = np.bincount(labels, minlength=self.n_components)
         out = [
-            ComponentSummary(int(sizes[c]), tuple(int(x) for x in self.ids[order[starts[c]: starts[c] + samples]]))
+            ComponentSummary(int(sizes[c]),
+                             tuple(int(x) for x in self.ids[order[starts[c]: starts[c] + min(samples, int(sizes[c]))]]))
             for c in range(self.n_components)
         ]
         return sorted(out, key=lambda c: -c.size)

@@ -28,7 +28,7 @@ from typing import IO
 
 from .. import __version__
 from ..core.errors import PosecrbError
-from ..core.files import atomic_write
+from ..core.files import atomic_write, make_output_dir
 from .manifest import DatasetEntry, Manifest, load_manifest, verify_file
 from .search import cache_dir, locate
 
@@ -63,8 +63,15 @@ class FetchResult:
 
 
 def target_path(entry: DatasetEntry, dest: str | os.PathLike | None = None) -> Path:
-    """Where ``fetch`` puts ``entry``: ``dest`` (default the user cache) / subdir / file."""
-    return Path(dest if dest is not None else cache_dir()) / entry.relpath
+    """Where ``fetch`` puts ``entry``: ``dest`` (default the user cache) / subdir / file, never
+    outside ``dest`` (the manifest's paths are plain names, ``posecrb.datasets.manifest``)."""
+    root = Path(dest if dest is not None else cache_dir())
+    target = root / entry.relpath
+    inside = os.path.normpath(os.path.abspath(target))
+    if os.path.commonpath([inside, os.path.normpath(os.path.abspath(root))]) != os.path.normpath(
+            os.path.abspath(root)):
+        raise FetchError(f"{entry.name}: manifest path {entry.relpath!r} leaves the destination {root}")
+    return target
 
 
 def _check_url(url: str, allow_http: bool) -> None:
@@ -212,7 +219,9 @@ def _download_verified(entry: DatasetEntry, dest: str | os.PathLike | None, url:
 
     src = url or entry.url
     _check_url(src, allow_http=url is not None)
-    target.parent.mkdir(parents=True, exist_ok=True)
+    root = make_output_dir(dest if dest is not None else cache_dir(), parents=dest is None)
+    if target.parent != root:
+        make_output_dir(target.parent)
     nbytes = 0
 
     def check(tmp: Path) -> None:

@@ -38,6 +38,7 @@ import numpy as np
 
 from ..core.errors import UsageError
 from ..core.graph import PoseGraph
+from ..io.text import PRECISION_RANGE
 from ..lie.so import so2_log, so3_log
 from ..models.paper.crlb import paper_crlb
 from ..models.paper.fim import FIM_VARIANTS
@@ -89,6 +90,30 @@ def parse_levels(spec: str) -> list[float]:
     if any(not (np.isfinite(v) and v > 0) for v in out):
         raise UsageError("--kc levels must be > 0")
     return sorted(set(out))
+
+
+def level_range(graph: PoseGraph, scale: str = "both", tau: float | None = None,
+                kappa: float | None = None) -> tuple[float, float]:
+    """The k_c for which every scaled precision (k_c kappa, and k_c tau with ``scale="both"``) stays
+    inside ``PRECISION_RANGE``, where every quantity built from it is finite (posecrb.io.text)."""
+    lo_p, hi_p = PRECISION_RANGE
+    k = np.asarray(graph.kappa if kappa is None else [kappa], dtype=float)
+    scaled = [k] + ([np.asarray(graph.tau if tau is None else [tau], dtype=float)] if scale == "both" else [])
+    lo = max(lo_p / float(v.min()) for v in scaled)
+    hi = min(hi_p / float(v.max()) for v in scaled)
+    return lo, hi
+
+
+def check_levels(graph: PoseGraph, kcs: Sequence[float], scale: str = "both", tau: float | None = None,
+                 kappa: float | None = None, name: str = "k_c") -> None:
+    """UsageError for a level outside ``level_range``: its noise model's precisions would leave the
+    range where the FIM, the solver and the sampler compute finite numbers."""
+    lo, hi = level_range(graph, scale, tau, kappa)
+    bad = [k for k in kcs if not lo <= k <= hi]
+    if bad:
+        raise UsageError(f"{name} {bad[0]:g}: outside [{lo:.3g}, {hi:.3g}] for {graph.name}, where the scaled "
+                         f"precisions stay inside [{PRECISION_RANGE[0]:g}, {PRECISION_RANGE[1]:g}] (beyond it "
+                         "the noise model's numbers overflow or underflow)")
 
 
 # ---------------------------------------------------------------- errors in the FIM's coordinates
@@ -240,6 +265,7 @@ def crlb_sweep(graph: PoseGraph, kcs: Sequence[float], trials: int = 100, seed: 
     if trials < 2:
         raise UsageError("--trials must be >= 2 (the MSE needs a standard error)")
     graph.require_connected()
+    check_levels(graph, [float(k) for k in kcs], scale, tau, kappa)
     anchor = 0 if anchor is None else int(anchor)
     solver_options = _solver_options(solver_options, anchor)
     truth_certified, truth_objective = True, None

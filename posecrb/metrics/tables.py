@@ -15,6 +15,7 @@ from __future__ import annotations
 
 import logging
 import os
+import shlex
 from collections.abc import Callable, Iterable, Sequence
 from concurrent.futures import ProcessPoolExecutor, as_completed
 from dataclasses import asdict, dataclass, field
@@ -85,7 +86,7 @@ def dataset_row(name: str, settings: TableSettings,
     try:
         path = datasets.resolve(name, settings.data_dir)
     except DatasetNotFound as exc:
-        row.update(status="not found", hint=f"posecrb datasets fetch {name}", error=str(exc))
+        row.update(status="not found", hint=f"posecrb datasets fetch {shlex.quote(name)}", error=str(exc))
         return row
     except PosecrbError as exc:   # e.g. a directory or a device given as the dataset
         row.update(status=status_of(exc), error=str(exc))

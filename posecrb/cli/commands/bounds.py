@@ -20,6 +20,7 @@ from ..options import (
     repeat_option,
     rotation_weight_option,
 )
+from ..paths import Command, DatasetArg
 
 log = logging.getLogger("posecrb")
 
@@ -48,8 +49,8 @@ def bounds_row(name_or_path: str, data_dir: str | None, anchor_id: int | None, r
     return row
 
 
-@click.command("bounds")
-@click.argument("files", nargs=-1, required=True)
+@click.command("bounds", cls=Command)
+@click.argument("files", nargs=-1, required=True, type=DatasetArg())
 @anchor_option
 @repeat_option
 @rotation_weight_option

@@ -21,6 +21,7 @@ from ..options import (
     ordering_option,
     resolve_model_settings,
 )
+from ..paths import Command, DatasetArg
 
 log = logging.getLogger("posecrb")
 
@@ -70,8 +71,8 @@ def crlb_result(file: str, data_dir: str | None, model: str, source: str, anchor
     return row, crb.pose_rows
 
 
-@click.command("crlb")
-@click.argument("file")
+@click.command("crlb", cls=Command)
+@click.argument("file", type=DatasetArg())
 @model_option
 @click.option("--quotient", is_flag=True, help="sed: quotient CRB F^+ (thesis 5.5) instead of the anchored one (5.1).")
 @click.option("--anchor", "anchors", type=POSE_ID, multiple=True,

@@ -5,8 +5,6 @@ import logging
 
 import click
 
-from ...datasets import search as datasets
-from ...io import check_output_file
 from ...io.npz import npz_path
 from ...models import fisher_information
 from ...models.thesis.frames import coordinates_description
@@ -14,7 +12,6 @@ from ...report.render import key_value_rows, print_rows
 from ..options import (
     POSE_ID,
     data_dir_option,
-    estimate_inputs,
     estimate_option,
     format_option,
     load_with_estimate,
@@ -23,6 +20,7 @@ from ..options import (
     ordering_option,
     resolve_model_settings,
 )
+from ..paths import Command, DatasetArg, OutputFile
 
 log = logging.getLogger("posecrb")
 
@@ -31,10 +29,8 @@ def fim_row(file: str, data_dir: str | None, model: str, source: str, anchor_id:
             rotation_model: str, save: str | None, fim_variant: str | None = None,
             frame: str | None = None, ordering: str = "auto") -> dict:
     variant, frame = resolve_model_settings(model, fim_variant, frame)
-    if save:
-
+    if save:   # checked before the work with the command's inputs (posecrb.cli.paths)
         save = npz_path(save)   # the file really written (and reported as `saved`)
-        check_output_file(save, [datasets.resolve(file, data_dir), *estimate_inputs(source)], option="--save")
     graph, est, est_info, times = load_with_estimate(file, data_dir, source)
     row: dict = {"dataset": graph.name, "model": model, "dim": graph.dim, "poses": graph.n,
                  "edges": graph.m, "components": graph.n_components}
@@ -55,15 +51,15 @@ def fim_row(file: str, data_dir: str | None, model: str, source: str, anchor_id:
     return row
 
 
-@click.command("fim")
-@click.argument("file")
+@click.command("fim", cls=Command)
+@click.argument("file", type=DatasetArg())
 @model_option
 @estimate_option
 @click.option("--anchor", type=POSE_ID, default=None,
               help="Pose id anchored for the log-det; default: the smallest id (of each component, sed).")
 @model_settings_options
 @ordering_option
-@click.option("--save", type=click.Path(dir_okay=False, writable=True), default=None,
+@click.option("--save", type=OutputFile((".npz",), append=".npz"), default=None,
               help="Write the FIM as a scipy sparse .npz with its index map "
                    "(row_pose_id, row_coordinate, coordinate_names) and its frame; .npz is appended "
                    "unless present. With --model sed --frame body it is comparable with a GTSAM Hessian.")

@@ -8,7 +8,8 @@ import click
 from ...core.errors import UsageError
 from ...report.render import print_rows
 from ...selection.select import select_edges, write_pruned
-from ..options import FiniteFloat, anchor_option, data_dir_option, format_option, load_dataset
+from ..options import SEED_RANGE, FiniteFloat, anchor_option, data_dir_option, format_option, load_dataset
+from ..paths import GRAPH_EXTENSIONS, Command, DatasetArg, InputFile, OutputFile
 
 log = logging.getLogger("posecrb")
 
@@ -46,8 +47,9 @@ def _summary(d: dict) -> list[dict]:
     return [{"quantity": k, "value": v} for k, v in rows]
 
 
-@click.command("select", short_help="Measurement selection: keep K edges, D-optimal, with a certificate.")
-@click.argument("file")
+@click.command("select", cls=Command,
+               short_help="Measurement selection: keep K edges, D-optimal, with a certificate.")
+@click.argument("file", type=DatasetArg())
 @click.option("--budget", required=True, metavar="K|P%",
               help="Number of candidate edges to keep, or a percentage of the candidates (rounded down).")
 @click.option("--objective", default="tree", show_default=True, metavar="tree|fim|fiedler",
@@ -57,7 +59,8 @@ def _summary(d: dict) -> list[dict]:
 @click.option("--method", default="greedy", show_default=True, metavar="greedy|relax|random|naive",
               help="greedy (exact greedy; MAC's GreedyEig for fiedler), relax (Frank-Wolfe on the convex "
                    "relaxation, top-K and Madow rounding), random (seeded), naive (heaviest rotation weights).")
-@click.option("--fixed", default="odometry", show_default=True, metavar="odometry|FILE",
+@click.option("--fixed", default="odometry", show_default=True, type=InputFile(("odometry",)),
+              metavar="odometry|FILE",
               help="Edges always kept: the odometry chain (consecutive ids, plus edges needed to connect it), "
                    "or a file of pose-id pairs 'i j'. Every other edge is a candidate.")
 @click.option("--certify", is_flag=True,
@@ -73,12 +76,13 @@ def _summary(d: dict) -> list[dict]:
               help="Seed the lazy greedy's queue with random-projection estimates of the gains (implies --lazy; "
                    "the lazy greedy's default above 50000 candidates).")
 @click.option("--exact", is_flag=True, help="Never use random projections.")
-@click.option("--estimate", default="solve", show_default=True, metavar="solve|vertices|FILE",
+@click.option("--estimate", default="solve", show_default=True, type=InputFile(("solve", "vertices")),
+              metavar="solve|vertices|FILE",
               help="fim objective: the estimate at which the FIM is evaluated (default the certified optimum "
                    "of the full graph).")
-@click.option("--seed", type=click.IntRange(0, 2 ** 63 - 1), default=0, show_default=True,
+@click.option("--seed", type=SEED_RANGE, default=0, show_default=True,
               help="Seed of random, Madow rounding and random projections.")
-@click.option("--out", "out_path", type=click.Path(dir_okay=False), default=None,
+@click.option("--out", "out_path", type=OutputFile(GRAPH_EXTENSIONS), default=None,
               help="Write the pruned graph (fixed + selected edges, every vertex) as g2o.")
 @anchor_option
 @data_dir_option

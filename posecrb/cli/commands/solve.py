@@ -6,10 +6,11 @@ import click
 from ...core.errors import SolverError
 from ...core.timing import timed
 from ...datasets import search as datasets
-from ...io import check_output_file, load, write_g2o
+from ...io import load, write_g2o
 from ...report.render import print_rows
 from ...solver import SolverOptions, solve
 from ..options import POSE_ID, FiniteFloat, data_dir_option, format_option
+from ..paths import GRAPH_EXTENSIONS, Command, DatasetArg, OutputFile
 
 # Compact column set for the human-readable formats; json/csv carry every key.
 TABLE_COLUMNS = ["dataset", "dim", "poses", "edges", "objective", "duality_gap", "lambda_min", "certified", "rank",
@@ -18,9 +19,9 @@ HEADERS = {"hessian_vector_products": "HVPs", "times.total": "time s", "duality_
            "lambda_min": "lambda_min(S)", "iterations": "TR its"}
 
 
-@click.command("solve")
-@click.argument("file")
-@click.option("--out", type=click.Path(dir_okay=False, writable=True), default=None,
+@click.command("solve", cls=Command)
+@click.argument("file", type=DatasetArg())
+@click.option("--out", type=OutputFile(GRAPH_EXTENSIONS), default=None,
               help="Write the estimate as g2o: original ids and edges, vertices replaced by the estimate, "
                    "anchored so that the anchor pose is the identity.")
 @format_option()
@@ -47,9 +48,7 @@ def command(file, out, fmt, r0, rmax, init, anchor, certificate_tol, sesync_comp
     R~ from the unnormalised quaternions (posecrb.io.load(..., quaternions="raw")).
     """
     quaternions = "raw" if sesync_compat else "normalize"
-    path = datasets.resolve(file, data_dir)
-    if out:
-        check_output_file(out, [path], option="--out")   # before the work, not after a long solve
+    path = datasets.resolve(file, data_dir)   # --out was checked before the work (posecrb.cli.paths)
     graph, parse_time = timed(lambda: load(path, quaternions=quaternions))
     anchor_idx = graph.anchor_index(anchor)
     res = solve(graph, SolverOptions(r0=r0, rmax=rmax, init=init, anchor=anchor_idx, certificate_tol=certificate_tol))
