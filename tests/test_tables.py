@@ -69,7 +69,8 @@ def _markdown_tables(text: str) -> list[list[list[str]]]:
     for block in (b for b in text.split("### ") if b.strip()):
         lines = [ln for ln in block.splitlines() if ln.startswith("|")]
         assert set(lines[1]) <= set("|-")
-        out.append([[c.strip() for c in ln.strip("|").split("|")] for i, ln in enumerate(lines) if i != 1])
+        out.append([[re.sub(r"\\(.)", r"\1", c.strip()) for c in re.split(r"(?<!\\)\|", ln.strip()[1:-1])]
+                    for i, ln in enumerate(lines) if i != 1])     # cells split at unescaped |, unescaped
     return out
 
 
@@ -80,7 +81,15 @@ def _latex_tabular(text: str) -> tuple[str, list[list[str]]]:
     body = text.split(r"\toprule")[1].split(r"\bottomrule")[0].replace(r"\midrule", "")
     rows = [ln.strip() for ln in body.splitlines() if ln.strip()]
     assert all(ln.endswith(r"\\") for ln in rows)
-    return spec, [[c.strip() for c in ln[:-2].split(" & ")] for ln in rows]
+    return spec, [[_tex_unescape(c.strip()) for c in ln[:-2].split(" & ")] for ln in rows]
+
+
+def _tex_unescape(cell: str) -> str:
+    """The text a LaTeX cell prints (the escapes of posecrb.report.latex.tex_escape undone)."""
+    for tex, ch in ((r"\textbackslash{}", "\\"), (r"\textasciicircum{}", "^"), (r"\textasciitilde{}", "~"),
+                    (r"\textless{}", "<"), (r"\textgreater{}", ">"), (r"\textbar{}", "|")):
+        cell = cell.replace(tex, ch)
+    return re.sub(r"\\([{}$#%&_])", r"\1", cell)
 
 
 def test_markdown_cells_are_the_computed_rows(shared_datasets, capfd, tmp_path):

@@ -9,7 +9,7 @@ the matrix and the failed pivot, never a NaN.
 from __future__ import annotations
 
 import logging
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 import scipy.sparse as sp
@@ -17,6 +17,9 @@ from sksparse.cholmod import CholmodNotPositiveDefiniteError, Factor, analyze
 
 from ..core.errors import NotPositiveDefinite, NumericalError, UsageError
 from .lanczos import largest_eigenpair
+
+if TYPE_CHECKING:
+    from .accuracy import LogdetAccuracy
 
 log = logging.getLogger("posecrb")
 
@@ -237,6 +240,14 @@ def anchored_logdet(matrix: sp.spmatrix, q: int, anchors: list[int], name: str, 
                     dim: int | None = None) -> float:
     """log det of a pose-major (q per pose) FIM with the anchored poses' rows/columns removed,
     factored with ``ordering`` (posecrb.linalg.ordering; ``dim`` defaults from q = 3 | 6)."""
+    return anchored_logdet_accuracy(matrix, q, anchors, name, ordering=ordering, dim=dim, accuracy=False)[0]
+
+
+def anchored_logdet_accuracy(matrix: sp.spmatrix, q: int, anchors: list[int], name: str, *,
+                             ordering: str = "auto", dim: int | None = None,
+                             accuracy: bool = True) -> tuple[float, LogdetAccuracy | None]:
+    """``anchored_logdet`` and, with ``accuracy``, its ``posecrb.linalg.accuracy.logdet_accuracy``."""
+    from .accuracy import logdet_accuracy  # noqa: PLC0415 -- import cycle: accuracy builds on this module
     from .ordering import block_cholesky  # noqa: PLC0415 -- import cycle: ordering builds on this module
 
     n = matrix.shape[0] // q
@@ -245,6 +256,7 @@ def anchored_logdet(matrix: sp.spmatrix, q: int, anchors: list[int], name: str, 
     dofs = (np.flatnonzero(keep)[:, None] * q + np.arange(q)).ravel()
     a = matrix[dofs][:, dofs].tocsc()
     if a.shape[0] == 0:
-        return 0.0
+        return 0.0, (logdet_accuracy(a, None, 0.0, name) if accuracy else None)
     f = block_cholesky(a, ordering, dim=dim or (2 if q == 3 else 3), poses=n, matrix="fim", block=q, name=name)
-    return _checked_logdet(f, name)
+    ld = _checked_logdet(f, name)
+    return ld, (logdet_accuracy(a, f, ld, name) if accuracy else None)

@@ -19,13 +19,14 @@ from ..core.errors import UsageError
 from ..core.graph import PoseGraph
 from ..core.status import OK, Status, log_status, put
 from ..io.npz import save_npz
-from ..linalg.cholesky import anchored_logdet
+from ..linalg.accuracy import LogdetAccuracy, logdet_accuracy
+from ..linalg.cholesky import anchored_logdet_accuracy
 from ..linalg.ordering import resolve_ordering
 from .paper.bounds import t_optimality
 from .paper.crlb import CrlbResult, InverseAccuracy, paper_crlb
 from .paper.fim import fim_symbolic_choice, paper_fim, trace_fim
 from .thesis.crb import SedCrbResult
-from .thesis.fim import sed_fim
+from .thesis.fim import _free_matrix, sed_fim
 from .thesis.frames import convert_information, coordinate_names, coordinates_description, sed_crb_in_frame
 
 log = logging.getLogger("posecrb")
@@ -47,6 +48,7 @@ class FisherInformation:
     layout: str
     logdet: float | None
     logdet_status: Status = OK
+    logdet_accuracy: LogdetAccuracy | None = None   # conditioning of the factored matrix (its digits)
     trace: float
     rank: int
     nullity: int
@@ -61,12 +63,15 @@ class FisherInformation:
         """The model's part of the ``fim`` row (keys and order of the command's JSON)."""
         row: dict = {"anchors": self.anchors, "layout": self.layout, "size": int(self.matrix.shape[0]),
                      "nnz": int(self.matrix.nnz)}
+        put(row, "logdet", self.logdet, self.logdet_status)
+        if self.logdet_accuracy is not None:
+            row["logdet_accuracy"] = {"condition": self.logdet_accuracy.condition,
+                                      "error_bound": self.logdet_accuracy.error_bound}
         if self.model == "paper":
-            row.update({"logdet": self.logdet, "trace": self.trace, "t_opt_approx": self.t_opt_approx,
+            row.update({"trace": self.trace, "t_opt_approx": self.t_opt_approx,
                         "rank": self.rank, "nullity": self.nullity, "rotation_weight": self.rotation_weight,
                         "fim_variant": self.fim_variant})
         else:
-            put(row, "logdet", self.logdet, self.logdet_status)
             row.update({"trace": self.trace, "rank": self.rank, "nullity": self.nullity,
                         "expected_nullity": self.expected_nullity})
         return row
@@ -94,16 +99,21 @@ def fisher_information(graph: PoseGraph, rot: np.ndarray, trans: np.ndarray, *, 
         times = {"fim_build": fim.build_time}
         t0 = time.perf_counter()
         sym, choice = fim_symbolic_choice(fim, ordering)
-        ld: float | None = sym.factor_logdet(fim.matrix, name="paper FIM")[1]
+        factor, ld_paper = sym.factor_logdet(fim.matrix, name="paper FIM")
         times["fim_logdet"] = time.perf_counter() - t0
+        acc_paper = logdet_accuracy(fim.matrix, factor, ld_paper, "paper FIM")
+        log_status(log, f"{graph.name}: log det of the FIM", acc_paper.status)
         ids, coord = fim.index_map()
         return FisherInformation(model="paper", matrix=fim.matrix, row_ids=ids, row_coord=coord,
                                  coordinate_names=fim.coordinate_names(), frame="mixed", anchors=[fim.anchor_id],
-                                 layout=fim.layout, logdet=ld, trace=trace_fim(fim), rank=fim.size, nullity=0,
+                                 layout=fim.layout, logdet=ld_paper, logdet_status=acc_paper.status,
+                                 logdet_accuracy=acc_paper,
+                                 trace=trace_fim(fim), rank=fim.size, nullity=0,
                                  t_opt_approx=t_optimality(graph, anchor, rotation_model)[1],
                                  rotation_weight=rotation_model, fim_variant=fim.variant, times=times,
                                  ordering=str(choice))
     sfim = sed_fim(graph, rot, trans, ordering=ordering)
+    acc: LogdetAccuracy | None
     times = dict(sfim.times)
     # log-det, rank and nullity are the same in both frames (det B_i = +-1, posecrb.models.thesis.frames)
     matrix = sfim.matrix if frame == "world" else convert_information(sfim.matrix, rot, trans, "body")
@@ -113,19 +123,26 @@ def fisher_information(graph: PoseGraph, rot: np.ndarray, trans: np.ndarray, *, 
                              "(`posecrb crlb --anchor` takes one anchor per component)")
         anchors = [graph.anchor_index(anchor_id)]
         t0 = time.perf_counter()
-        ld = anchored_logdet(sfim.matrix, sfim.q, anchors, "SE(d) FIM on the free poses",
-                                ordering=ordering, dim=graph.dim)
+        ld_anchor, acc = anchored_logdet_accuracy(sfim.matrix, sfim.q, anchors, "SE(d) FIM on the free poses",
+                                           ordering=ordering, dim=graph.dim)
         times["fim_logdet"] = time.perf_counter() - t0
-        status = OK
+        ld: float | None = ld_anchor
+        status = acc.status if acc is not None else OK
     else:
         anchors, ld, status = list(sfim.anchors), sfim.logdet_anchored, sfim.logdet_status
-        log_status(log, f"{graph.name}: log det of the SE(d) FIM", status)
+        acc = None
+        if ld is not None and sfim.factor is not None:
+            free, _ = _free_matrix(sfim.matrix, graph.n, sfim.q, anchors)
+            acc = logdet_accuracy(free, sfim.factor, ld, "SE(d) FIM on the free poses")
+            status = acc.status
+    log_status(log, f"{graph.name}: log det of the SE(d) FIM", status)
     names = coordinate_names(graph.dim, frame)
     layout = "poses (rotation first)" if frame == "world" else f"poses (GTSAM order: {', '.join(names)})"
     return FisherInformation(model="sed", matrix=matrix, row_ids=np.repeat(graph.ids, sfim.q),
                              row_coord=np.tile(np.arange(sfim.q), graph.n), coordinate_names=names, frame=frame,
                              anchors=[int(graph.ids[a]) for a in anchors], layout=layout, logdet=ld,
-                             logdet_status=status, trace=float(matrix.diagonal().sum()), rank=sfim.rank,
+                             logdet_status=status, logdet_accuracy=acc, trace=float(matrix.diagonal().sum()),
+                             rank=sfim.rank,
                              nullity=sfim.nullity, expected_nullity=sfim.q * sfim.components, times=times,
                              ordering=str(resolve_ordering(ordering, dim=graph.dim, poses=graph.n, matrix="fim")))
 

@@ -44,6 +44,7 @@ def bounds_row(name_or_path: str, data_dir: str | None, anchor_id: int | None, r
     log_status(log, f"{graph.name}: ub", b.ub_status)
     log_status(log, f"{graph.name}: lambda_min(L_w)", b.lambda_min_rot_status)
     log_status(log, f"{graph.name}: Lemma 4 gap bound", b.gap_bound_status)
+    log_status(log, f"{graph.name}: FIM log-det", m.fim_logdet_status)
     row = m.to_row(times={"parse": t_parse})
     row["ordering"] = {"requested": ordering, **m.ordering}
     return row

@@ -161,6 +161,10 @@ def crlb_cmd(file, kc_spec, scale, kappa, tau, anchor, fim_variant, data_dir, tr
             log.warning("k_c = %g: CRLB %s: %s", lv.kc,
                         "not available" if lv.accuracy["status"] == "unavailable" else "doubtful",
                         lv.accuracy["reason"])
+        if lv.ratio_status:
+            log.warning("k_c = %g: MSE/CRLB %s: %s", lv.kc,
+                        "not available" if lv.ratio_status["status"] == "unavailable" else "doubtful",
+                        lv.ratio_status["reason"])
         if lv.curvature_status:
             log.warning("k_c = %g: curvature-corrected CRLB (eq. 68) %s: %s", lv.kc,
                         "not available" if lv.curvature_status["status"] == "unavailable" else "doubtful",
