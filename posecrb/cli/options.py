@@ -62,6 +62,23 @@ class FiniteFloat(click.FloatRange):
         return super().convert(value, param, ctx)
 
 
+class PlainInt(click.IntRange):
+    """An integer option written as plain decimal digits (an optional sign), inside [min, max].
+
+    click's INT/IntRange take what Python's ``int`` takes: ``1_0`` (ten), non-ASCII digits and
+    surrounding Unicode spaces. Every integer option of posecrb uses this type."""
+
+    name = "integer"
+
+    def convert(self, value, param, ctx):
+        if isinstance(value, str):
+            text = value.strip()
+            if re.fullmatch(r"[+-]?[0-9]+", text) is None:
+                self.fail(f"{value!r} is not an integer (plain decimal digits)", param, ctx)
+            value = int(text)
+        return super().convert(value, param, ctx)
+
+
 class PoseId(click.ParamType):
     """A pose id as in the files: a non-negative integer that fits int64 (digits only)."""
 
@@ -94,14 +111,14 @@ data_dir_option = click.option(
 
 # Seeds go to numpy.random.SeedSequence (any non-negative integer) and are recorded in run.json and
 # in int64 arrays: non-negative and within int64.
-SEED_RANGE = click.IntRange(0, 2 ** 63 - 1)
+SEED_RANGE = PlainInt(0, 2 ** 63 - 1)
 
 anchor_option = click.option(
     "--anchor", type=POSE_ID, default=None,
     help="Pose id (as in the file) anchored to the origin; default: the smallest id.")
 
 repeat_option = click.option(
-    "--repeat", type=click.IntRange(1, 1000), default=3, show_default=True,
+    "--repeat", type=PlainInt(1, 1000), default=3, show_default=True,
     help="Timing: warm-up once, then the median of K runs.")
 
 

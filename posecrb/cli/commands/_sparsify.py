@@ -20,6 +20,7 @@ from ...report.outputs import write_experiment_outputs
 from ...report.render import print_rows
 from ..options import (
     SEED_RANGE,
+    PlainInt,
     anchor_option,
     data_dir_option,
     executor_settings,
@@ -57,10 +58,10 @@ MAX_TASKS = 10000
 @click.option("--fixed", default="odometry", show_default=True, type=InputFile(("odometry",)),
               metavar="odometry|FILE", help="Fixed edges: the odometry chain, or a file of pose-id pairs 'i j'.")
 @click.option("--certify", is_flag=True, help="Frank-Wolfe bound for greedy, random and naive too.")
-@click.option("--max-iter", type=click.IntRange(1, 100000), default=None, help="Frank-Wolfe iterations.")
+@click.option("--max-iter", type=PlainInt(1, 100000), default=None, help="Frank-Wolfe iterations.")
 @click.option("--seed", type=SEED_RANGE, default=0, show_default=True,
               help="Seed of random selections and Madow rounding.")
-@click.option("--jobs", type=click.IntRange(1, 1024), default=1, show_default=True,
+@click.option("--jobs", type=PlainInt(1, 1024), default=1, show_default=True,
               help="Worker processes (local pool, or LocalCluster size for --executor dask).")
 @click.option("--executor", type=click.Choice(["local", "dask"]), default="local", show_default=True,
               help="local: serial (--jobs 1) or a process pool; dask: dask.distributed.")

@@ -14,7 +14,7 @@ from ...datasets.fetch import PROBE_TIMEOUT, fetch, fetch_many
 from ...datasets.manifest import load_manifest
 from ...io import write_g2o
 from ...report.render import print_rows
-from ..options import SEED_RANGE, FiniteFloat, data_dir_option, format_option
+from ..options import SEED_RANGE, FiniteFloat, PlainInt, data_dir_option, format_option
 from ..paths import GRAPH_EXTENSIONS, DatasetArg, Group, OutputDir, OutputFile
 from ..progress import progress_display
 
@@ -179,7 +179,7 @@ def synth_memory(kind: str, poses: int) -> float:
 
 @command.command("synth")
 @click.argument("kind", type=click.Choice(["grid2d", "grid3d", "sphere", "torus", "octagon", "demo"]))
-@click.option("--poses", type=click.IntRange(2), default=None,
+@click.option("--poses", type=PlainInt(2), default=None,
               help="Number of poses (grid2d 100, grid3d 125, sphere 2500, torus 5000; octagon is always 8).")
 @click.option("--noise", "sigma", type=FiniteFloat(min=1e-6, max=1e6), default=None,
               help="Noisy measurements with translation std SIGMA and rotation angle std SIGMA [rad]: "
@@ -190,7 +190,7 @@ def synth_memory(kind: str, poses: int) -> float:
               help="Langevin rotation concentration (implies noise unless --noise-free).")
 @click.option("--noise-free", is_flag=True, help="Exact measurements even with --tau/--kappa (information only).")
 @click.option("--seed", type=SEED_RANGE, default=0, show_default=True, help="Seed of the noise (numpy PCG64).")
-@click.option("--extra", "extra_edges", type=click.IntRange(0, 21), default=0, show_default=True,
+@click.option("--extra", "extra_edges", type=PlainInt(0, 21), default=0, show_default=True,
               help="octagon: number of additional measurements, drawn with --seed without repetition "
                    "from the 21 pairs of poses 1..7 (paper Fig. 3-5).")
 @click.option("--out", "out", type=OutputFile(GRAPH_EXTENSIONS), required=True,

@@ -26,6 +26,7 @@ from ...report.render import print_rows
 from ..options import (
     SEED_RANGE,
     FiniteFloat,
+    PlainInt,
     anchor_option,
     data_dir_option,
     executor_settings,
@@ -51,11 +52,11 @@ def _run_options(default_trials: str, name: str, extra: tuple[str, ...] = ()
                  ) -> Callable[[Callable[..., Any]], Callable[..., Any]]:
     def deco(f):
         opts = [
-            click.option("--trials", type=click.IntRange(2, 10 ** 7), default=None,
+            click.option("--trials", type=PlainInt(2, 10 ** 7), default=None,
                          help=f"Monte Carlo trials ({default_trials}); the memory they need is checked first."),
             click.option("--seed", type=SEED_RANGE, default=0, show_default=True,
                          help="Root seed; every trial has its own SeedSequence child."),
-            click.option("--jobs", type=click.IntRange(1, 1024), default=1, show_default=True,
+            click.option("--jobs", type=PlainInt(1, 1024), default=1, show_default=True,
                          help="Worker processes (local pool, or LocalCluster size for --executor dask)."),
             click.option("--executor", type=click.Choice(["local", "dask"]), default="local", show_default=True,
                          help="local: serial (--jobs 1) or a process pool; dask: dask.distributed "

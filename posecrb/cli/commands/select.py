@@ -8,7 +8,7 @@ import click
 from ...core.errors import UsageError
 from ...report.render import print_rows
 from ...selection.select import select_edges, write_pruned
-from ..options import SEED_RANGE, FiniteFloat, anchor_option, data_dir_option, format_option, load_dataset
+from ..options import SEED_RANGE, FiniteFloat, PlainInt, anchor_option, data_dir_option, format_option, load_dataset
 from ..paths import GRAPH_EXTENSIONS, Command, DatasetArg, InputFile, OutputFile
 
 log = logging.getLogger("posecrb")
@@ -65,7 +65,7 @@ def _summary(d: dict) -> list[dict]:
                    "or a file of pose-id pairs 'i j'. Every other edge is a candidate.")
 @click.option("--certify", is_flag=True,
               help="Also run the relaxation for an upper bound (greedy, random, naive); relax always has it.")
-@click.option("--max-iter", type=click.IntRange(1, 100000), default=None,
+@click.option("--max-iter", type=PlainInt(1, 100000), default=None,
               help="Frank-Wolfe iterations (default 100; fiedler 20 as MAC).")
 @click.option("--tol", type=FiniteFloat(min=0, min_open=True, max=1), default=1e-3, show_default=True,
               help="Stop Frank-Wolfe when the duality gap is below TOL x (bound - base value).")

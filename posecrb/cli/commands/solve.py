@@ -9,7 +9,7 @@ from ...datasets import search as datasets
 from ...io import load, write_g2o
 from ...report.render import print_rows
 from ...solver import SolverOptions, solve
-from ..options import POSE_ID, FiniteFloat, data_dir_option, format_option
+from ..options import POSE_ID, FiniteFloat, PlainInt, data_dir_option, format_option
 from ..paths import GRAPH_EXTENSIONS, Command, DatasetArg, OutputFile
 
 # Compact column set for the human-readable formats; json/csv carry every key.
@@ -25,9 +25,9 @@ HEADERS = {"hessian_vector_products": "HVPs", "times.total": "time s", "duality_
               help="Write the estimate as g2o: original ids and edges, vertices replaced by the estimate, "
                    "anchored so that the anchor pose is the identity.")
 @format_option()
-@click.option("--r0", type=click.IntRange(2, 100), default=None,
+@click.option("--r0", type=PlainInt(2, 100), default=None,
               help="First rank of the Riemannian staircase [default: d+1].")
-@click.option("--rmax", type=click.IntRange(2, 100), default=10, show_default=True,
+@click.option("--rmax", type=PlainInt(2, 100), default=10, show_default=True,
               help="Last rank of the Riemannian staircase.")
 @click.option("--init", "init", type=click.Choice(["chordal", "vertices"]), default="chordal", show_default=True,
               help="Initial rotations: chordal relaxation, or the file's own vertices.")

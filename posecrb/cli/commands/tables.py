@@ -30,6 +30,7 @@ from ...report.render import to_csv, to_json, to_markdown, to_rich_table
 from ...sim.generators import builtin_demo
 from ..options import (
     TABLE_FORMATS,
+    PlainInt,
     data_dir_option,
     format_option,
     make_rotation_weight_option,
@@ -82,14 +83,14 @@ def _render(rows: list[dict], tables: Sequence[int], fmt: str, compare: bool, se
 
 @click.command("tables", cls=Command)
 @click.option("--all", "all_", is_flag=True, help="Every dataset of the manifest and search path (the default).")
-@click.option("--table", "tables", type=click.IntRange(1, 4), multiple=True,
+@click.option("--table", "tables", type=PlainInt(1, 4), multiple=True,
               help="Which table(s) to print: 1 (2D metrics), 2 (3D metrics), 3/4 (construction times). "
                    "Repeatable; default all four.")
 @click.option("--datasets", "names", type=DatasetArg(), multiple=True,
               help="A dataset name or path (repeatable: --datasets intel --datasets CSAIL.g2o); default: "
                    "every dataset of the manifest and search path.")
 @repeat_option
-@click.option("--jobs", type=click.IntRange(1, 64), default=1, show_default=True,
+@click.option("--jobs", type=PlainInt(1, 64), default=1, show_default=True,
               help="Datasets computed in parallel processes (timings then include core contention).")
 @format_option(TABLE_FORMATS)
 @click.option("--out", "out_dir", type=OutputDir(OUT_FILES), default=None,
