@@ -472,3 +472,44 @@ def test_markdown_and_latex_escape_dataset_names(tmp_path, capsys, monkeypatch):
     assert rc == 0
     assert (r"we\textbar{}ird\_\$\#\&\{x\}\textbackslash{}input\textasciitilde{}\textasciicircum{}*"
             in out)
+
+
+# ---------------------------------------------------------------- found by the red-team pass
+def test_too_long_output_name_is_refused_before_the_work_and_a_long_one_is_written(tmp_path, capsys):
+    """A 256-byte file name ended in `cannot write ...: File name too long` after the solve; a
+    251-byte one failed too, because of the temporary's longer name."""
+    g = grid(tmp_path)
+    rc, _, err = run(["solve", g, "--out", tmp_path / ("a" * 252 + ".g2o")], capsys)
+    assert rc == 2 and "the file name is 256 bytes long" in err
+    out = tmp_path / ("b" * 251 + ".g2o")
+    rc, _, err = run(["solve", g, "--out", out], capsys)
+    assert rc == 0 and out.is_file(), err
+    assert not [p for p in tmp_path.iterdir() if p.name.startswith(".")]
+
+
+def test_regress_expected_file_that_does_not_exist_is_a_usage_error(empty_world, capsys):
+    rc, _, err = run(["regress", "--expected", empty_world / "nope.json"], capsys)
+    assert rc == 2 and "nope.json: no such file" in err
+
+
+def test_thesis_empty_m_list_is_a_usage_error(capsys):
+    """`experiment thesis --m ''` ran the default list."""
+    rc, _, err = run(["experiment", "thesis", "--m", "", "--trials", "2"], capsys)
+    assert rc == 2 and "--m takes a comma-separated list" in err
+
+
+def test_unreachable_dask_scheduler_is_a_usage_error(monkeypatch):
+    """An unreachable --scheduler was an internal error (OSError) after a 30 s wait."""
+    pytest.importorskip("dask.distributed")
+    import dask.distributed
+
+    from posecrb.core.errors import UsageError
+    from posecrb.sim import montecarlo
+
+    def refused(*a, **k):
+        raise OSError("Timed out trying to connect to tcp://127.0.0.1:1 after 30 s")
+
+    monkeypatch.setattr(dask.distributed, "Client", refused)
+    with pytest.raises(UsageError, match="--scheduler tcp://127.0.0.1:1: cannot connect to the Dask scheduler"):
+        montecarlo.run_tasks(montecarlo.demo_trial, [{}], montecarlo.make_tasks(0, 2, [(1,)]), executor="dask",
+                             scheduler="tcp://127.0.0.1:1")

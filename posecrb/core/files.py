@@ -327,6 +327,23 @@ def check_extension(path: str | os.PathLike, extensions: Sequence[str], option: 
                          f"(got {suffix or 'none'}); the format follows the extension")
 
 
+def _name_max(directory: str | os.PathLike) -> int:
+    try:
+        return int(os.pathconf(directory, "PC_NAME_MAX"))
+    except (OSError, ValueError, AttributeError):
+        return 255
+
+
+def _check_name_length(directory: Path, name: str, option: str | None, shown: str) -> None:
+    """UsageError when ``name`` is longer than the file system of ``directory`` allows (found
+    before the work, not as ENAMETOOLONG after it)."""
+    limit = _name_max(directory)
+    size = len(os.fsencode(name))
+    if size > limit:
+        raise UsageError(f"{_shown(option, shown)}: the file name is {size} bytes long; the file system of "
+                         f"{directory} allows {limit}")
+
+
 def check_output_file(path: str | os.PathLike, inputs: Sequence[str | os.PathLike | None] = (), *,
                       option: str | None = "--out", extensions: Sequence[str] | None = None) -> Path:
     """Validate an output file before any work (module docstring): UsageError (exit 2) when the
@@ -353,6 +370,7 @@ def check_output_file(path: str | os.PathLike, inputs: Sequence[str | os.PathLik
     parent_shown = os.path.dirname(shown.rstrip(os.sep)) or "."   # as the user wrote it
     if parent.is_dir():
         _probe_writable(parent, option, shown)
+        _check_name_length(parent, p.name, option, shown)
     elif os.path.lexists(parent):
         raise UsageError(f"{_shown(option, shown)}: {parent_shown} is not a directory")
     else:
@@ -380,10 +398,13 @@ def check_output_dir(path: str | os.PathLike, inputs: Sequence[str | os.PathLike
         parent_shown = os.path.dirname(shown.rstrip(os.sep)) or "."
         if parent.is_dir():
             _probe_writable(parent, option, shown)
+            _check_name_length(parent, p.name, option, shown)
         elif os.path.lexists(parent):
             raise UsageError(f"{_shown(option, shown)}: {parent_shown} is not a directory")
         else:
             raise UsageError(f"{_shown(option, shown)}: directory {parent_shown} does not exist")
+    for name in names:
+        _check_name_length(p if p.is_dir() else p.parent, name, option, shown)
     for inp in inputs:
         if inp is None:
             continue
@@ -464,8 +485,11 @@ def atomic_write(path: str | os.PathLike, mode: str = "w", *, encoding: str | No
         raise UsageError(f"atomic_write mode must be 'w' or 'wb', not {mode!r}")
     target = _target(path)
     directory, base = os.path.split(target)
+    # the temporary's name fits the file system whatever the target's length (8 random characters)
+    room = _name_max(directory) - len(os.fsencode(suffix)) - 10
+    prefix = "." + os.fsdecode(os.fsencode(base)[:max(room, 1)]).rstrip("\ufffd") + "."
     try:
-        fd, tmp = tempfile.mkstemp(prefix=f".{base}.", suffix=suffix, dir=directory)
+        fd, tmp = tempfile.mkstemp(prefix=prefix, suffix=suffix, dir=directory)
     except OSError as exc:
         raise OutputError(os.fspath(path), exc.strerror or str(exc)) from None
     _LIVE.add(tmp)

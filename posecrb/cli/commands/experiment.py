@@ -205,7 +205,7 @@ def thesis_cmd(m_spec, trials, seed, jobs, executor, scheduler, plot_path, out_d
     """Thesis ch. 6: empirical covariance of the intrinsic MLE vs the anchored (Pi F Pi)^+ and
     quotient F^+ bounds with F_m = m F_1, on the built-in 5-pose SE(2) case (nullity 6)."""
 
-    if m_spec:
+    if m_spec is not None:
         parts = [x.strip() for x in m_spec.split(",") if x.strip()]
         # digits only (int() would take 1_0, +5 and non-ASCII digits)
         bad = next((x for x in parts if re.fullmatch(r"[0-9]{1,13}", x) is None), None)

@@ -2,6 +2,7 @@
 from __future__ import annotations
 
 import logging
+import os
 import shlex
 from dataclasses import asdict
 
@@ -48,6 +49,9 @@ def command(names, update, expected_path, allow_missing, all_rows, data_dir, fmt
         # the file is rewritten at the end (atomically): check that it can be, before the work
         check_output_file(target.resolve(), option="--expected", extensions=(".json",))
         expected_path = str(target)
+    if expected_path is not None and not update and not os.path.lexists(expected_path):
+        raise UsageError(f"--expected {expected_path}: no such file (give an existing expected file, or "
+                         "--update to create it)")
     data = load_expected(expected_path)
     stored = data["datasets"]
     requested = list(names) or None
