@@ -60,7 +60,7 @@ import zlib
 from collections.abc import Callable, Iterator, Sequence
 from dataclasses import dataclass
 from pathlib import Path
-from typing import IO, Any
+from typing import IO, Any, cast
 
 from .errors import OutputError, ParseError, UsageError
 from .resources import available_memory, format_bytes
@@ -153,27 +153,26 @@ def _read_bounded(fh: IO[bytes], name: str, limit: int) -> bytes:
     return data
 
 
-def check_input_file(path: str | os.PathLike, *, max_bytes: int | None = None) -> None:
-    """The guards of ``read_regular_file`` without reading (options checked before the work):
-    ParseError unless ``path`` is an existing regular file no larger than ``max_bytes``."""
+def _guarded(path: str | os.PathLike, max_bytes: int | None, read: bool) -> bytes | None:
     name = os.fspath(path)
     limit = input_limit() if max_bytes is None else max_bytes
     fh, st = _open_regular(name)
     with fh:
         if st.st_size > limit:
             raise _too_large(name, st.st_size, limit)
+        return _read_bounded(fh, name, limit) if read else None
+
+
+def check_input_file(path: str | os.PathLike, *, max_bytes: int | None = None) -> None:
+    """The guards of ``read_regular_file`` without reading (options checked before the work):
+    ParseError unless ``path`` is an existing regular file no larger than ``max_bytes``."""
+    _guarded(path, max_bytes, read=False)
 
 
 def read_regular_file(path: str | os.PathLike, *, max_bytes: int | None = None) -> bytes:
     """The bytes of ``path`` as stored; ParseError (exit 1) unless it is an existing regular file
     no larger than ``max_bytes`` (default ``input_limit()``)."""
-    name = os.fspath(path)
-    limit = input_limit() if max_bytes is None else max_bytes
-    fh, st = _open_regular(name)
-    with fh:
-        if st.st_size > limit:
-            raise _too_large(name, st.st_size, limit)
-        return _read_bounded(fh, name, limit)
+    return cast(bytes, _guarded(path, max_bytes, read=True))
 
 
 def gunzip(data: bytes, name: str, limit: int | None = None) -> bytes:
@@ -366,6 +365,12 @@ def check_output_file(path: str | os.PathLike, inputs: Sequence[str | os.PathLik
         if inp is not None and os.path.lexists(p) and same_file(p, inp):
             raise UsageError(f"{_shown(option, shown)} is the input file {os.fspath(inp)}: refusing to overwrite "
                              "an input; write to another path")
+    _check_parent(p, shown, option)
+    return Path(shown)
+
+
+def _check_parent(p: Path, shown: str, option: str | None) -> None:
+    """The directory of the absolute target ``p`` exists, is writable and takes its name."""
     parent = p.parent
     parent_shown = os.path.dirname(shown.rstrip(os.sep)) or "."   # as the user wrote it
     if parent.is_dir():
@@ -375,7 +380,6 @@ def check_output_file(path: str | os.PathLike, inputs: Sequence[str | os.PathLik
         raise UsageError(f"{_shown(option, shown)}: {parent_shown} is not a directory")
     else:
         raise UsageError(f"{_shown(option, shown)}: directory {parent_shown} does not exist")
-    return Path(shown)
 
 
 def check_output_dir(path: str | os.PathLike, inputs: Sequence[str | os.PathLike | None] = (),
@@ -394,15 +398,7 @@ def check_output_dir(path: str | os.PathLike, inputs: Sequence[str | os.PathLike
             raise UsageError(f"{_shown(option, shown)}: is {path_kind(st)}, not a directory")
         _probe_writable(p, option, shown)
     else:
-        parent = p.parent
-        parent_shown = os.path.dirname(shown.rstrip(os.sep)) or "."
-        if parent.is_dir():
-            _probe_writable(parent, option, shown)
-            _check_name_length(parent, p.name, option, shown)
-        elif os.path.lexists(parent):
-            raise UsageError(f"{_shown(option, shown)}: {parent_shown} is not a directory")
-        else:
-            raise UsageError(f"{_shown(option, shown)}: directory {parent_shown} does not exist")
+        _check_parent(p, shown, option)
     for name in names:
         _check_name_length(p if p.is_dir() else p.parent, name, option, shown)
     for inp in inputs:
