@@ -202,7 +202,8 @@ def test_statuses_travel_through_the_dict():
     res = posecrb.BoundsResult.from_dict(d)
     assert res.ub is None and res.ub_status == Status.unavailable("breaks down", "use ub_lambda")
     assert res.to_dict() == d
-    assert res.status.state == "unavailable" and set(res.statuses()) == {"ub", "lambda_min(L_w)", "Lemma 4 gap bound"}
+    assert res.status.state == "unavailable" and set(res.statuses()) == {"ub", "lambda_min(L_w)", "Lemma 4 gap bound",
+                                                                               "FIM log-det"}
     assert "status" not in res.to_dict()                             # no estimate: nothing uncertified
     unc = dict(d, fim_logdet=5.0, trace_fim=6.0, fim_variant="consistent",
                estimate={"source": "solve", "certified": False, "objective": 1.0})

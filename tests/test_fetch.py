@@ -217,7 +217,8 @@ def test_cli_fetch_success_and_failure(server, tmp_path, capsys):
 
 # ---------------------------------------------------------------- misbehaving servers: bounded in time and size
 class _HostileHandler(http.server.BaseHTTPRequestHandler):
-    """/drip: announces 1000 bytes and sends one every 0.1 s; /announce-huge: announces 1 GB;
+    """/drip: announces 1000 bytes and sends one every 0.1 s; /stall: one byte, then nothing for 30 s;
+    /slow-headers: no answer for 30 s; /announce-huge: announces 1 GB;
     /stream-huge: no Content-Length, streams zeros until the client hangs up (at most 64 MiB)."""
 
     def log_message(self, *args) -> None:
@@ -226,6 +227,9 @@ class _HostileHandler(http.server.BaseHTTPRequestHandler):
     def do_GET(self) -> None:
         import time
 
+        if self.path.startswith("/slow-headers"):
+            time.sleep(30)
+            return
         self.send_response(200)
         self.send_header("Content-Type", "application/octet-stream")
         try:
@@ -236,6 +240,12 @@ class _HostileHandler(http.server.BaseHTTPRequestHandler):
                     self.wfile.write(b"x")
                     self.wfile.flush()
                     time.sleep(0.1)
+            elif self.path.startswith("/stall"):
+                self.send_header("Content-Length", "1000")
+                self.end_headers()
+                self.wfile.write(b"x")
+                self.wfile.flush()
+                time.sleep(30)                      # then nothing: a stalled server
             elif self.path.startswith("/announce-huge"):
                 self.send_header("Content-Length", str(10 ** 9))
                 self.end_headers()
@@ -272,6 +282,21 @@ def test_trickling_server_hits_the_overall_deadline(hostile_server, tmp_path):
     with pytest.raises(FetchError, match=r"exceeded the deadline of 1 s"):
         fetch("intel", url=f"{hostile_server}/drip/intel.g2o", dest=dest, timeout=5, deadline=1.0)
     assert time.monotonic() - t0 < 5          # the per-read timeout (5 s) never fires: a byte every 0.1 s
+    assert files_in(dest) == []
+
+
+@pytest.mark.timeout(60)
+@pytest.mark.parametrize("path", ["stall", "slow-headers"])
+def test_fetch_keeps_its_deadline_when_the_server_stalls(hostile_server, tmp_path, path):
+    """A 2 s deadline took 30 s: one read (or the wait for the headers) could last the whole
+    --timeout. Now every wait is bounded by the time left."""
+    import time
+
+    dest = tmp_path / "dest"
+    t0 = time.monotonic()
+    with pytest.raises(FetchError, match=r"exceeded the deadline of 1 s"):
+        fetch("intel", url=f"{hostile_server}/{path}/intel.g2o", dest=dest, timeout=30, deadline=1.0)
+    assert time.monotonic() - t0 < 3
     assert files_in(dest) == []
 
 

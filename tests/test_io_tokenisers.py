@@ -15,9 +15,10 @@ from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
 from posecrb.core.errors import ParseError
+from posecrb.core.files import decode_utf8
 from posecrb.io import FORMATS, parse_bytes
 from posecrb.io.reader import parse
-from posecrb.io.text import Fallback, decode_utf8, scan_bytes, split_text
+from posecrb.io.text import Fallback, scan_bytes, split_text
 
 from .hostile.corpus import CASES
 

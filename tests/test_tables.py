@@ -15,11 +15,11 @@ from posecrb.report.latex import tex_number as _tex_number
 
 from .numerics import EPS
 
-SUBSET = "CSAIL,tinyGrid3D"
+SUBSET = ["--datasets", "CSAIL", "--datasets", "tinyGrid3D"]
 
 
 def _run(capfd, *args):
-    rc = main(["tables", "--datasets", SUBSET, "--repeat", "1", *args])
+    rc = main(["tables", *SUBSET, "--repeat", "1", *args])
     out, err = capfd.readouterr()
     return rc, out, err
 
@@ -69,7 +69,8 @@ def _markdown_tables(text: str) -> list[list[list[str]]]:
     for block in (b for b in text.split("### ") if b.strip()):
         lines = [ln for ln in block.splitlines() if ln.startswith("|")]
         assert set(lines[1]) <= set("|-")
-        out.append([[c.strip() for c in ln.strip("|").split("|")] for i, ln in enumerate(lines) if i != 1])
+        out.append([[re.sub(r"\\(.)", r"\1", c.strip()) for c in re.split(r"(?<!\\)\|", ln.strip()[1:-1])]
+                    for i, ln in enumerate(lines) if i != 1])     # cells split at unescaped |, unescaped
     return out
 
 
@@ -80,7 +81,15 @@ def _latex_tabular(text: str) -> tuple[str, list[list[str]]]:
     body = text.split(r"\toprule")[1].split(r"\bottomrule")[0].replace(r"\midrule", "")
     rows = [ln.strip() for ln in body.splitlines() if ln.strip()]
     assert all(ln.endswith(r"\\") for ln in rows)
-    return spec, [[c.strip() for c in ln[:-2].split(" & ")] for ln in rows]
+    return spec, [[_tex_unescape(c.strip()) for c in ln[:-2].split(" & ")] for ln in rows]
+
+
+def _tex_unescape(cell: str) -> str:
+    """The text a LaTeX cell prints (the escapes of posecrb.report.latex.tex_escape undone)."""
+    for tex, ch in ((r"\textbackslash{}", "\\"), (r"\textasciicircum{}", "^"), (r"\textasciitilde{}", "~"),
+                    (r"\textless{}", "<"), (r"\textgreater{}", ">"), (r"\textbar{}", "|")):
+        cell = cell.replace(tex, ch)
+    return re.sub(r"\\([{}$#%&_])", r"\1", cell)
 
 
 def test_markdown_cells_are_the_computed_rows(shared_datasets, capfd, tmp_path):
@@ -167,7 +176,7 @@ def test_out_dir_has_every_format_and_run_record(shared_datasets, capfd, tmp_pat
 
 
 def test_requested_missing_dataset_is_a_row_and_exit_one(shared_datasets, capfd):
-    rc = main(["tables", "--datasets", "CSAIL,nosuchdataset", "--repeat", "1", "--format", "json"])
+    rc = main(["tables", "--datasets", "CSAIL", "--datasets", "nosuchdataset", "--repeat", "1", "--format", "json"])
     out, err = capfd.readouterr()
     assert rc == 1
     rows = {r["dataset"]: r for r in json.loads(out)["rows"]}
@@ -271,6 +280,7 @@ def test_first_run_without_any_dataset_uses_the_builtin_graph(tmp_path, monkeypa
 @pytest.mark.parametrize("ext", ["png", "svg"])
 def test_plot_writes_one_figure_atomically(shared_datasets, capfd, tmp_path, ext):
     target = tmp_path / "fig" / f"tables.{ext}"
+    target.parent.mkdir()         # an output's directory must exist (tests/test_outputs.py)
     rc, _, _ = _run(capfd, "--format", "csv", "--plot", str(target))
     assert rc == 0
     data = target.read_bytes()
@@ -285,12 +295,12 @@ def test_plot_writes_one_figure_atomically(shared_datasets, capfd, tmp_path, ext
 
 def test_plot_target_is_checked_before_the_work(tmp_path, capfd):
     # exit 2 (usage), not 1 (the dataset does not exist): nothing was computed
-    for bad in (tmp_path / "t.pdf", tmp_path / "t", tmp_path):
+    for bad in (tmp_path / "t.eps", tmp_path / "t", tmp_path):
         assert main(["tables", "--datasets", "nosuchdataset", "--plot", str(bad)]) == 2
     (tmp_path / "file").write_text("")
     assert main(["tables", "--datasets", "nosuchdataset", "--plot", str(tmp_path / "file" / "t.png")]) == 2
     err = capfd.readouterr().err
-    assert ".pdf" in err and "not a directory" in err
+    assert ".eps" in err and "not a directory" in err
     assert sorted(p.name for p in tmp_path.iterdir()) == ["file"]
 
 

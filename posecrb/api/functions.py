@@ -16,6 +16,7 @@ from dataclasses import replace
 from typing import TYPE_CHECKING, Any, TypeAlias
 
 from ..core.errors import ArgumentError
+from ..core.files import GRAPH_EXTENSIONS
 from ..core.graph import PoseGraph
 from ..core.result import check_output_argument
 from . import arguments as arg
@@ -183,7 +184,7 @@ def solve(source: Source, *, r0: int | None = None, rmax: int = 10, init: str = 
     target = None
     if out is not None:
         inputs = () if isinstance(source, PoseGraph) else (arg.resolve_source(source, data_dir),)
-        target = check_output_argument("out", out, inputs)
+        target = check_output_argument("out", out, inputs, extensions=GRAPH_EXTENSIONS)
     graph, times = arg.load_graph(source, data_dir, quaternions=quaternions)
     opts = SolverOptions.from_keywords(r0=r0, rmax=rmax, init=init, anchor=graph.anchor_index(ids[0] if ids else None),
                                        certificate_tol=certificate_tol, **options)
@@ -280,8 +281,8 @@ def _bounds_result(m: DatasetMetrics, times: dict[str, float], ordering: str) ->
     extra: dict[str, Any] = {}
     all_times = {**times, **b.times}
     if est is not None and m.fim is not None:
-        extra = {"fim_logdet": m.fim_logdet, "trace_fim": trace_fim(m.fim), "fim_variant": m.fim.variant,
-                 "estimate": est}
+        extra = {"fim_logdet": m.fim_logdet, "fim_logdet_status": m.fim_logdet_status,
+                 "trace_fim": trace_fim(m.fim), "fim_variant": m.fim.variant, "estimate": est}
         all_times.update(fim_build=m.times["fim_build"], fim_logdet=m.times["fim_logdet"])
         if est.solve_time is not None:
             all_times["solve"] = est.solve_time
@@ -359,7 +360,7 @@ def fim(source: Source, *, model: str = "paper", estimate: EstimateSpec = "solve
         inputs = () if isinstance(source, PoseGraph) else (arg.resolve_source(source, data_dir),)
         est_input = (os.fspath(estimate),) if isinstance(estimate, (str, os.PathLike)) and \
             os.fspath(estimate) not in ("solve", "vertices", "none") else ()
-        target = check_output_argument("save", _npz(save), inputs + est_input)
+        target = check_output_argument("save", _npz(save), inputs + est_input, extensions=(".npz",))
     graph, times = arg.load_graph(source, data_dir)
     if ids:
         arg.check_anchors(graph, ids)
@@ -527,7 +528,7 @@ def select(source: Source, *, budget: int | str, objective: str = "tree", method
     if out is not None:
         inputs = () if isinstance(source, PoseGraph) else (arg.resolve_source(source, data_dir),)
         extra = () if fixed_rule in FIXED_RULES else (fixed_rule,)
-        target = check_output_argument("out", out, inputs + extra)
+        target = check_output_argument("out", out, inputs + extra, extensions=GRAPH_EXTENSIONS)
     graph, _ = arg.load_graph(source, data_dir)
     idx = graph.anchor_index(ids[0] if ids else None)
     reference = None

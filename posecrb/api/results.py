@@ -58,7 +58,9 @@ class BoundsResult(Result):
     times : dict of str to float
         Seconds per step (medians of ``repeat`` runs).
     fim_logdet, trace_fim : float or None
-        log det and trace of the FIM at the estimate (None without one).
+        log det and trace of the FIM at the estimate (None without one). ``fim_logdet_status``
+        is a warning when the log-det's rounding-error bound (``posecrb.linalg.accuracy``)
+        exceeds 1e-6 relative, unavailable when no digit is correct.
     fim_variant : str or None
         The FIM's variant.
     estimate : Estimate or None
@@ -100,6 +102,7 @@ class BoundsResult(Result):
     total_degree: int
     times: dict[str, float] = field(default_factory=dict)
     fim_logdet: float | None = optional_field()
+    fim_logdet_status: Status = status_field("FIM log-det")
     trace_fim: float | None = optional_field()
     fim_variant: str | None = optional_field()
     estimate: Estimate | None = optional_field(**{NESTED: Estimate})

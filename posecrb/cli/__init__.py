@@ -116,7 +116,10 @@ _PACKAGE_DIR = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
                               f"(Python {sys.version.split()[0]}, {sys.executable})")
 @click.option("-v", "--verbose", count=True, help="More log output on stderr (-vv for debug).")
 @click.option("-q", "--quiet", is_flag=True, help="Only errors on stderr.")
-def cli(verbose: int, quiet: bool) -> None:
+@click.option("--strict", is_flag=True,
+              help="A dataset name whose file fails the manifest's checksum is an error, not a warning.")
+@click.pass_context
+def cli(ctx: click.Context, verbose: int, quiet: bool, strict: bool) -> None:
     """Fisher information, Cramér-Rao bounds and D-optimality bounds for pose-graph SLAM.
 
     FILE arguments take a path to a g2o or TORO file, or a bare dataset name
@@ -124,7 +127,10 @@ def cli(verbose: int, quiet: bool) -> None:
     ~/.cache/posecrb. Results go to stdout, logs and warnings to stderr.
     Exit codes: 0 ok, 1 data or solver error, 2 usage error.
     """
+    from ..datasets.search import strict_checksums  # noqa: PLC0415 -- only once a command runs
+
     _configure_logging(verbose, quiet)
+    ctx.with_resource(strict_checksums(strict))
 
 
 def _warning_origin(filename: str) -> str:

@@ -5,7 +5,6 @@ import logging
 import math
 import re
 from collections.abc import Callable
-from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
 import click
@@ -13,6 +12,7 @@ import click
 from ..core.errors import UsageError
 from ..core.timing import timed
 from ..datasets import search as datasets
+from .paths import InputDir, InputFile
 
 if TYPE_CHECKING:
     from ..core.graph import PoseGraph
@@ -61,6 +61,23 @@ class FiniteFloat(click.FloatRange):
         return super().convert(value, param, ctx)
 
 
+class PlainInt(click.IntRange):
+    """An integer option written as plain decimal digits (an optional sign), inside [min, max].
+
+    click's INT/IntRange take what Python's ``int`` takes: ``1_0`` (ten), non-ASCII digits and
+    surrounding Unicode spaces. Every integer option of posecrb uses this type."""
+
+    name = "integer"
+
+    def convert(self, value, param, ctx):
+        if isinstance(value, str):
+            text = value.strip()
+            if re.fullmatch(r"[+-]?[0-9]+", text) is None:
+                self.fail(f"{value!r} is not an integer (plain decimal digits)", param, ctx)
+            value = int(text)
+        return super().convert(value, param, ctx)
+
+
 class PoseId(click.ParamType):
     """A pose id as in the files: a non-negative integer that fits int64 (digits only)."""
 
@@ -88,15 +105,19 @@ TABLE_FORMATS = ("table", "markdown", "csv", "json", "latex")   # `tables` adds 
 
 
 data_dir_option = click.option(
-    "--data-dir", type=click.Path(file_okay=False), default=None,
-    help="Directory searched first for bare dataset names.")
+    "--data-dir", type=InputDir(), default=None,
+    help="Directory searched first for bare dataset names (must exist).")
+
+# Seeds go to numpy.random.SeedSequence (any non-negative integer) and are recorded in run.json and
+# in int64 arrays: non-negative and within int64.
+SEED_RANGE = PlainInt(0, 2 ** 63 - 1)
 
 anchor_option = click.option(
     "--anchor", type=POSE_ID, default=None,
     help="Pose id (as in the file) anchored to the origin; default: the smallest id.")
 
 repeat_option = click.option(
-    "--repeat", type=click.IntRange(1, 1000), default=3, show_default=True,
+    "--repeat", type=PlainInt(1, 1000), default=3, show_default=True,
     help="Timing: warm-up once, then the median of K runs.")
 
 
@@ -116,9 +137,14 @@ def executor_settings(executor: str, jobs: int, scheduler: str | None) -> dict:
 
 
 def plot_target(plot_path: str | None, out_dir: str | None, name: str) -> str | None:
+    """Where the figure goes: ``--plot``, else ``--out DIR``/NAME.png (the directory is created)."""
     if plot_path:
         return plot_path
-    return str(Path(out_dir) / f"{name}.png") if out_dir else None
+    if not out_dir:
+        return None
+    from ..core.files import make_output_dir  # noqa: PLC0415 -- only when writing
+
+    return str(make_output_dir(out_dir) / f"{name}.png")
 
 
 
@@ -145,6 +171,7 @@ def make_estimate_option(dest: str = "estimate_source", *, allow_none: bool = Fa
     """``--estimate``: where the poses come from; ``allow_none`` adds ``none`` (graph-only columns)."""
     return click.option(
         "--estimate", dest, default="solve", show_default=True,
+        type=InputFile(("solve", "vertices", "none") if allow_none else ("solve", "vertices")),
         metavar="solve|vertices|none|FILE" if allow_none else "solve|vertices|FILE",
         help="Where the poses (at which the FIM is evaluated) come from: the certified solver (global "
              "optimum), the file's own VERTEX lines, "

@@ -6,6 +6,7 @@
     ├── UsageError (also a ValueError)   an argument the caller can fix
     │   └── ArgumentError                one named argument: ``anchor=5 is not a pose id of g.g2o``
     ├── ParseError                       file:line and reason
+    ├── OutputError                      a result cannot be written: path and reason
     ├── DatasetNotFound
     ├── NumericalError
     │   └── NotPositiveDefinite
@@ -19,6 +20,7 @@ component sizes for disconnected graphs.
 """
 from __future__ import annotations
 
+import shlex
 from dataclasses import dataclass
 
 
@@ -66,6 +68,16 @@ class ParseError(PosecrbError):
         super().__init__(f"{where}: {reason}")
 
 
+class OutputError(PosecrbError):
+    """A result file cannot be written (disk full, permission denied, read-only file system):
+    the path and the system's reason (exit 1). Nothing was written: the previous file, if any,
+    is intact (``posecrb.core.files.atomic_write``)."""
+
+    def __init__(self, path: str, reason: str):
+        self.path, self.reason = str(path), reason
+        super().__init__(f"cannot write {self.path}: {reason}")
+
+
 class DatasetNotFound(PosecrbError):
     """A bare dataset name found nowhere on the search path; the message lists the directories
     searched and how to fetch the dataset.
@@ -92,7 +104,7 @@ class DatasetNotFound(PosecrbError):
         hint = "; searched: " + ", ".join(searched) if searched else ""
         super().__init__(
             f"dataset {name!r} not found{hint}. "
-            f"Pass a path, set --data-dir or $POSECRB_DATA, or run `posecrb datasets fetch {name}`."
+            f"Pass a path, set --data-dir or $POSECRB_DATA, or run `posecrb datasets fetch {shlex.quote(name)}`."
         )
 
 

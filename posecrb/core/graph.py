@@ -141,6 +141,8 @@ class PoseGraph(PoseDimensions):
             return "synthetic"
 
         base = os.path.basename(self.path)
+        if base.lower().endswith(".gz") and base.count(".") > 1:
+            base = base[:-3]            # intel.g2o.gz is intel, read transparently (posecrb.core.files)
         return base.rsplit(".", 1)[0] if "." in base else base
 
     @property
@@ -187,7 +189,8 @@ class PoseGraph(PoseDimensions):
         starts = np.searchsorted(labels[order], np.arange(self.n_components))
         sizes = np.bincount(labels, minlength=self.n_components)
         out = [
-            ComponentSummary(int(sizes[c]), tuple(int(x) for x in self.ids[order[starts[c]: starts[c] + samples]]))
+            ComponentSummary(int(sizes[c]),
+                             tuple(int(x) for x in self.ids[order[starts[c]: starts[c] + min(samples, int(sizes[c]))]]))
             for c in range(self.n_components)
         ]
         return sorted(out, key=lambda c: -c.size)

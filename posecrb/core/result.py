@@ -240,20 +240,23 @@ class Result:
 
 
 def check_output_argument(parameter: str, path: str | os.PathLike[str],
-                          inputs: tuple[str | os.PathLike[str] | None, ...] = ()) -> str:
-    """``posecrb.core.files.check_output_file`` for a library argument: the same checks, before
-    any work, with the error naming ``parameter`` (an ``ArgumentError``: ``save='x.npz': ...``;
-    the command line shows ``--save x.npz: ...``). Returns the path as a string."""
+                          inputs: tuple[str | os.PathLike[str] | None, ...] = (), *,
+                          extensions: tuple[str, ...] | None = None) -> str:
+    """``posecrb.core.files.check_output_file`` for a library argument: the same checks (the
+    extension among ``extensions`` included), before any work, with the error naming
+    ``parameter`` (an ``ArgumentError``: ``save='x.npz': ...``; the command line shows
+    ``--save x.npz: ...``). Returns the path as a string."""
     if not isinstance(path, (str, os.PathLike)) or not os.fspath(path):
         raise ArgumentError(parameter, path, "is not a file name (a non-empty str or os.PathLike)")
     shown = os.fspath(path)
     try:
-        check_output_file(shown, inputs, option="")
+        check_output_file(shown, inputs, option=None, extensions=extensions)
     except UsageError as exc:
         text = str(exc)
-        reason = text[len(shown) + 1:] if text.startswith(f" {shown}") else text
-        raise ArgumentError(parameter, shown, reason.lstrip(": ").strip() if reason.startswith(":") else
-                            reason.strip(), sep=": " if reason.startswith(":") else " ") from None
+        reason = text[len(shown):] if text.startswith(shown) else f": {text}"
+        colon = reason.startswith(":")
+        raise ArgumentError(parameter, shown, reason[1:].strip() if colon else reason.strip(),
+                            sep=": " if colon else " ") from None
     return str(shown)
 
 

@@ -16,6 +16,7 @@ from __future__ import annotations
 import http.client
 import logging
 import os
+import socket
 import threading
 import time
 import urllib.error
@@ -28,7 +29,7 @@ from typing import IO
 
 from .. import __version__
 from ..core.errors import PosecrbError
-from ..core.files import atomic_write
+from ..core.files import atomic_write, make_output_dir
 from .manifest import DatasetEntry, Manifest, load_manifest, verify_file
 from .search import cache_dir, locate
 
@@ -63,8 +64,15 @@ class FetchResult:
 
 
 def target_path(entry: DatasetEntry, dest: str | os.PathLike | None = None) -> Path:
-    """Where ``fetch`` puts ``entry``: ``dest`` (default the user cache) / subdir / file."""
-    return Path(dest if dest is not None else cache_dir()) / entry.relpath
+    """Where ``fetch`` puts ``entry``: ``dest`` (default the user cache) / subdir / file, never
+    outside ``dest`` (the manifest's paths are plain names, ``posecrb.datasets.manifest``)."""
+    root = Path(dest if dest is not None else cache_dir())
+    target = root / entry.relpath
+    inside = os.path.normpath(os.path.abspath(target))
+    if os.path.commonpath([inside, os.path.normpath(os.path.abspath(root))]) != os.path.normpath(
+            os.path.abspath(root)):
+        raise FetchError(f"{entry.name}: manifest path {entry.relpath!r} leaves the destination {root}")
+    return target
 
 
 def _check_url(url: str, allow_http: bool) -> None:
@@ -84,26 +92,38 @@ def _download(url: str, fh: IO[bytes], progress: Progress | None, timeout: float
     """Stream ``url`` into ``fh``; raises FetchError unless every announced byte arrived within
     ``deadline`` seconds and no more than ``max_bytes`` came.
 
-    ``read1`` returns whatever has arrived (``read(n)`` would wait for n bytes), so the deadline
-    is checked between reads; one read can still take up to ``timeout``.
+    The deadline bounds everything after the name lookup: the connection and the response
+    headers wait at most ``min(timeout, deadline)``, and before every read the socket's timeout is
+    lowered to the time left, so a server that stalls or trickles cannot hold the download past
+    it (``read1`` returns whatever has arrived; ``read(n)`` would wait for n bytes).
     """
     req = urllib.request.Request(url, headers={"User-Agent": f"posecrb/{__version__}"})
     start = time.monotonic()
     limit = None if deadline is None else start + deadline
+
+    def left() -> float:
+        return timeout if limit is None else max(min(timeout, limit - time.monotonic()), 1e-3)
+
+    def past_deadline() -> bool:
+        return limit is not None and time.monotonic() >= limit
+
+    done = 0
     try:
-        with urllib.request.urlopen(req, timeout=timeout) as resp:
+        with urllib.request.urlopen(req, timeout=left()) as resp:
+            sock = _socket_of(resp)
             length = resp.headers.get("Content-Length")
             total = int(length) if length and length.isdigit() else None
             if max_bytes is not None and total is not None and total > max_bytes:
                 raise FetchError(f"{url}: the server announces {total} bytes, more than the expected "
                                  f"{max_bytes}; not downloaded")
-            done = 0
             if progress:
                 progress(0, total)
             while True:
-                if limit is not None and time.monotonic() > limit:
+                if past_deadline():
                     raise FetchError(f"download from {url} exceeded the deadline of {deadline:g} s "
                                      f"({done} bytes received); aborted")
+                if sock is not None:
+                    sock.settimeout(left())
                 chunk = resp.read1(_CHUNK)
                 if not chunk:
                     break
@@ -116,14 +136,24 @@ def _download(url: str, fh: IO[bytes], progress: Progress | None, timeout: float
                     progress(done, total)
     except urllib.error.HTTPError as exc:
         raise FetchError(f"{url}: HTTP {exc.code} {exc.reason}") from None
-    except urllib.error.URLError as exc:
-        raise FetchError(f"cannot reach {url}: {exc.reason}") from None
-    except (http.client.HTTPException, OSError) as exc:
+    except (urllib.error.URLError, http.client.HTTPException, OSError) as exc:
+        if past_deadline():
+            raise FetchError(f"download from {url} exceeded the deadline of {deadline:g} s "
+                             f"({done} bytes received); aborted") from None
+        if isinstance(exc, urllib.error.URLError):
+            raise FetchError(f"cannot reach {url}: {exc.reason}") from None
         raise FetchError(f"download from {url} interrupted: {type(exc).__name__}: {exc}") from None
     # http.client returns a short read instead of raising when the peer closes early.
     if total is not None and done != total:
         raise FetchError(f"download from {url} interrupted: got {done} of {total} bytes")
     return done
+
+
+def _socket_of(resp: object) -> socket.socket | None:
+    """The socket under an ``http.client.HTTPResponse`` (None where the layout differs)."""
+    raw = getattr(getattr(resp, "fp", None), "raw", None)
+    sock = getattr(raw, "_sock", None)
+    return sock if isinstance(sock, socket.socket) else None
 
 
 def present(entry: DatasetEntry, *, dest: str | os.PathLike | None = None,
@@ -212,7 +242,9 @@ def _download_verified(entry: DatasetEntry, dest: str | os.PathLike | None, url:
 
     src = url or entry.url
     _check_url(src, allow_http=url is not None)
-    target.parent.mkdir(parents=True, exist_ok=True)
+    root = make_output_dir(dest if dest is not None else cache_dir(), parents=dest is None)
+    if target.parent != root:
+        make_output_dir(target.parent)
     nbytes = 0
 
     def check(tmp: Path) -> None:

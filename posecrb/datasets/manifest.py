@@ -119,6 +119,14 @@ def _validate(raw: dict, where: str) -> DatasetEntry:
         # The manifest is what users download from: plain HTTP would defeat nothing (the
         # checksum still guards the bytes) but would leak what they fetch; keep it HTTPS.
         raise ManifestError(f"{where}: url must be https://, got {entry.url!r}")
+    for what, value in (("file", entry.file), ("subdir", entry.subdir)):
+        # a path from the manifest is joined to the user's directories: it must stay inside them
+        parts = value.replace("\\", "/").split("/")
+        if ("\0" in value or value.startswith(("/", "\\")) or (len(value) > 1 and value[1] == ":")
+                or any(p in (".", "..") for p in parts) or (what == "file" and (len(parts) != 1 or not value))
+                or (what == "subdir" and value and "" in parts)):
+            raise ManifestError(f"{where}: {what} {value!r} must be a plain relative name (no '..', no absolute "
+                                "path, no separator in a file name): it would leave the data directory")
     if not (entry.sha256 or entry.git_blob):
         raise ManifestError(f"{where}: needs sha256 or git_blob")
     if entry.table is not None and (entry.paper_name is None or entry.paper_order is None):

@@ -12,7 +12,9 @@ from typing import Any
 
 from ..core.errors import PosecrbError
 from ..core.graph import PoseGraph
+from ..core.status import OK, Status
 from ..core.timing import timed
+from ..linalg.accuracy import logdet_accuracy
 from ..models.paper.bounds import GraphBounds, compute_bounds
 from ..models.paper.fim import PaperFim, fim_symbolic_choice, paper_fim
 from ..solver.estimate import Estimate, get_estimate
@@ -45,6 +47,7 @@ class DatasetMetrics:
     estimate: Estimate | None = None
     fim: PaperFim | None = None
     fim_logdet: float | None = None
+    fim_logdet_status: Status = OK      # its accuracy (posecrb.linalg.accuracy.logdet_accuracy)
     times: dict[str, float] = field(default_factory=dict)    # fim_build, fim_logdet (median of repeat)
     error: PosecrbError | None = None
     ordering: dict[str, str] = field(default_factory=dict)   # orderings used: lb, ub (bounds), fim
@@ -75,15 +78,22 @@ def evaluate(graph: PoseGraph, settings: EvaluationSettings, *, step: Callable[[
         fim, t_build = timed(lambda: paper_fim(graph, est.rot, est.trans, settings.anchor, settings.rotation_model,
                                                variant=settings.fim_variant), settings.repeat)
 
+        factor: list[Any] = []
+
         def logdet() -> float:
             sym, choice = fim_symbolic_choice(fim, settings.ordering)
             used["fim"] = str(choice)
-            return sym.factor_logdet(fim.matrix, name="paper FIM")[1]
+            f, value = sym.factor_logdet(fim.matrix, name="paper FIM")
+            factor[:] = [f]
+            return value
 
         ld, t_ld = timed(logdet, settings.repeat)
+        # how many digits of it to trust: after the timed region, with the last run's factor
+        accuracy = logdet_accuracy(fim.matrix, factor[0], ld, "paper FIM")
     except PosecrbError as exc:
         if errors != "keep":
             raise
         return DatasetMetrics(graph=graph, bounds=b, estimate=est, error=exc, ordering=used)
     return DatasetMetrics(graph=graph, bounds=b, estimate=est, fim=fim, fim_logdet=ld,
-                          times={"fim_build": t_build, "fim_logdet": t_ld}, ordering=used)
+                          fim_logdet_status=accuracy.status, times={"fim_build": t_build, "fim_logdet": t_ld},
+                          ordering=used)

@@ -13,12 +13,13 @@ as eq. 64 in 2D). A changed input file or FIM variant is reported, not compared.
 from __future__ import annotations
 
 import json
+import math
 import os
 from dataclasses import dataclass
 from pathlib import Path
 
-from ..core.errors import InternalError, PosecrbError
-from ..core.files import read_regular_file, write_text
+from ..core.errors import InternalError, ParseError, PosecrbError
+from ..core.files import decode_utf8, read_input, write_text
 from ..datasets import search as datasets
 from ..io import load
 from ..models.paper.crlb import crlb_from_fim
@@ -38,19 +39,65 @@ def default_expected_path() -> Path:
     return repo if repo.exists() else package / "data" / "expected.json"
 
 
+def _in_site_packages(path: Path) -> bool:
+    return any(part in ("site-packages", "dist-packages") for part in path.parts)
+
+
+def checkout_expected_path() -> Path | None:
+    """The expected file ``regress --update`` may rewrite without ``--expected``: the checkout's
+    ``datasets/expected.json`` (a symlink into the package data of that checkout), or None when
+    posecrb runs from an installed package (whose files an update must never change)."""
+    root = Path(__file__).resolve().parents[2]
+    repo = root / "datasets" / "expected.json"
+    if (root / "pyproject.toml").is_file() and os.path.lexists(repo) and not _in_site_packages(root):
+        return repo
+    return None
+
+
+def _line_of(text: str, needle: str) -> int | None:
+    k = text.find(needle)
+    return None if k < 0 else text.count("\n", 0, k) + 1
+
+
+_NUMBERS = (*TOLERANCES, "trace_crlb_error_bound")
+
+
+def parse_expected(text: str, path: str = "<expected>") -> dict:
+    """An expected file's content, checked: ParseError (file, line where one exists, reason) for
+    invalid JSON or anything ``compare`` could not use (a value that is not a finite number, a
+    checksum or variant that is not text, a dataset entry that is not an object)."""
+    try:
+        data = json.loads(text)
+    except json.JSONDecodeError as exc:
+        raise ParseError(path, exc.lineno, f"invalid JSON ({exc.msg})") from None
+    except RecursionError:
+        raise ParseError(path, None, "invalid JSON (nested too deeply)") from None
+    if not isinstance(data, dict) or not isinstance(data.get("datasets"), dict):
+        raise ParseError(path, None, "expected an object with a 'datasets' mapping (dataset name -> values)")
+    for name, values in data["datasets"].items():
+        where = _line_of(text, json.dumps(name))
+        if not isinstance(values, dict):
+            raise ParseError(path, where, f"dataset {name!r}: expected an object of values, got "
+                                          f"{type(values).__name__}")
+        for key in _NUMBERS:
+            v = values.get(key)
+            if v is not None and (isinstance(v, bool) or not isinstance(v, (int, float)) or not math.isfinite(v)):
+                raise ParseError(path, where, f"dataset {name!r}: {key} must be a finite number or null, got {v!r}")
+        for key in ("sha256", "fim_variant"):
+            v = values.get(key)
+            if v is not None and not isinstance(v, str):
+                raise ParseError(path, where, f"dataset {name!r}: {key} must be text, got {v!r}")
+    return data
+
+
 def load_expected(path: str | os.PathLike | None = None) -> dict:
+    """The expected file (default ``default_expected_path()``), read through the input layer
+    (regular file, size, gzip) and checked by ``parse_expected``; a missing file is empty."""
     p = Path(path) if path else default_expected_path()
     if not os.path.lexists(p):
         return {"version": 1, "datasets": {}}
-    try:
-        data = json.loads(read_regular_file(p))   # a directory, FIFO or device is an error, not a hang
-    except (json.JSONDecodeError, UnicodeDecodeError) as exc:
-        if isinstance(exc, UnicodeDecodeError):
-            raise PosecrbError(f"{p}: not a text file (invalid UTF-8)") from None
-        raise PosecrbError(f"{p}:{exc.lineno}: invalid JSON ({exc.msg})") from None
-    if not isinstance(data, dict) or not isinstance(data.get("datasets"), dict):
-        raise PosecrbError(f"{p}: expected an object with a 'datasets' mapping")
-    return data
+    inp = read_input(p)   # a directory, FIFO or device is an error, not a hang
+    return parse_expected(decode_utf8(inp.data, str(p)), str(p))
 
 
 def save_expected(data: dict, path: str | os.PathLike | None = None) -> Path:

@@ -15,6 +15,7 @@ from __future__ import annotations
 
 import logging
 import os
+import shlex
 from collections.abc import Callable, Iterable, Sequence
 from concurrent.futures import ProcessPoolExecutor, as_completed
 from dataclasses import asdict, dataclass, field
@@ -85,7 +86,7 @@ def dataset_row(name: str, settings: TableSettings,
     try:
         path = datasets.resolve(name, settings.data_dir)
     except DatasetNotFound as exc:
-        row.update(status="not found", hint=f"posecrb datasets fetch {name}", error=str(exc))
+        row.update(status="not found", hint=f"posecrb datasets fetch {shlex.quote(name)}", error=str(exc))
         return row
     except PosecrbError as exc:   # e.g. a directory or a device given as the dataset
         row.update(status=status_of(exc), error=str(exc))
@@ -115,9 +116,13 @@ def dataset_row(name: str, settings: TableSettings,
         if est is None or m.fim is None or m.fim_logdet is None:
             raise InternalError("evaluate() returned no FIM and no error")
         ld = m.fim_logdet
-        row.update(fim_logdet=ld, fim_variant=m.fim.variant, rotation_weight=settings.rotation_model,
+        put(row, "fim_logdet", ld, m.fim_logdet_status)
+        if not m.fim_logdet_status.ok:
+            log.warning("%s: %s", name, m.fim_logdet_status.message("FIM log-det"))
+        row.update(fim_variant=m.fim.variant, rotation_weight=settings.rotation_model,
                    fim_time=m.times["fim_logdet"], fim_build_time=m.times["fim_build"])
-        row.update(gap_ub_rel=None if b.ub is None else (b.ub - b.lb) / b.lb, gap_fim_rel=(ld - b.lb) / b.lb,
+        row.update(gap_ub_rel=None if b.ub is None else (b.ub - b.lb) / b.lb,
+                   gap_fim_rel=(ld - b.lb) / b.lb if m.fim_logdet_status.available else None,
                    parse_time=t_parse, ordering=m.ordering)
         if not est.certified:
             row["status"] = "uncertified"

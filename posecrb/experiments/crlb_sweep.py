@@ -38,6 +38,8 @@ import numpy as np
 
 from ..core.errors import UsageError
 from ..core.graph import PoseGraph
+from ..core.status import OK, Status
+from ..io.text import PRECISION_RANGE
 from ..lie.so import so2_log, so3_log
 from ..models.paper.crlb import paper_crlb
 from ..models.paper.fim import FIM_VARIANTS
@@ -47,6 +49,13 @@ from ..solver import SolverOptions, solve
 from ..solver.rounding import anchor_estimate
 
 MAX_LEVELS = 1000
+# The estimates are computed in double precision: positions of size S carry rounding errors of
+# about eps S (the solver reaches a few eps on noise-free data: MSE 1.8e-29 per pose on a 16-pose
+# grid of size 3, i.e. 3.7 eps per coordinate). A CRLB per pose below (d + d_r) (RESOLUTION eps S)^2
+# is below what any double-precision estimate can resolve: its MSE measures rounding, not noise.
+RESOLUTION = 100.0
+# Within this factor of that floor the ratio MSE / CRLB is inflated by rounding: a warning.
+RESOLUTION_MARGIN = 100.0
 
 
 def parse_levels(spec: str) -> list[float]:
@@ -91,6 +100,30 @@ def parse_levels(spec: str) -> list[float]:
     return sorted(set(out))
 
 
+def level_range(graph: PoseGraph, scale: str = "both", tau: float | None = None,
+                kappa: float | None = None) -> tuple[float, float]:
+    """The k_c for which every scaled precision (k_c kappa, and k_c tau with ``scale="both"``) stays
+    inside ``PRECISION_RANGE``, where every quantity built from it is finite (posecrb.io.text)."""
+    lo_p, hi_p = PRECISION_RANGE
+    k = np.asarray(graph.kappa if kappa is None else [kappa], dtype=float)
+    scaled = [k] + ([np.asarray(graph.tau if tau is None else [tau], dtype=float)] if scale == "both" else [])
+    lo = max(lo_p / float(v.min()) for v in scaled)
+    hi = min(hi_p / float(v.max()) for v in scaled)
+    return lo, hi
+
+
+def check_levels(graph: PoseGraph, kcs: Sequence[float], scale: str = "both", tau: float | None = None,
+                 kappa: float | None = None, name: str = "k_c") -> None:
+    """UsageError for a level outside ``level_range``: its noise model's precisions would leave the
+    range where the FIM, the solver and the sampler compute finite numbers."""
+    lo, hi = level_range(graph, scale, tau, kappa)
+    bad = [k for k in kcs if not lo <= k <= hi]
+    if bad:
+        raise UsageError(f"{name} {bad[0]:g}: outside [{lo:.3g}, {hi:.3g}] for {graph.name}, where the scaled "
+                         f"precisions stay inside [{PRECISION_RANGE[0]:g}, {PRECISION_RANGE[1]:g}] (beyond it "
+                         "the noise model's numbers overflow or underflow)")
+
+
 # ---------------------------------------------------------------- errors in the FIM's coordinates
 def rotation_errors(rot_true: np.ndarray, rot_est: np.ndarray) -> np.ndarray:
     """(n, d_r) rotation errors in the paper FIM's coordinates (right perturbation of the truth).
@@ -132,12 +165,41 @@ class CrlbLevel:
     fim_variant: str = "consistent"
     curvature_status: dict | None = None  # posecrb.core.status JSON when eq. (68) is not ok at this level
     accuracy: dict | None = None          # posecrb.models.paper.crlb.InverseAccuracy of the bound (JSON form)
+    ratio_status: dict | None = None      # posecrb.core.status JSON when the MSE is at the numerical floor
 
     def row(self) -> dict:
         r = dict(vars(self))
         if r["curvature_status"] is None:
             r.pop("curvature_status")
+        if r["ratio_status"] is None:
+            r.pop("ratio_status")
+        elif r["ratio_status"]["status"] == "unavailable":
+            r["ratio"] = None
+            if r.get("ratio_curvature") is not None:
+                r["ratio_curvature"] = None
         return r
+
+
+def resolution_floor(trans: np.ndarray, dim: int) -> float:
+    """MSE per pose below which double-precision estimates resolve nothing (``RESOLUTION``)."""
+    scale = max(1.0, float(np.abs(trans).max()) if trans.size else 1.0)
+    eps = float(np.finfo(float).eps)
+    return (dim + (1 if dim == 2 else 3)) * (RESOLUTION * eps * scale) ** 2
+
+
+def ratio_status(mse_bound: float, floor: float, kc: float) -> Status:
+    """Whether MSE / CRLB at one level measures the noise or the rounding of the estimates."""
+    if not mse_bound > floor:
+        return Status.unavailable(
+            f"the CRLB per pose ({mse_bound:.3g}) is below the numerical resolution of the estimates (about "
+            f"{floor:.2g} per pose in double precision) at k_c = {kc:g}: the MSE measures rounding, not noise, "
+            "so MSE/CRLB is meaningless", "use smaller k_c")
+    if mse_bound <= RESOLUTION_MARGIN * floor:
+        return Status.warning(
+            f"the CRLB per pose ({mse_bound:.3g}) is within a factor {RESOLUTION_MARGIN:g} of the numerical "
+            f"resolution of the estimates (about {floor:.2g}) at k_c = {kc:g}: rounding may inflate MSE/CRLB",
+            "use smaller k_c")
+    return OK
 
 
 @dataclass
@@ -240,6 +302,7 @@ def crlb_sweep(graph: PoseGraph, kcs: Sequence[float], trials: int = 100, seed: 
     if trials < 2:
         raise UsageError("--trials must be >= 2 (the MSE needs a standard error)")
     graph.require_connected()
+    check_levels(graph, [float(k) for k in kcs], scale, tau, kappa)
     anchor = 0 if anchor is None else int(anchor)
     solver_options = _solver_options(solver_options, anchor)
     truth_certified, truth_objective = True, None
@@ -255,6 +318,7 @@ def crlb_sweep(graph: PoseGraph, kcs: Sequence[float], trials: int = 100, seed: 
     results = run_tasks(_crlb_trial, contexts, tasks, executor=executor, jobs=jobs, scheduler=scheduler,
                         client=client, progress=progress)
     n_p = graph.n - 1
+    floor = resolution_floor(trans, graph.dim)
     levels, data = [], {}
     for g, kc in enumerate(kcs):
         rs = [r for r, t in zip(results, tasks) if t.group == g]
@@ -266,12 +330,14 @@ def crlb_sweep(graph: PoseGraph, kcs: Sequence[float], trials: int = 100, seed: 
         mse, se = mean_and_stderr((sq_t + sq_r) / n_p)
         b = _bounds(graph, rot, trans, anchor, kc, scale, tau, kappa, fim_variant)
         curv = b["mse_bound_curvature"]
+        rst = ratio_status(b["mse_bound"], floor, kc)
         levels.append(CrlbLevel(
             kc=kc, trials=len(rs), mse=mse, mse_stderr=se, mse_trans=float(sq_t.mean() / n_p),
             mse_rot=float(sq_r.mean() / n_p), mse_bound=b["mse_bound"], mse_bound_trans=b["mse_bound_trans"],
             mse_bound_rot=b["mse_bound_rot"], mse_bound_curvature=curv, ratio=mse / b["mse_bound"],
             ratio_curvature=None if curv is None else mse / curv, uncertified=int((~cert).sum()),
-            fim_variant=fim_variant, curvature_status=b["curvature_status"], accuracy=b["accuracy"]))
+            fim_variant=fim_variant, curvature_status=b["curvature_status"], accuracy=b["accuracy"],
+            ratio_status=None if rst.ok else rst.as_json()))
     return CrlbSweepResult(
         dataset=graph.name, dim=graph.dim, n=graph.n, m=graph.m, anchor_id=int(graph.ids[anchor]),
         scale=scale, tau=tau, kappa=kappa, trials=trials, seed=seed, truth_certified=truth_certified,

@@ -31,6 +31,7 @@ from typing import Any
 import numpy as np
 
 from ..core.errors import SolverError, UsageError
+from ..core.files import save_figure
 from ..core.graph import PoseGraph
 from ..core.status import put
 from ..linalg.cholesky import SymbolicCholesky
@@ -288,7 +289,8 @@ def sparsify_experiment(graph: PoseGraph, budgets: Sequence[str] = DEFAULT_BUDGE
 
 def plot_sparsify(result: SparsifyResult, path: str | os.PathLike) -> str:
     """Share of the full graph's gain in the objective (``(f(S) - f(F)) / (f(all) - f(F))``),
-    lambda_2 and ATE against the budget, one line per method; written atomically."""
+    lambda_2 and ATE against the budget, one line per method; written atomically through the file
+    layer (``posecrb.core.files.save_figure``: format by the extension, .png, .svg or .pdf)."""
 
     import matplotlib  # noqa: PLC0415 -- optional heavy dependency (matplotlib), only for --plot
 
@@ -314,11 +316,4 @@ def plot_sparsify(result: SparsifyResult, path: str | os.PathLike) -> str:
         ax.grid(True, alpha=0.3)
     axes[0].legend(fontsize=8)
     fig.suptitle(f"{result.dataset}: {result.candidates} candidate loop closures, {result.fixed} fixed edges")
-    fig.tight_layout()
-    path = os.fspath(path)
-    os.makedirs(os.path.dirname(os.path.abspath(path)), exist_ok=True)
-    tmp = f"{path}.tmp"
-    fig.savefig(tmp, dpi=100, format="png")
-    plt.close(fig)
-    os.replace(tmp, path)
-    return path
+    return os.fspath(save_figure(fig, path))

@@ -8,18 +8,17 @@ line of the later one. Writing (``save``) picks the format by suffix, or by name
 """
 from __future__ import annotations
 
-import hashlib
 import os
 
 import numpy as np
 
 from ..core.errors import ArgumentError, UsageError
-from ..core.files import read_regular_file
+from ..core.files import decode_utf8, read_input
 from ..core.graph import PoseGraph
 from .g2o import G2O
 from .reader import QUATERNION_MODES, parse
 from .records import Format
-from .text import Fallback, decode_utf8, scan_bytes, split_text
+from .text import Fallback, scan_bytes, split_text
 from .toro import TORO
 
 FORMATS: dict[str, Format] = {fmt.name: fmt for fmt in (G2O, TORO)}
@@ -46,11 +45,12 @@ def load(path: str | os.PathLike, quaternions: str = "normalize") -> PoseGraph:
 
     Either way a zero quaternion is an error, vertex quaternions (an estimate, which
     SE-Sync's reader ignores) are always normalised, and 2D/TORO files are unaffected.
-    Only regular files are read (a directory, FIFO or device is an error saying so).
+    Only regular files are read (a directory, FIFO or device is an error saying so), no larger
+    than the memory available allows, and a gzip-compressed file (``intel.g2o.gz``) is read
+    transparently; ``sha256`` is that of the file as stored (``posecrb.core.files.read_input``).
     """
-    path = os.fspath(path)
-    data = read_regular_file(path)
-    return parse_bytes(data, path=path, sha256=hashlib.sha256(data).hexdigest(), quaternions=quaternions)
+    inp = read_input(path)
+    return parse_bytes(inp.data, path=inp.path, sha256=inp.sha256, quaternions=quaternions)
 
 
 def parse_bytes(data: bytes, path: str = "<string>", sha256: str | None = None,

@@ -7,6 +7,7 @@ qz qw`` + the 21 upper-triangular entries row by row, order (x, y, z, rx, ry, rz
 from __future__ import annotations
 
 import io
+import logging
 import os
 
 import numpy as np
@@ -18,6 +19,12 @@ from ..lie.so import so2_exp, so2_log
 from .records import Format, RecordKind
 from .rotations import quat_to_rot, rot_to_quat
 from .text import MAX_INFORMATION, fmt_number
+
+log = logging.getLogger("posecrb")
+
+# The smallest normal double; below it a number keeps fewer significant bits (spacing 2^-1074).
+_TINY = float(np.finfo(float).tiny)
+_SUBNORMAL_SPACING = 5e-324
 
 RECORDS: dict[str, RecordKind] = {r.tag: r for r in [
     RecordKind("VERTEX_SE2", "g2o", 2, "vertex", 4),          # id x y theta
@@ -34,6 +41,16 @@ def _quaternions(path: str, q: np.ndarray, lines: np.ndarray, tag: str, normaliz
     bad = np.flatnonzero(~(s > 0))
     if bad.size:
         raise ParseError(path, int(lines[bad[0]]), f"{tag}: zero quaternion")
+    sub = np.flatnonzero(s < _TINY)
+    if sub.size:
+        # Every component is subnormal: read from the file, each was rounded to a multiple of
+        # 2^-1074, so the direction q/|q| (the rotation) is only known to that spacing over |q|.
+        k = int(sub[0])
+        rel = _SUBNORMAL_SPACING / float(s[k])
+        log.warning("%s:%d: %s: %d quaternion(s) whose components are all subnormal (largest |q_i| = %s, below "
+                    "%.3g): read to a relative precision of only about %.1g, so the rotation is that inaccurate; "
+                    "write quaternions normalised", path, int(lines[k]), tag, sub.size, fmt_number(s[k]), _TINY,
+                    rel)
     qs = q / s[:, None]
     ns = np.linalg.norm(qs, axis=1)
     if normalize:

@@ -5,7 +5,8 @@ a tag then numeric fields. This module turns a file's content into groups of lin
 each group's numeric block into arrays, with every violation a ``ParseError`` naming file,
 line and reason (docs/design.md#formats). Robustness rules:
 
-* Lines end at ``\\n``, ``\\r\\n`` or ``\\r`` only. ``str.splitlines`` would also break at form
+* Lines end at ``\\n``, ``\\r\\n`` or ``\\r`` only (the line rules of the input layer,
+  ``posecrb.core.files``, shared by every text input). ``str.splitlines`` would also break at form
   feed, vertical tab, ``\\x1c``-``\\x1e``, NEL and U+2028/U+2029, turning the tail of a comment
   into data and shifting every later line number.
 * Fields are separated by ASCII blanks (space, tab, form feed, vertical tab). Numbers follow
@@ -33,6 +34,7 @@ from itertools import chain
 import numpy as np
 
 from ..core.errors import InternalError, ParseError
+from ..core.files import FIELD_SEP, ODD_SPACE, split_lines
 from .records import RecordKind
 
 # Magnitude limits, checked at parse time so that no quantity built from a file overflows
@@ -45,10 +47,6 @@ MAX_TRANSLATION = 1e50          # every translation component (edges and vertice
 MAX_INFORMATION = 1e100         # every information-matrix entry
 PRECISION_RANGE = (1e-100, 1e100)   # tau, kappa and the 3D rotation weight w = omega(kappa)/3 (eq. 59)
 
-_LINE_END = re.compile(r"\r\n|\r|\n")
-# Characters str.split() treats as whitespace but a g2o/TORO reader must not.
-_ODD_SPACE = re.compile(r"[\x1c-\x1f\x85\xa0\u1680\u2000-\u200a\u2028\u2029\u202f\u205f\u3000]")
-_FIELD_SEP = re.compile(r"[ \t\f\v]+")
 _NUMBER = r"[+-]?(?:(?:[0-9]+\.?[0-9]*|\.[0-9]+)(?:[eE][+-]?[0-9]+)?|(?i:nan|inf|infinity))"
 # Fast screens over all tokens of a block joined by spaces. Past them, float() and int() can
 # only meet the plain grammar (no underscores, non-ASCII digits or Unicode spaces, which
@@ -74,15 +72,6 @@ def fmt_number(x: float) -> str:
     """A number as users write it (never ``np.float64(...)``)."""
     x = float(x)
     return f"{x:.6g}" if x == x and abs(x) != float("inf") else str(x)
-
-
-def decode_utf8(data: bytes, path: str) -> str:
-    """The file's text; invalid UTF-8 is an error at the line where it starts."""
-    try:
-        return data.decode("utf-8")
-    except UnicodeDecodeError as exc:
-        line = len(_LINE_END.findall(data[: exc.start].decode("utf-8", "replace"))) + 1
-        raise ParseError(path, line, "not a text file (invalid UTF-8)") from None
 
 
 def check_magnitude(path: str, lines: np.ndarray, tag: str, vals: np.ndarray, limit: float, what: str) -> None:
@@ -119,13 +108,12 @@ class Tokens:
 # --------------------------------------------------------------------------------------------
 # Reference tokeniser: any text, exact error locations.
 
-def split_lines(text: str) -> list[list[str]]:
-    """Fields of every line; lines end at \\n, \\r\\n, \\r only and fields are separated by ASCII
-    blanks (the module docstring). Every line-based input (formats, the selection's pair files) uses it."""
-    lines = _LINE_END.split(text) if "\r" in text else text.split("\n")
-    if _ODD_SPACE.search(text) is None and "\f" not in text and "\v" not in text:
+def _split_lines(text: str) -> list[list[str]]:
+    """Fields of every line, by the line rules of ``posecrb.core.files`` (module docstring)."""
+    lines = split_lines(text)
+    if ODD_SPACE.search(text) is None and "\f" not in text and "\v" not in text:
         return [ln.split() for ln in lines]          # only ASCII blanks occur
-    return [[f for f in _FIELD_SEP.split(ln) if f] for ln in lines]
+    return [[f for f in FIELD_SEP.split(ln) if f] for ln in lines]
 
 
 def _numeric_block(path: str, rows: list[list[str]], lines: np.ndarray,
@@ -171,7 +159,7 @@ def _numeric_block(path: str, rows: list[list[str]], lines: np.ndarray,
 
 def split_text(text: str) -> Tokens:
     """The reference tokeniser (module docstring): every input, every error located."""
-    rows = split_lines(text)
+    rows = _split_lines(text)
     groups: dict[str, list[int]] = {}
     for k, r in enumerate(rows):
         if r:

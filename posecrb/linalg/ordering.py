@@ -35,6 +35,7 @@ import scipy.sparse as sp
 from sksparse.cholmod import analyze
 
 from ..core.errors import UsageError
+from .accuracy import LogdetAccuracy, logdet_accuracy
 from .cholesky import Factor, PermutedFactor, SymbolicCholesky
 
 ORDERINGS = ("auto", "amd", "colamd", "metis", "nesdis")
@@ -176,17 +177,26 @@ def anchored_logdet(matrix: sp.spmatrix, q: int, anchors: list[int], name: str, 
                     dim: int | None = None) -> float:
     """log det of a pose-major (q per pose) FIM with the anchored poses' rows/columns removed,
     factored with ``ordering`` (``dim`` defaults from q = 3 | 6); raises NotPositiveDefinite."""
+    return anchored_logdet_accuracy(matrix, q, anchors, name, ordering=ordering, dim=dim, accuracy=False)[0]
+
+
+def anchored_logdet_accuracy(matrix: sp.spmatrix, q: int, anchors: list[int], name: str, *,
+                             ordering: str = "auto", dim: int | None = None,
+                             accuracy: bool = True) -> tuple[float, LogdetAccuracy | None]:
+    """``anchored_logdet`` and, with ``accuracy``, its ``posecrb.linalg.accuracy.logdet_accuracy``
+    (from the same factor: no second factorization)."""
     n = matrix.shape[0] // q
     keep = np.ones(n, bool)
     keep[anchors] = False
     dofs = (np.flatnonzero(keep)[:, None] * q + np.arange(q)).ravel()
     a = matrix[dofs][:, dofs].tocsc()
     if a.shape[0] == 0:
-        return 0.0
+        return 0.0, (logdet_accuracy(a, None, 0.0, name) if accuracy else None)
     nb = a.shape[0] // q
     sym, _ = ordered_symbolic(a, ordering, dim=dim or (2 if q == 3 else 3), poses=n, matrix="fim",
                               pose_of_row=np.repeat(np.arange(nb), q), n_poses=nb)
-    return sym.factor_logdet(a, name=name)[1]
+    factor, ld = sym.factor_logdet(a, name=name)
+    return ld, (logdet_accuracy(a, factor, ld, name) if accuracy else None)
 
 
 def solver_symbolic(pattern: sp.spmatrix, dim: int, n: int, mode: str = "auto") -> SymbolicCholesky:

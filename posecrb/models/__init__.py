@@ -16,14 +16,15 @@ import numpy as np
 from ..core.errors import ArgumentError
 from ..core.graph import PoseGraph
 from ..core.status import OK, Status
-from ..linalg.ordering import anchored_logdet, resolve_ordering
+from ..linalg.accuracy import LogdetAccuracy, logdet_accuracy
+from ..linalg.ordering import anchored_logdet_accuracy, resolve_ordering
 from ..solver.estimate import Estimate
 from .paper.bounds import t_optimality
 from .paper.crlb import InverseAccuracy, PaperCrlb, paper_crlb
 from .paper.fim import fim_symbolic_choice, paper_fim, trace_fim
 from .results import CrlbResult, FimResult
 from .sed.crlb import SedCrlb
-from .sed.fim import sed_fim
+from .sed.fim import _free_matrix, sed_fim
 from .sed.frames import convert_information, coordinate_names, coordinates_description, sed_crlb_in_frame
 
 MODELS = ("paper", "sed")
@@ -32,6 +33,11 @@ MODELS = ("paper", "sed")
 def _graph_keys(graph: PoseGraph, model: str) -> dict[str, object]:
     return {"dataset": graph.name, "model": model, "dim": graph.dim, "poses": graph.n, "edges": graph.m,
             "components": graph.n_components}
+
+
+def _accuracy_keys(acc: LogdetAccuracy | None) -> dict[str, float] | None:
+    """The JSON's ``logdet_accuracy``: the log-det's condition number and its rounding-error bound."""
+    return None if acc is None else {"condition": acc.condition, "error_bound": acc.error_bound}
 
 
 def model_fim(graph: PoseGraph, estimate: Estimate, *, model: str = "paper", anchor: int | None = None,
@@ -52,11 +58,13 @@ def model_fim(graph: PoseGraph, estimate: Estimate, *, model: str = "paper", anc
         times = {"fim_build": fim.build_time}
         t0 = time.perf_counter()
         sym, choice = fim_symbolic_choice(fim, ordering)
-        ld: float | None = sym.factor_logdet(fim.matrix, name="paper FIM")[1]
+        factor, ld_paper = sym.factor_logdet(fim.matrix, name="paper FIM")
         times["fim_logdet"] = time.perf_counter() - t0
+        acc_paper = logdet_accuracy(fim.matrix, factor, ld_paper, "paper FIM")
         ids, coord = fim.index_map()
         return FimResult(**_graph_keys(graph, model), anchors=[fim.anchor_id], layout=fim.layout,  # type: ignore[arg-type]
-                         size=fim.size, nnz=fim.nnz, logdet=ld, trace=trace_fim(fim),
+                         size=fim.size, nnz=fim.nnz, logdet=ld_paper, logdet_status=acc_paper.status,
+                         logdet_accuracy=_accuracy_keys(acc_paper), trace=trace_fim(fim),
                          t_opt_approx=t_optimality(graph, idx, rotation_weight)[1], rank=fim.size, nullity=0,
                          rotation_weight=rotation_weight, fim_variant=fim.variant,
                          ordering={"requested": ordering, "fim": str(choice)}, frame="mixed",
@@ -66,6 +74,7 @@ def model_fim(graph: PoseGraph, estimate: Estimate, *, model: str = "paper", anc
     if model != "sed":
         raise ArgumentError("model", model, f"is not one of {', '.join(MODELS)}")
     sfim = sed_fim(graph, rot, trans, ordering=ordering)
+    acc: LogdetAccuracy | None
     times = dict(sfim.times)
     # log-det, rank and nullity are the same in both frames (det B_i = +-1, posecrb.models.sed.frames)
     matrix = sfim.matrix if frame == "world" else convert_information(sfim.matrix, rot, trans, "body")
@@ -77,16 +86,24 @@ def model_fim(graph: PoseGraph, estimate: Estimate, *, model: str = "paper", anc
                                 "component)")
         anchors = [graph.anchor_index(anchor)]
         t0 = time.perf_counter()
-        ld = anchored_logdet(sfim.matrix, sfim.q, anchors, "SE(d) FIM on the free poses", ordering=ordering,
-                             dim=graph.dim)
+        ld_anchor, acc = anchored_logdet_accuracy(sfim.matrix, sfim.q, anchors, "SE(d) FIM on the free poses",
+                                                  ordering=ordering, dim=graph.dim)
         times["fim_logdet"] = time.perf_counter() - t0
+        ld: float | None = ld_anchor
+        status = acc.status if acc is not None else OK
     else:
         anchors, ld, status = list(sfim.anchors), sfim.logdet_anchored, sfim.logdet_status
+        acc = None
+        if ld is not None and sfim.factor is not None:
+            free, _ = _free_matrix(sfim.matrix, graph.n, sfim.q, anchors)
+            acc = logdet_accuracy(free, sfim.factor, ld, "SE(d) FIM on the free poses")
+            status = acc.status
     names = coordinate_names(graph.dim, frame)
     layout = "poses (rotation first)" if frame == "world" else f"poses (GTSAM order: {', '.join(names)})"
     used = resolve_ordering(ordering, dim=graph.dim, poses=graph.n, matrix="fim")
     return FimResult(**_graph_keys(graph, model), anchors=[int(graph.ids[a]) for a in anchors],  # type: ignore[arg-type]
                      layout=layout, size=int(matrix.shape[0]), nnz=int(matrix.nnz), logdet=ld, logdet_status=status,
+                     logdet_accuracy=_accuracy_keys(acc),
                      trace=float(matrix.diagonal().sum()), rank=sfim.rank, nullity=sfim.nullity,
                      expected_nullity=sfim.q * sfim.components, ordering={"requested": ordering, "fim": str(used)},
                      frame=frame, coordinates_description=coordinates_description(graph.dim, frame),

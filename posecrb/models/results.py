@@ -71,6 +71,11 @@ class FimResult(_ModelKeys):
         Rows and stored entries of the matrix.
     logdet : float or None
         log det of the anchored FIM (D-optimality); None when unavailable (``logdet_status``).
+    logdet_accuracy : dict of str to float or None
+        ``condition`` (the log-det's componentwise condition number) and ``error_bound`` (a
+        first-order bound on its rounding error, from a selected inversion of the factor;
+        ``posecrb.linalg.accuracy``). ``logdet_status`` is a warning when the bound exceeds
+        1e-6 relative and unavailable when no digit is correct.
     trace : float
         Its trace (T-optimality, eq. 69/70 for the paper model).
     t_opt_approx : float or None
@@ -115,7 +120,8 @@ class FimResult(_ModelKeys):
     size: int
     nnz: int
     logdet: float | None
-    logdet_status: Status = status_field("log det of the SE(d) FIM")
+    logdet_status: Status = status_field("log det of the FIM")
+    logdet_accuracy: dict[str, float] | None = optional_field()
     trace: float
     t_opt_approx: float | None = optional_field()
     rank: int

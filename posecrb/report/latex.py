@@ -6,7 +6,7 @@ import math
 
 def tex_number(v: object) -> str:
     """One LaTeX table cell: ``--`` for None, yes/no, integers as is, floats as ``$m\\times10^{e}$``
-    (4 decimals, the mantissa renormalised when it rounds to 10), text with ``_ % &`` escaped."""
+    (4 decimals, the mantissa renormalised when it rounds to 10), text escaped (``tex_escape``)."""
     if v is None:
         return "--"
     if isinstance(v, bool):
@@ -21,7 +21,18 @@ def tex_number(v: object) -> str:
         if f"{m:.4f}".startswith("10."):
             m, e = m / 10, e + 1
         return f"${m:.4f}\\times10^{{{e}}}$"
-    return str(v).replace("_", r"\_").replace("%", r"\%").replace("&", r"\&")
+    return tex_escape(str(v))
+
+
+_TEX_SPECIAL = {"\\": r"\textbackslash{}", "{": r"\{", "}": r"\}", "$": r"\$", "#": r"\#", "%": r"\%",
+                "&": r"\&", "_": r"\_", "^": r"\textasciicircum{}", "~": r"\textasciitilde{}",
+                "<": r"\textless{}", ">": r"\textgreater{}", "|": r"\textbar{}"}
+
+
+def tex_escape(text: str) -> str:
+    """``text`` as literal LaTeX (every character with a meaning to LaTeX escaped, line breaks as
+    spaces): a dataset named ``a_b&c$`` or ``\\input{x}`` is printed as written, never executed."""
+    return "".join(_TEX_SPECIAL.get(ch, ch) for ch in " ".join(str(text).splitlines()))
 
 
 def to_latex(rows: list[dict], columns: list[str], caption: str, headers: dict[str, str]) -> str:

@@ -11,7 +11,7 @@ from collections.abc import Mapping, Sequence
 from pathlib import Path
 from typing import Any
 
-from ..core.files import write_text
+from ..core.files import make_output_dir, write_text
 from ..core.provenance import write_run_record
 from .render import to_csv, to_json
 
@@ -24,8 +24,7 @@ def write_experiment_outputs(out_dir: str | os.PathLike, rows: Sequence[dict[str
 
     ``record`` comes from ``run_record``; the names of the files written are added to its
     ``results["files"]``. Returns the paths written."""
-    d = Path(out_dir)
-    d.mkdir(parents=True, exist_ok=True)
+    d = make_output_dir(out_dir)
     written = [write_text(d / "rows.csv", to_csv(list(rows))),
                write_text(d / "rows.json", to_json(list(rows), single=False) + "\n")]
     for name, data in (extra or {}).items():

@@ -1,8 +1,8 @@
 """Figures (matplotlib, Agg backend: no display needed).
 
-Each function takes a result and a path, writes one small figure (PNG, or SVG by the
-path's extension) and returns the path. They mirror the paper's Fig. 4-7 and the thesis's
-Graphs 6.8-6.9; ``plot_tables`` summarises Tables I-IV in one figure.
+Each function takes a result and a path, writes one small figure (PNG, SVG or PDF, by the
+path's extension, through the file layer: ``save_figure``) and returns the path. They mirror the
+paper's Fig. 4-7 and the thesis's Graphs 6.8-6.9; ``plot_tables`` summarises Tables I-IV in one figure.
 """
 from __future__ import annotations
 
@@ -17,55 +17,24 @@ matplotlib.use("Agg")
 import matplotlib.pyplot as plt
 import numpy as np
 
-from ..core.errors import UsageError
-from ..core.files import atomic_write
+from ..core.files import FIGURE_EXTENSIONS, check_output_file, save_figure
 from ..evaluation.published import paper_row
 
 if TYPE_CHECKING:
-    from matplotlib.figure import Figure
 
     from ..experiments.crlb_sweep import CrlbSweepResult
     from ..experiments.octagon import OctagonResult
     from ..experiments.thesis import ThesisResult
 
 DPI = 100
-FIGURE_FORMATS = (".png", ".svg")
+FIGURE_FORMATS = FIGURE_EXTENSIONS
 
 
 def check_figure_path(path: str | os.PathLike) -> Path:
-    """The figure target, checked before any work: extension .png or .svg, not a directory,
-    and its directory (or the nearest existing ancestor, which ``_save`` will extend) writable.
-    Raises UsageError (exit 2)."""
-    path = Path(path)
-    if path.suffix.lower() not in FIGURE_FORMATS:
-        raise UsageError(f"{path}: figure format from the extension must be one of "
-                         f"{', '.join(FIGURE_FORMATS)} (got {path.suffix or 'none'!r})")
-    if path.is_dir():
-        raise UsageError(f"{path}: is a directory")
-    parent = path.parent
-    while not parent.exists() and parent != parent.parent:
-        parent = parent.parent
-    if not parent.is_dir():
-        raise UsageError(f"{path}: {parent} is not a directory")
-    if not os.access(parent, os.W_OK | os.X_OK):
-        raise UsageError(f"{path}: directory {parent} is not writable")
-    return path
-
-
-def _save(fig: Figure, path: str | os.PathLike) -> Path:
-    """savefig to a temporary in the target directory, renamed into place (atomic_write);
-    the format follows the suffix (PNG without one)."""
-
-    path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    try:
-        fig.tight_layout()
-        # SVG text stays text: searchable, selectable, smaller than glyph paths.
-        with atomic_write(path, "wb") as fh, plt.rc_context({"svg.fonttype": "none"}):
-            fig.savefig(fh, dpi=DPI, format=path.suffix[1:].lower() or "png")
-    finally:
-        plt.close(fig)
-    return path
+    """The figure target, checked before any work (``posecrb.core.files.check_output_file``):
+    extension .png, .svg or .pdf, not a directory, its directory existing and writable. Raises
+    UsageError (exit 2)."""
+    return check_output_file(path, option=None, extensions=FIGURE_EXTENSIONS)
 
 
 def plot_crlb_sweep(result: CrlbSweepResult, path: str | os.PathLike) -> Path:
@@ -91,7 +60,7 @@ def plot_crlb_sweep(result: CrlbSweepResult, path: str | os.PathLike) -> Path:
     ax.set_title(f"{result.dataset}: {result.n - 1} free poses, {result.m} edges")
     ax.grid(True, which="both", alpha=0.3)
     ax.legend(fontsize=8)
-    return _save(fig, path)
+    return save_figure(fig, path)
 
 
 def plot_thesis(result: ThesisResult, path: str | os.PathLike) -> Path:
@@ -111,7 +80,7 @@ def plot_thesis(result: ThesisResult, path: str | os.PathLike) -> Path:
         ax.grid(True, which="both", alpha=0.3)
         ax.legend(fontsize=8)
     fig.suptitle(f"thesis ch. 6 case study ({result.trials} trials per m)", fontsize=10)
-    return _save(fig, path)
+    return save_figure(fig, path)
 
 
 def plot_octagon(result: OctagonResult, path: str | os.PathLike) -> Path:
@@ -139,7 +108,7 @@ def plot_octagon(result: OctagonResult, path: str | os.PathLike) -> Path:
         ax.grid(True, alpha=0.3)
         ax.legend(fontsize=8)
     fig.suptitle(f"octagon: 8 poses, odometry + 0..21 extra edges ({len(result.graphs)} graphs)", fontsize=10)
-    return _save(fig, path)
+    return save_figure(fig, path)
 
 
 # Table I/II quantities: colour per quantity, the same in both panels.
@@ -235,4 +204,4 @@ def plot_tables(rows: Sequence[dict], path: str | os.PathLike, note: str | None 
         footer = f"{note}   {footer}".strip()
     if footer:
         fig.text(0.01, 0.005, footer, fontsize=7, color="0.35", ha="left", va="bottom")
-    return _save(fig, path)
+    return save_figure(fig, path)

@@ -13,6 +13,7 @@ import csv
 import io
 import json
 import math
+import re
 import sys
 from collections.abc import Iterable, Sequence
 from typing import TYPE_CHECKING, Any
@@ -104,14 +105,24 @@ def to_csv(rows: Sequence[dict[str, Any]], columns: Sequence[str] | None = None)
     return buf.getvalue()
 
 
+_MARKDOWN_SPECIAL = re.compile(r"([\\`*_\[\]<>|~])")
+
+
+def markdown_escape(text: str) -> str:
+    """``text`` as literal Markdown table-cell content: every character Markdown (CommonMark or
+    GitHub's tables) gives a meaning is backslash-escaped, line breaks become spaces (a dataset named
+    ``a|b`` or ``*x*`` is shown as written and never splits a row)."""
+    return _MARKDOWN_SPECIAL.sub(r"\\\1", " ".join(str(text).splitlines()))
+
+
 def to_markdown(rows: Sequence[dict[str, Any]], columns: Sequence[str] | None = None,
                 headers: dict[str, str] | None = None) -> str:
     flat = [flatten(render_statuses(_plain(r))) for r in rows]
     cols = _columns(flat, columns)
     headers = headers or {}
-    lines = ["| " + " | ".join(headers.get(c, c) for c in cols) + " |",
+    lines = ["| " + " | ".join(markdown_escape(headers.get(c, c)) for c in cols) + " |",
              "|" + "|".join("---" for _ in cols) + "|"]
-    lines += ["| " + " | ".join(fmt_value(r.get(c)) for c in cols) + " |" for r in flat]
+    lines += ["| " + " | ".join(markdown_escape(fmt_value(r.get(c))) for c in cols) + " |" for r in flat]
     return "\n".join(lines) + "\n"
 
 
@@ -119,16 +130,19 @@ def to_rich_table(rows: Sequence[dict[str, Any]], columns: Sequence[str] | None 
                   title: str | None = None, headers: dict[str, str] | None = None,
                   caption: str | None = None) -> Table:
     from rich.table import Table  # noqa: PLC0415 -- lazy: start-up time (rich only for table output)
+    from rich.text import Text  # noqa: PLC0415 -- lazy: start-up time (rich only for table output)
 
+    # Text, never markup: a dataset named "[red]x" or a reason with brackets is shown as written.
     flat = [flatten(render_statuses(_plain(r))) for r in rows]
     cols = _columns(flat, columns)
     headers = headers or {}
-    table = Table(title=title, caption=caption, show_lines=False)
+    table = Table(title=None if title is None else Text(title), caption=None if caption is None else Text(caption),
+                  show_lines=False)
     for c in cols:
         numeric = any(isinstance(r.get(c), (int, float)) and not isinstance(r.get(c), bool) for r in flat)
-        table.add_column(headers.get(c, c), justify="right" if numeric else "left", overflow="fold")
+        table.add_column(Text(headers.get(c, c)), justify="right" if numeric else "left", overflow="fold")
     for r in flat:
-        table.add_row(*(fmt_value(r.get(c)) for c in cols))
+        table.add_row(*(Text(fmt_value(r.get(c))) for c in cols))
     return table
 
 

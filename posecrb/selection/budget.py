@@ -1,10 +1,10 @@
 """What a selection may choose from and how many: the budget K and the split of the edges into
-fixed edges F and candidates C (docs/design.md#glossary-selection).
+fixed edges F and candidates C (docs/design.md#glossary).
 
 ``--budget`` is ``K`` or ``P%`` of the candidates (rounded down, as MAC does). ``--fixed`` is
 ``odometry`` (the edges between consecutive pose ids, joined into a connected set by the heaviest
 candidates where the chain is broken) or a text file of pose-id pairs, read through the input
-layer (``read_pair_lines``).
+layer (``posecrb.core.files.read_lines``).
 """
 from __future__ import annotations
 
@@ -17,9 +17,8 @@ import numpy as np
 import scipy.sparse as sp
 
 from ..core.errors import ParseError, PosecrbError, UsageError
-from ..core.files import read_regular_file
+from ..core.files import read_lines
 from ..core.graph import PoseGraph, connected_components
-from ..io.text import decode_utf8, split_lines
 
 log = logging.getLogger("posecrb")
 
@@ -127,35 +126,17 @@ def split_edges(graph: PoseGraph, fixed: str = "odometry") -> EdgeSplit:
     return EdgeSplit(fixed=fixed_idx, candidates=cand, rule=rule, connectivity=extra)
 
 
-def read_pair_lines(path: str) -> list[list[str]]:
-    """The fields of every line of a pose-id pair file, through the input layer: a regular file
-    (``posecrb.core.files.read_regular_file``), UTF-8, and the readers' line and field rules
-    (``posecrb.io.text.split_lines``: lines end at \\n, \\r\\n or \\r only). The only read of the file."""
-    return split_lines(decode_utf8(read_regular_file(path), path))
-
-
-def _uncommented(fields: list[str]) -> list[str]:
-    """A line's fields up to its first ``#`` (the rest of the line is a comment)."""
-    out = []
-    for f in fields:
-        head, hash_, _ = f.partition("#")
-        if head:
-            out.append(head)
-        if hash_:
-            break
-    return out
-
-
 def _fixed_from_file(graph: PoseGraph, path: str) -> np.ndarray:
     pairs, where = [], []
-    for k, fields in enumerate(read_pair_lines(path), 1):
-        tok = _uncommented(fields)
+    # the input layer: regular files only, size-guarded, gzip, UTF-8, the g2o reader's line rules
+    for line in read_lines(path):
+        tok = line.fields()
         if not tok:
             continue
         if len(tok) != 2 or not all(re.fullmatch(r"[0-9]{1,18}", t) for t in tok):
-            raise ParseError(path, k, f"expected two pose ids 'i j', got {' '.join(fields)!r}")
+            raise ParseError(path, line.number, f"expected two pose ids 'i j', got {line.text.strip()!r}")
         pairs.append((int(tok[0]), int(tok[1])))
-        where.append(k)
+        where.append(line.number)
     if not pairs:
         raise ParseError(path, None, "no pose-id pairs in the fixed-edge file")
     p = np.array(pairs, dtype=np.int64)

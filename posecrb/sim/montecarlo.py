@@ -173,7 +173,12 @@ def run_dask(fn, contexts, chunks, jobs, scheduler, client, collect, out):
     with contextlib.ExitStack() as stack:
         if client is None:
             if scheduler:
-                client = stack.enter_context(Client(scheduler))
+                try:
+                    client = stack.enter_context(Client(scheduler))
+                except (OSError, TimeoutError, ValueError, TypeError) as exc:
+                    # unreachable, refused or malformed address: the user's to fix, not a bug
+                    raise UsageError(f"--scheduler {scheduler}: cannot connect to the Dask scheduler "
+                                     f"({type(exc).__name__}: {exc})") from None
             else:
                 cluster = stack.enter_context(LocalCluster(
                     n_workers=jobs, threads_per_worker=1, processes=True, host="127.0.0.1",

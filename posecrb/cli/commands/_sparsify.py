@@ -6,6 +6,7 @@ import time
 
 import click
 
+from ...core.errors import UsageError
 from ...core.provenance import dataset_entry, run_record
 from ...core.status import Status, log_status
 from ...experiments.sparsify import (
@@ -17,7 +18,17 @@ from ...experiments.sparsify import (
 )
 from ...report.outputs import write_experiment_outputs
 from ...report.render import print_rows
-from ..options import anchor_option, data_dir_option, executor_settings, format_option, load_dataset, plot_target
+from ..options import (
+    SEED_RANGE,
+    PlainInt,
+    anchor_option,
+    data_dir_option,
+    executor_settings,
+    format_option,
+    load_dataset,
+    plot_target,
+)
+from ..paths import FIGURE_EXTENSIONS, Command, DatasetArg, InputFile, OutputDir, OutputFile
 from ..progress import progress
 
 log = logging.getLogger("posecrb")
@@ -31,27 +42,35 @@ HEADERS = {"budget_spec": "budget", "budget": "K", "upper_bound": "upper bound",
            "rpe_trans": "RPE t", "rpe_rot_deg": "RPE R [°]"}
 
 
-@click.command("sparsify", short_help="Selection methods vs budget: bounds, certificates, ATE of the pruned graphs.")
-@click.argument("file")
+# Budgets x methods: every pair is a selection and a certified solve of the pruned graph.
+MAX_TASKS = 10000
+
+
+@click.command("sparsify", cls=Command,
+               short_help="Selection methods vs budget: bounds, certificates, ATE of the pruned graphs.")
+@click.argument("file", type=DatasetArg())
 @click.option("--budgets", default=None, metavar="LIST",
               help="Budgets, each K or P% of the loop closures (default 10%,20%,...,100%; --quick: 20%,50%).")
 @click.option("--methods", default=None, metavar="LIST",
               help="[objective-]method list (default greedy,relax,fiedler-relax,random,naive).")
 @click.option("--objective", default="tree", show_default=True, metavar="tree|fim|fiedler",
               help="Objective of the methods named without one.")
-@click.option("--fixed", default="odometry", show_default=True, metavar="odometry|FILE", help="Fixed edges.")
+@click.option("--fixed", default="odometry", show_default=True, type=InputFile(("odometry",)),
+              metavar="odometry|FILE", help="Fixed edges: the odometry chain, or a file of pose-id pairs 'i j'.")
 @click.option("--certify", is_flag=True, help="Relaxation bound for greedy, random and naive too.")
-@click.option("--max-iter", type=click.IntRange(1, 100000), default=None, help="Relaxation iterations.")
-@click.option("--seed", type=click.IntRange(0, 2 ** 63 - 1), default=0, show_default=True,
+@click.option("--max-iter", type=PlainInt(1, 100000), default=None, help="Relaxation iterations.")
+@click.option("--seed", type=SEED_RANGE, default=0, show_default=True,
               help="Seed of random selections and Madow rounding.")
-@click.option("--jobs", type=click.IntRange(1, 1024), default=1, show_default=True,
+@click.option("--jobs", type=PlainInt(1, 1024), default=1, show_default=True,
               help="Worker processes (local pool, or LocalCluster size for --executor dask).")
 @click.option("--executor", type=click.Choice(["local", "dask"]), default="local", show_default=True,
               help="local: serial (--jobs 1) or a process pool; dask: dask.distributed.")
 @click.option("--scheduler", metavar="ADDRESS", default=None, help="Dask scheduler address.")
-@click.option("--plot", "plot_path", type=click.Path(dir_okay=False), default=None, help="Write the figure (PNG).")
-@click.option("--out", "out_dir", type=click.Path(file_okay=False), default=None,
-              help="Directory for rows.csv, rows.json, run.json and sparsify.png.")
+@click.option("--plot", "plot_path", type=OutputFile(FIGURE_EXTENSIONS), default=None,
+              help="Write the figure (PNG, SVG or PDF, by the extension).")
+@click.option("--out", "out_dir", type=OutputDir(("rows.csv", "rows.json", "run.json", "sparsify.png")), default=None,
+              help="Directory for rows.csv, rows.json, run.json and sparsify.png; created if missing (its parent "
+                   "must exist).")
 @click.option("--quick", is_flag=True, help="Small settings for CI (budgets 20%,50%).")
 @anchor_option
 @data_dir_option
@@ -63,11 +82,14 @@ def sparsify_cmd(file, budgets, methods, objective, fixed, certify, max_iter, se
     pruned graph's certified optimum (ATE/RPE against the full graph's optimum, aligned)."""
 
     ex = executor_settings(executor, jobs, scheduler)
-    graph, _ = load_dataset(file, data_dir)
     budgets = budgets or ",".join(QUICK_BUDGETS if quick else DEFAULT_BUDGETS)
     methods = methods or ",".join(DEFAULT_METHODS)
-    t0 = time.perf_counter()
     n_tasks = len([b for b in budgets.split(",") if b.strip()]) * len([m for m in methods.split(",") if m.strip()])
+    if n_tasks > MAX_TASKS:
+        raise UsageError(f"--budgets x --methods gives {n_tasks} selections (each with a certified solve); "
+                         f"at most {MAX_TASKS}")
+    graph, _ = load_dataset(file, data_dir)
+    t0 = time.perf_counter()
     with progress(n_tasks, f"{graph.name}: selections") as cb:
         res = sparsify_experiment(graph, budgets.split(","), methods, objective=objective, fixed=fixed, seed=seed,
                                   certify=certify, max_iter=max_iter, anchor=graph.anchor_index(anchor),

@@ -19,6 +19,7 @@ from ..options import (
     repeat_option,
     rotation_weight_option,
 )
+from ..paths import Command, DatasetArg
 
 log = logging.getLogger("posecrb")
 
@@ -29,8 +30,8 @@ HEADERS = {"times.lb": "lb time [s]", "times.ub": "ub time [s]", "ub_lambda": "u
            "times.fim_logdet": "FIM time [s]", "estimate.source": "estimate", "fim_variant": "FIM variant"}
 
 
-@click.command("bounds")
-@click.argument("files", nargs=-1, required=True)
+@click.command("bounds", cls=Command)
+@click.argument("files", nargs=-1, required=True, type=DatasetArg())
 @anchor_option
 @repeat_option
 @rotation_weight_option

@@ -17,12 +17,13 @@ from ..options import (
     model_settings_options,
     ordering_option,
 )
+from ..paths import Command, DatasetArg
 
 log = logging.getLogger("posecrb")
 
 
-@click.command("crlb")
-@click.argument("file")
+@click.command("crlb", cls=Command)
+@click.argument("file", type=DatasetArg())
 @model_option
 @click.option("--quotient", is_flag=True, help="sed: quotient CRB F^+ (thesis 5.5) instead of the anchored one (5.1).")
 @click.option("--anchor", "anchors", type=POSE_ID, multiple=True,

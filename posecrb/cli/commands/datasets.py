@@ -2,19 +2,20 @@
 from __future__ import annotations
 
 import logging
-from pathlib import Path
 
 import click
 
 from ...core.errors import PosecrbError
 from ...core.noise import precisions_from_sigma
+from ...core.resources import check_memory
 from ...datasets import search as ds
 from ...datasets import verify as dsv
 from ...datasets.fetch import PROBE_TIMEOUT, fetch, fetch_many
 from ...datasets.manifest import load_manifest
-from ...io import check_output_dir, check_output_file, write_g2o
+from ...io import write_g2o
 from ...report.render import print_rows
-from ..options import FiniteFloat, data_dir_option, format_option
+from ..options import SEED_RANGE, FiniteFloat, PlainInt, data_dir_option, format_option
+from ..paths import GRAPH_EXTENSIONS, DatasetArg, Group, OutputDir, OutputFile
 from ..progress import progress_display
 
 log = logging.getLogger("posecrb")
@@ -22,7 +23,7 @@ log = logging.getLogger("posecrb")
 LIST_COLUMNS = ["name", "dim", "poses", "edges", "table", "paper_name", "status", "path"]
 
 
-@click.group("datasets")
+@click.group("datasets", cls=Group)
 def command() -> None:
     """Dataset manifest, lookup, download (verified) and synthetic graphs.
 
@@ -45,7 +46,7 @@ def list_cmd(data_dir: str | None, fmt: str, no_check: bool) -> None:
 
 
 @command.command("path")
-@click.argument("name")
+@click.argument("name", type=DatasetArg())
 @data_dir_option
 def path_cmd(name: str, data_dir: str | None) -> None:
     """Print the file NAME resolves to (exit 1 with a fetch hint if it is not found)."""
@@ -55,8 +56,9 @@ def path_cmd(name: str, data_dir: str | None) -> None:
 @command.command("fetch")
 @click.argument("names", nargs=-1)
 @click.option("--all", "all_", is_flag=True, help="Every dataset of the manifest.")
-@click.option("--dest", type=click.Path(file_okay=False), default=None,
-              help="Download directory (default: the user cache ~/.cache/posecrb).")
+@click.option("--dest", type=OutputDir(), default=None,
+              help="Download directory, created if missing (its parent must exist; default: the user cache "
+                   "~/.cache/posecrb).")
 @click.option("--url", default=None, help="Download from this URL instead of the manifest's (one NAME only).")
 @click.option("--timeout", type=FiniteFloat(min=0, min_open=True, max=1e6), default=60.0, show_default=True,
               help="Network timeout in seconds (connection and each read).")
@@ -83,8 +85,6 @@ def fetch_cmd(names: tuple[str, ...], all_: bool, dest: str | None, url: str | N
         raise click.UsageError("give dataset NAME(s) or --all (not both)")
     if url and (all_ or len(names) != 1):
         raise click.UsageError("--url needs exactly one NAME")
-    if dest is not None:
-        check_output_dir(dest, option="--dest")
     manifest = load_manifest()
     entries = list(manifest) if all_ else [manifest.get(n) for n in names]
     quiet = log.getEffectiveLevel() >= logging.ERROR
@@ -165,9 +165,21 @@ def verify_cmd(data_dir: str | None, parse: bool, fmt: str) -> None:
                                        f"{c.entry.poses} / {c.entry.edges})" for c in bad))
 
 
+# Peak memory of generating and writing a graph, per edge (measured: 3D grid of 200000 poses,
+# 600000 edges, 0.96 GB peak, i.e. 1.6 kB per edge; 2 kB leaves a margin), and edges per pose.
+SYNTH_BYTES_PER_EDGE = 2048
+SYNTH_EDGES_PER_POSE = {"grid2d": 2, "grid3d": 3, "sphere": 2, "torus": 2, "octagon": 4, "demo": 2}
+SYNTH_BASE_BYTES = 200 * 1024 ** 2       # the interpreter, numpy and scipy
+
+
+def synth_memory(kind: str, poses: int) -> float:
+    """Estimated peak memory of ``datasets synth KIND --poses N`` in bytes."""
+    return SYNTH_BASE_BYTES + float(poses) * SYNTH_EDGES_PER_POSE.get(kind, 3) * SYNTH_BYTES_PER_EDGE
+
+
 @command.command("synth")
 @click.argument("kind", type=click.Choice(["grid2d", "grid3d", "sphere", "torus", "octagon", "demo"]))
-@click.option("--poses", type=click.IntRange(2), default=None,
+@click.option("--poses", type=PlainInt(2), default=None,
               help="Number of poses (grid2d 100, grid3d 125, sphere 2500, torus 5000; octagon is always 8).")
 @click.option("--noise", "sigma", type=FiniteFloat(min=1e-6, max=1e6), default=None,
               help="Noisy measurements with translation std SIGMA and rotation angle std SIGMA [rad]: "
@@ -177,11 +189,12 @@ def verify_cmd(data_dir: str | None, parse: bool, fmt: str) -> None:
 @click.option("--kappa", type=FiniteFloat(min=1e-12, max=1e12), default=None,
               help="Langevin rotation concentration (implies noise unless --noise-free).")
 @click.option("--noise-free", is_flag=True, help="Exact measurements even with --tau/--kappa (information only).")
-@click.option("--seed", type=int, default=0, show_default=True, help="Seed of the noise (numpy PCG64).")
-@click.option("--extra", "extra_edges", type=click.IntRange(0, 21), default=0, show_default=True,
+@click.option("--seed", type=SEED_RANGE, default=0, show_default=True, help="Seed of the noise (numpy PCG64).")
+@click.option("--extra", "extra_edges", type=PlainInt(0, 21), default=0, show_default=True,
               help="octagon: number of additional measurements, drawn with --seed without repetition "
                    "from the 21 pairs of poses 1..7 (paper Fig. 3-5).")
-@click.option("--out", "out", type=click.Path(dir_okay=False), required=True, help="Output g2o file.")
+@click.option("--out", "out", type=OutputFile(GRAPH_EXTENSIONS), required=True,
+              help="Output g2o file (its directory must exist).")
 @format_option()
 def synth_cmd(kind: str, poses: int | None, sigma: float | None, tau: float | None, kappa: float | None,
               noise_free: bool, seed: int, extra_edges: int, out: str, fmt: str) -> None:
@@ -201,11 +214,11 @@ def synth_cmd(kind: str, poses: int | None, sigma: float | None, tau: float | No
     noisy = (sigma is not None or tau is not None or kappa is not None) and not noise_free
     if kind == "demo" and (poses or sigma or tau or kappa or noise_free):
         raise click.UsageError("`demo` is fixed: no --poses/--noise/--tau/--kappa/--noise-free")
-    check_output_file(out, option="--out", create_parents=True)
+    if poses is not None:
+        check_memory(synth_memory(kind, poses), f"--poses {poses}", "ask for fewer poses")
     from ...sim.generators import generate  # noqa: PLC0415 -- lazy: start-up time (scipy.special)
 
     graph = generate(kind, poses, tau=tau, kappa=kappa, noise=noisy, seed=seed, extra_edges=extra_edges)
-    Path(out).parent.mkdir(parents=True, exist_ok=True)
     write_g2o(graph, out)
     noisy = noisy or kind == "demo"
     row = {"kind": kind, "poses": graph.n, "edges": graph.m, "dim": graph.dim,

@@ -8,23 +8,25 @@ cluster (``--executor dask [--scheduler ADDRESS]``); results are bit-identical f
 from __future__ import annotations
 
 import logging
+import re
 import time
 from collections.abc import Callable
-from pathlib import Path
 from typing import Any
 
 import click
 
 from ...core.errors import UsageError
 from ...core.provenance import dataset_entry, run_record
-from ...experiments.crlb_sweep import crlb_sweep, parse_levels
+from ...core.resources import check_memory
+from ...experiments.crlb_sweep import MAX_LEVELS, check_levels, crlb_sweep, parse_levels
 from ...experiments.octagon import octagon_experiment
 from ...experiments.thesis import DEFAULT_M, QUICK_M, thesis_experiment
-from ...io import check_output_dir, check_output_file
 from ...report.outputs import write_experiment_outputs
 from ...report.render import print_rows
 from ..options import (
+    SEED_RANGE,
     FiniteFloat,
+    PlainInt,
     anchor_option,
     data_dir_option,
     executor_settings,
@@ -33,6 +35,7 @@ from ..options import (
     load_dataset,
     plot_target,
 )
+from ..paths import FIGURE_EXTENSIONS, DatasetArg, Group, OutputDir, OutputFile
 from ..progress import progress
 from ._sparsify import sparsify_cmd
 
@@ -40,14 +43,20 @@ log = logging.getLogger("posecrb")
 
 
 # ---------------------------------------------------------------- shared options and helpers
-def _run_options(default_trials: str) -> Callable[[Callable[..., Any]], Callable[..., Any]]:
+def out_files(name: str, extra: tuple[str, ...] = ()) -> tuple[str, ...]:
+    """The files an experiment's ``--out DIR`` receives (``write_experiment_outputs``) and its figure."""
+    return ("rows.csv", "rows.json", "run.json", f"{name}.png", *(f"{e}.csv" for e in extra))
+
+
+def _run_options(default_trials: str, name: str, extra: tuple[str, ...] = ()
+                 ) -> Callable[[Callable[..., Any]], Callable[..., Any]]:
     def deco(f):
         opts = [
-            click.option("--trials", type=click.IntRange(2, 10 ** 7), default=None,
-                         help=f"Monte Carlo trials ({default_trials})."),
-            click.option("--seed", type=click.IntRange(0, 2 ** 63 - 1), default=0, show_default=True,
+            click.option("--trials", type=PlainInt(2, 10 ** 7), default=None,
+                         help=f"Monte Carlo trials ({default_trials}); the memory they need is checked first."),
+            click.option("--seed", type=SEED_RANGE, default=0, show_default=True,
                          help="Root seed; every trial has its own SeedSequence child."),
-            click.option("--jobs", type=click.IntRange(1, 1024), default=1, show_default=True,
+            click.option("--jobs", type=PlainInt(1, 1024), default=1, show_default=True,
                          help="Worker processes (local pool, or LocalCluster size for --executor dask)."),
             click.option("--executor", type=click.Choice(["local", "dask"]), default="local", show_default=True,
                          help="local: serial (--jobs 1) or a process pool; dask: dask.distributed "
@@ -55,10 +64,11 @@ def _run_options(default_trials: str) -> Callable[[Callable[..., Any]], Callable
             click.option("--scheduler", metavar="ADDRESS", default=None,
                          help="Dask scheduler address (tcp://host:8786); without it a LocalCluster on "
                               "127.0.0.1 is started."),
-            click.option("--plot", "plot_path", type=click.Path(dir_okay=False), default=None,
-                         help="Write the figure (PNG)."),
-            click.option("--out", "out_dir", type=click.Path(file_okay=False), default=None,
-                         help="Directory for the data (rows.csv, rows.json, per-trial data) and run.json."),
+            click.option("--plot", "plot_path", type=OutputFile(FIGURE_EXTENSIONS), default=None,
+                         help="Write the figure (PNG, SVG or PDF, by the extension)."),
+            click.option("--out", "out_dir", type=OutputDir(out_files(name, extra)), default=None,
+                         help="Directory for the data (rows.csv, rows.json, per-trial data), run.json and "
+                              f"{name}.png; created if missing (its parent must exist)."),
             click.option("--quick", is_flag=True, help="Small settings for CI (well under a minute)."),
             format_option(),
         ]
@@ -77,25 +87,22 @@ def _write_out(out_dir: str | None, experiment: str, settings: dict, rows: list[
         write_experiment_outputs(out_dir, rows, record, extra)
 
 
-def _check_outputs(plot_path: str | None, out_dir: str | None, name: str, extra: tuple[str, ...] = (),
-                   inputs: tuple[str | None, ...] = ()) -> None:
-    """Validate --plot and --out before the trials run (exit 2), not after."""
+# thesis --m: F_m = m F_1; the MLE's errors are about 1/sqrt(m) (1e-6 at the bound), far above its
+# stopping tolerance (steps below 1e-15, gradients below 1e-12 relative) up to this m.
+MAX_M = 10 ** 12
 
-    if out_dir:
-        check_output_dir(out_dir, inputs, ["rows.csv", "rows.json", "run.json", f"{name}.png",
-                                           *(f"{e}.csv" for e in extra)], option="--out")
-    if plot_path:
-        check_output_file(plot_path, inputs, option="--plot", create_parents=True)
-        fmt = Path(plot_path).suffix[1:].lower()
-        if fmt:
-            from matplotlib.backend_bases import FigureCanvasBase  # noqa: PLC0415 -- optional heavy dependency (matplotlib), only for --plot
-
-            if fmt not in FigureCanvasBase.get_supported_filetypes():
-                raise UsageError(f"--plot {plot_path}: matplotlib cannot write .{fmt} files (use .png, .pdf, "
-                                 ".svg, ...)")
+# Bookkeeping memory per Monte Carlo trial: its task and seed (~0.7 kB measured), its result, its
+# row in the per-trial output; 4 kB leaves a margin.
+TRIAL_BYTES = 4096
 
 
-@click.group("experiment")
+def _check_trials(trials: int, groups: int, what: str) -> None:
+    """--trials against the memory its bookkeeping needs (before the work; exit 2)."""
+    check_memory(float(trials) * groups * TRIAL_BYTES, f"--trials {trials} x {groups} {what}",
+                 "ask for fewer trials")
+
+
+@click.group("experiment", cls=Group)
 def command() -> None:
     """The paper's and the thesis's experiments (Monte Carlo CRLB, T- vs D-optimality, thesis ch. 6)."""
 
@@ -110,7 +117,7 @@ CRLB_HEADERS = {"mse_stderr": "± s.e.", "mse_bound": "CRLB/n_p", "mse_bound_cur
 
 
 @command.command("crlb", short_help="Monte Carlo MSE vs CRLB over noise levels (paper Fig. 6/7).")
-@click.argument("file")
+@click.argument("file", type=DatasetArg())
 @click.option("--kc", "kc_spec", default=None,
               help="Noise levels k_c: one value (20), a list (1,5,20) or a range (1:20, 1:20:0.5). "
                    "Default 1:20 (--quick: 1,20).")
@@ -124,7 +131,7 @@ CRLB_HEADERS = {"mse_stderr": "± s.e.", "mse_bound": "CRLB/n_p", "mse_bound_cur
 @anchor_option
 @fim_variant_option
 @data_dir_option
-@_run_options("default 100; --quick: 20")
+@_run_options("default 100; --quick: 20", "crlb", ("trials",))
 def crlb_cmd(file, kc_spec, scale, kappa, tau, anchor, fim_variant, data_dir, trials, seed, jobs, executor,
              scheduler, plot_path, out_dir, quick, fmt):
     """Fig. 6/7: MSE per pose of the certified MLE vs trace(CRLB)/n_p over noise levels k_c.
@@ -138,9 +145,10 @@ def crlb_cmd(file, kc_spec, scale, kappa, tau, anchor, fim_variant, data_dir, tr
 
     kcs = parse_levels(kc_spec or ("1,20" if quick else "1:20"))
     trials = trials or (20 if quick else 100)
+    _check_trials(trials, len(kcs), "noise levels")
     ex = executor_settings(executor, jobs, scheduler)
     graph, _ = load_dataset(file, data_dir)
-    _check_outputs(plot_path, out_dir, "crlb", ("trials",), (graph.path,))
+    check_levels(graph, kcs, scale, tau, kappa, name="--kc")
     anchor_idx = graph.anchor_index(anchor)
     t0 = time.perf_counter()
     with progress(len(kcs) * trials, f"{graph.name}: trials") as cb:
@@ -154,6 +162,10 @@ def crlb_cmd(file, kc_spec, scale, kappa, tau, anchor, fim_variant, data_dir, tr
             log.warning("k_c = %g: CRLB %s: %s", lv.kc,
                         "not available" if lv.accuracy["status"] == "unavailable" else "doubtful",
                         lv.accuracy["reason"])
+        if lv.ratio_status:
+            log.warning("k_c = %g: MSE/CRLB %s: %s", lv.kc,
+                        "not available" if lv.ratio_status["status"] == "unavailable" else "doubtful",
+                        lv.ratio_status["reason"])
         if lv.curvature_status:
             log.warning("k_c = %g: curvature-corrected CRLB (eq. 68) %s: %s", lv.kc,
                         "not available" if lv.curvature_status["status"] == "unavailable" else "doubtful",
@@ -188,23 +200,27 @@ THESIS_HEADERS = {"frob": "‖Cov−CRB‖_F", "frob_rel": "relative", "frob_rel
 @command.command("thesis", short_help="Thesis ch. 6: MLE covariance vs anchored and quotient CRB.")
 @click.option("--m", "m_spec", default=None,
               help="Measurements per arc, a list (default 1,2,5,10,20,50,100,150; --quick: 1,10,100).")
-@_run_options("default 200; --quick: 100")
+@_run_options("default 200; --quick: 100", "thesis", ("eigenvalues",))
 def thesis_cmd(m_spec, trials, seed, jobs, executor, scheduler, plot_path, out_dir, quick, fmt):
     """Thesis ch. 6: empirical covariance of the intrinsic MLE vs the anchored (Pi F Pi)^+ and
     quotient F^+ bounds with F_m = m F_1, on the built-in 5-pose SE(2) case (nullity 6)."""
 
-    if m_spec:
-        try:
-            ms = sorted({int(x) for x in m_spec.split(",") if x.strip()})
-        except ValueError as exc:
-            raise UsageError(f"--m takes a comma-separated list of integers, got {m_spec!r}") from exc
-        if not ms or ms[0] < 1:
-            raise UsageError("--m values must be >= 1")
+    if m_spec is not None:
+        parts = [x.strip() for x in m_spec.split(",") if x.strip()]
+        # digits only (int() would take 1_0, +5 and non-ASCII digits)
+        bad = next((x for x in parts if re.fullmatch(r"[0-9]{1,13}", x) is None), None)
+        if bad is not None or not parts:
+            raise UsageError(f"--m takes a comma-separated list of integers 1..{MAX_M}, got {m_spec!r}")
+        ms = sorted({int(x) for x in parts})
+        if ms[0] < 1 or ms[-1] > MAX_M or len(ms) > MAX_LEVELS:
+            raise UsageError(f"--m values must be integers in 1..{MAX_M} (at most {MAX_LEVELS} of them): F_m = m F_1 "
+                             "beyond that makes the MLE's errors (about 1/sqrt(m)) approach its own numerical "
+                             "resolution, and the covariance would measure rounding")
     else:
         ms = list(QUICK_M if quick else DEFAULT_M)
     trials = trials or (100 if quick else 200)
     ex = executor_settings(executor, jobs, scheduler)
-    _check_outputs(plot_path, out_dir, "thesis", ("eigenvalues",))
+    _check_trials(trials, len(ms), "values of m")
     t0 = time.perf_counter()
     with progress(len(ms) * trials, "thesis: trials") as cb:
         res = thesis_experiment(ms, trials, seed, progress=cb, **ex)
@@ -230,14 +246,14 @@ OCTAGON_HEADERS = {"extra_edges": "extra", "m": "edges", "total_degree": "degree
 @click.option("--radius", type=FiniteFloat(min=1e-6, max=1e6), default=0.1, show_default=True,
               help="Circumradius of the octagon. The paper gives no size; 0.1 keeps sum tau||p||^2 small, "
                    "as it states.")
-@_run_options("random graphs per number of extra edges; default 50; --quick: 5")
+@_run_options("random graphs per number of extra edges; default 50; --quick: 5", "octagon", ("graphs",))
 def octagon_cmd(radius, trials, seed, jobs, executor, scheduler, plot_path, out_dir, quick, fmt):
     """Fig. 4/5: T-optimality (trace F) and D-optimality (log det F) vs total node degree on the
     8-pose octagon with 0..21 extra edges; flags graphs worse than one with fewer edges."""
 
     trials = trials or (5 if quick else 50)
     ex = executor_settings(executor, jobs, scheduler)
-    _check_outputs(plot_path, out_dir, "octagon", ("graphs",))
+    _check_trials(trials, 22, "levels")
     t0 = time.perf_counter()
     with progress(22, "octagon: levels") as cb:
         res = octagon_experiment(trials, seed, radius=radius, progress=cb, **ex)

@@ -17,19 +17,20 @@ from ..options import (
     model_settings_options,
     ordering_option,
 )
+from ..paths import Command, DatasetArg, OutputFile
 
 log = logging.getLogger("posecrb")
 
 
-@click.command("fim")
-@click.argument("file")
+@click.command("fim", cls=Command)
+@click.argument("file", type=DatasetArg())
 @model_option
 @estimate_option
 @click.option("--anchor", type=POSE_ID, default=None,
               help="Pose id anchored for the log-det; default: the smallest id (of each component, sed).")
 @model_settings_options
 @ordering_option
-@click.option("--save", type=click.Path(dir_okay=False, writable=True), default=None,
+@click.option("--save", type=OutputFile((".npz",), append=".npz"), default=None,
               help="Write the FIM as a scipy sparse .npz with its index map "
                    "(row_pose_id, row_coordinate, coordinate_names) and its frame; .npz is appended "
                    "unless present. With --model sed --frame body it is comparable with a GTSAM Hessian.")

@@ -7,6 +7,7 @@ import numpy as np
 from ...core.graph import PoseGraph
 from ...report.render import print_rows
 from ..options import data_dir_option, format_option, load_dataset
+from ..paths import Command, DatasetArg
 
 
 def graph_info(graph: PoseGraph) -> dict:
@@ -39,8 +40,8 @@ def graph_info(graph: PoseGraph) -> dict:
     }
 
 
-@click.command("info")
-@click.argument("files", nargs=-1, required=True)
+@click.command("info", cls=Command)
+@click.argument("files", nargs=-1, required=True, type=DatasetArg())
 @data_dir_option
 @format_option()
 def command(files: tuple[str, ...], data_dir: str | None, fmt: str) -> None:

@@ -9,7 +9,8 @@ from ...api.functions import select
 from ...core.errors import UsageError
 from ...core.status import log_statuses
 from ...report.render import print_rows
-from ..options import FiniteFloat, anchor_option, data_dir_option, format_option
+from ..options import SEED_RANGE, FiniteFloat, PlainInt, anchor_option, data_dir_option, format_option
+from ..paths import GRAPH_EXTENSIONS, Command, DatasetArg, InputFile, OutputFile
 
 log = logging.getLogger("posecrb")
 
@@ -47,8 +48,9 @@ def _summary(d: dict) -> list[dict]:
     return [{"quantity": k, "value": v} for k, v in rows]
 
 
-@click.command("select", short_help="Measurement selection: keep K edges, D-optimal, with a certificate.")
-@click.argument("file")
+@click.command("select", cls=Command,
+               short_help="Measurement selection: keep K edges, D-optimal, with a certificate.")
+@click.argument("file", type=DatasetArg())
 @click.option("--budget", required=True, metavar="K|P%",
               help="Number of candidate edges to keep, or a percentage of the candidates (rounded down).")
 @click.option("--objective", default="tree", show_default=True, metavar="tree|fim|fiedler",
@@ -59,12 +61,13 @@ def _summary(d: dict) -> list[dict]:
               help="greedy (exact greedy; MAC's GreedyEig for fiedler), relax (the concave relaxation's bound, "
                    "top-K and Madow rounding; tree and fim keep the greedy set unless a rounding beats it), "
                    "random (seeded), naive (heaviest rotation weights).")
-@click.option("--fixed", default="odometry", show_default=True, metavar="odometry|FILE",
+@click.option("--fixed", default="odometry", show_default=True, type=InputFile(("odometry",)),
+              metavar="odometry|FILE",
               help="Edges always kept: the odometry chain (consecutive ids, plus edges needed to connect it), "
                    "or a file of pose-id pairs 'i j'. Every other edge is a candidate.")
 @click.option("--certify", is_flag=True,
               help="Also run the relaxation for an upper bound (greedy, random, naive); relax always has it.")
-@click.option("--max-iter", type=click.IntRange(1, 100000), default=None,
+@click.option("--max-iter", type=PlainInt(1, 100000), default=None,
               help="Relaxation iterations (default 100; fiedler: Frank-Wolfe, 20 as MAC).")
 @click.option("--tol", type=FiniteFloat(min=0, min_open=True, max=1), default=1e-3, show_default=True,
               help="Stop the relaxation when its duality gap is below TOL x (bound - base value).")
@@ -75,12 +78,13 @@ def _summary(d: dict) -> list[dict]:
               help="Seed the lazy greedy's queue with random-projection estimates of the gains (implies --lazy; "
                    "the lazy greedy's default above 50000 candidates).")
 @click.option("--exact", is_flag=True, help="Never use random projections.")
-@click.option("--estimate", default="solve", show_default=True, metavar="solve|vertices|FILE",
+@click.option("--estimate", default="solve", show_default=True, type=InputFile(("solve", "vertices")),
+              metavar="solve|vertices|FILE",
               help="fim objective: the estimate at which the FIM is evaluated (default the certified optimum "
                    "of the full graph).")
-@click.option("--seed", type=click.IntRange(0, 2 ** 63 - 1), default=0, show_default=True,
+@click.option("--seed", type=SEED_RANGE, default=0, show_default=True,
               help="Seed of random, Madow rounding and random projections.")
-@click.option("--out", "out_path", type=click.Path(dir_okay=False), default=None,
+@click.option("--out", "out_path", type=OutputFile(GRAPH_EXTENSIONS), default=None,
               help="Write the pruned graph (fixed + selected edges, every vertex) as g2o.")
 @anchor_option
 @data_dir_option

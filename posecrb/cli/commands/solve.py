@@ -6,7 +6,8 @@ import click
 from ...api.functions import solve
 from ...core.errors import SolverError
 from ...report.render import print_rows
-from ..options import POSE_ID, FiniteFloat, data_dir_option, format_option
+from ..options import POSE_ID, FiniteFloat, PlainInt, data_dir_option, format_option
+from ..paths import GRAPH_EXTENSIONS, Command, DatasetArg, OutputFile
 
 # Compact column set for the human-readable formats; json/csv carry every key.
 TABLE_COLUMNS = ["dataset", "dim", "poses", "edges", "objective", "duality_gap", "lambda_min", "certified", "rank",
@@ -15,15 +16,15 @@ HEADERS = {"hessian_vector_products": "HVPs", "times.total": "time s", "duality_
            "lambda_min": "lambda_min(S)", "iterations": "TR its"}
 
 
-@click.command("solve")
-@click.argument("file")
-@click.option("--out", type=click.Path(dir_okay=False, writable=True), default=None,
+@click.command("solve", cls=Command)
+@click.argument("file", type=DatasetArg())
+@click.option("--out", type=OutputFile(GRAPH_EXTENSIONS), default=None,
               help="Write the estimate as g2o: original ids and edges, vertices replaced by the estimate, "
                    "anchored so that the anchor pose is the identity.")
 @format_option()
-@click.option("--r0", type=click.IntRange(2, 100), default=None,
+@click.option("--r0", type=PlainInt(2, 100), default=None,
               help="First rank of the Riemannian staircase [default: d+1].")
-@click.option("--rmax", type=click.IntRange(2, 100), default=10, show_default=True,
+@click.option("--rmax", type=PlainInt(2, 100), default=10, show_default=True,
               help="Last rank of the Riemannian staircase.")
 @click.option("--init", "init", type=click.Choice(["chordal", "vertices"]), default="chordal", show_default=True,
               help="Initial rotations: chordal relaxation, or the file's own vertices.")

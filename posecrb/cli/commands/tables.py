@@ -4,14 +4,12 @@ from __future__ import annotations
 import logging
 import os
 import sys
-import tempfile
 from collections.abc import Sequence
-from pathlib import Path
 
 import click
 
 from ...core.errors import PosecrbError
-from ...core.files import write_text
+from ...core.files import make_output_dir, scratch_dir, write_text
 from ...core.provenance import write_run_record
 from ...evaluation.tables import (
     HEADERS,
@@ -26,18 +24,20 @@ from ...evaluation.tables import (
     table_rows,
     tables_run_record,
 )
-from ...io import check_output_dir, write_g2o
+from ...io import write_g2o
 from ...report.latex import to_latex
 from ...report.render import to_csv, to_json, to_markdown, to_rich_table
 from ...sim.generators import builtin_demo
 from ..options import (
     TABLE_FORMATS,
+    PlainInt,
     data_dir_option,
     format_option,
     make_rotation_weight_option,
     ordering_option,
     repeat_option,
 )
+from ..paths import FIGURE_EXTENSIONS, Command, DatasetArg, OutputDir, OutputFile
 from ..progress import progress
 
 log = logging.getLogger("posecrb")
@@ -81,17 +81,19 @@ def _render(rows: list[dict], tables: Sequence[int], fmt: str, compare: bool, se
     return "\n".join(parts)
 
 
-@click.command("tables")
+@click.command("tables", cls=Command)
 @click.option("--all", "all_", is_flag=True, help="Every dataset of the manifest and search path (the default).")
-@click.option("--table", "tables", type=click.IntRange(1, 4), multiple=True,
+@click.option("--table", "tables", type=PlainInt(1, 4), multiple=True,
               help="Which table(s) to print: 1 (2D metrics), 2 (3D metrics), 3/4 (construction times). "
                    "Repeatable; default all four.")
-@click.option("--datasets", "names", default=None, help="Comma-separated dataset names or paths.")
+@click.option("--datasets", "names", type=DatasetArg(), multiple=True,
+              help="A dataset name or path (repeatable: --datasets intel --datasets CSAIL.g2o); default: "
+                   "every dataset of the manifest and search path.")
 @repeat_option
-@click.option("--jobs", type=click.IntRange(1, 64), default=1, show_default=True,
+@click.option("--jobs", type=PlainInt(1, 64), default=1, show_default=True,
               help="Datasets computed in parallel processes (timings then include core contention).")
 @format_option(TABLE_FORMATS)
-@click.option("--out", "out_dir", type=click.Path(file_okay=False), default=None,
+@click.option("--out", "out_dir", type=OutputDir(OUT_FILES), default=None,
               help="Also write every format and run.json (versions, CPU, sha256, settings) to DIR.")
 @click.option("--compare-paper", is_flag=True, help="Add the paper's printed values and relative differences.")
 @make_rotation_weight_option(default=None)   # None: not given (--as-published picks table2)
@@ -99,8 +101,8 @@ def _render(rows: list[dict], tables: Sequence[int], fmt: str, compare: bool, se
               help="Reproduce the printed Table II: eq. (64) exactly as printed (fim_variant=eq64) with the "
                    "empirical rotation weight table2. Without it the 3D rows are the model's quantities "
                    "(eq. 59, the model's Fisher information). 2D rows are the same either way.")
-@click.option("--plot", "plot_path", type=click.Path(dir_okay=False), default=None,
-              help="Also draw one figure (PNG or SVG, by the extension): FIM log-det and ub relative to lb per "
+@click.option("--plot", "plot_path", type=OutputFile(FIGURE_EXTENSIONS), default=None,
+              help="Also draw one figure (PNG, SVG or PDF, by the extension): FIM log-det and ub relative to lb per "
                    "dataset, and every time against the paper's printed one.")
 @ordering_option
 @click.option("--executor", type=click.Choice(["local", "dask"]), default="local", show_default=True,
@@ -126,14 +128,8 @@ def command(all_, tables, names, repeat, jobs, fmt, out_dir, compare_paper, rota
     """
     if all_ and names:
         raise click.UsageError("--all and --datasets are exclusive")
-    if plot_path:
-        from ...report.plots import check_figure_path  # noqa: PLC0415 -- matplotlib, only for --plot
-
-        check_figure_path(plot_path)  # before the work: a bad target is a usage error, not a lost run
-    requested = [n.strip() for n in names.split(",") if n.strip()] if names else None
-    if out_dir:
-
-        check_output_dir(out_dir, requested or [], OUT_FILES, option="--out")
+    # --out and --plot were checked before the work, against the inputs (posecrb.cli.paths)
+    requested = list(names) or None
     explicit = bool(tables)
     tables = sorted(set(tables)) or [1, 2, 3, 4]
     if as_published:
@@ -164,7 +160,7 @@ def command(all_, tables, names, repeat, jobs, fmt, out_dir, compare_paper, rota
     if not requested and all(r["status"] == "not found" for r in rows):
 
         demo = builtin_demo()
-        tmp = Path(tempfile.mkdtemp(prefix="posecrb-")) / "builtin_demo.g2o"
+        tmp = scratch_dir() / "builtin_demo.g2o"
         write_g2o(demo, tmp)
         log.warning("no dataset found on the search path; running on the built-in synthetic graph "
                     "(posecrb.sim.generators.builtin_demo, written to %s)", tmp)
@@ -181,8 +177,7 @@ def command(all_, tables, names, repeat, jobs, fmt, out_dir, compare_paper, rota
 
     if out_dir:
 
-        out = Path(out_dir)
-        out.mkdir(parents=True, exist_ok=True)
+        out = make_output_dir(out_dir)
         for t in tables:   # every file atomically (temporary + rename)
             trs, cols = table_rows(rows, t, compare_paper)
             stem = out / f"table{t}"

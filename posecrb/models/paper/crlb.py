@@ -36,7 +36,7 @@ Statuses (``posecrb.core.status``), never a silent number:
 from __future__ import annotations
 
 import time
-from collections.abc import Callable, Mapping, Sequence
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -46,6 +46,7 @@ import scipy.sparse as sp
 from ...core.graph import PoseGraph
 from ...core.result import Result, plain
 from ...core.status import OK, Status
+from ...linalg.accuracy import onenorm_inverse
 from ...linalg.cholesky import Factor
 from ...linalg.ordering import block_cholesky
 from ...linalg.selinv import _block_pattern_padded, inverse_block_diagonal
@@ -112,33 +113,6 @@ class InverseAccuracy(Result):
         return {"CRLB": self.status}
 
 
-def _onenorm_inverse(solve: Callable[[np.ndarray], np.ndarray], n: int) -> float:
-    """Hager's / Higham's (LAPACK xLACON) estimate of ``||B||_1`` for a symmetric B given by
-    ``solve`` (x -> B x); deterministic, a handful of products."""
-    if n == 0:
-        return 0.0
-    x = np.full(n, 1.0 / n)
-    est = 0.0
-    last = -1
-    for _ in range(5):
-        y = solve(x)
-        new = float(np.abs(y).sum())
-        if new <= est:
-            break
-        est = new
-        z = solve(np.where(y >= 0, 1.0, -1.0))
-        j = int(np.argmax(np.abs(z)))
-        if j == last or np.abs(z[j]) <= z @ x:
-            break
-        x = np.zeros(n)
-        x[j] = 1.0
-        last = j
-    # Higham's extra test vector guards against the estimate being fooled by cancellation.
-    alt = (-1.0) ** np.arange(n) * (1.0 + np.arange(n) / max(n - 1, 1))
-    est2 = 2.0 * float(np.abs(solve(alt)).sum()) / (3.0 * n)
-    return max(est, est2)
-
-
 def inverse_accuracy(a: sp.spmatrix, factor: Factor, name: str = "matrix", columns: int = ACCURACY_COLUMNS,
                      seed: int = ACCURACY_SEED) -> InverseAccuracy:
     """Accuracy estimate of ``a^{-1}`` computed from ``factor`` (a CHOLMOD factor of ``a``)."""
@@ -160,8 +134,8 @@ def inverse_accuracy(a: sp.spmatrix, factor: Factor, name: str = "matrix", colum
         diag = a.diagonal()
         s = 1.0 / np.sqrt(diag)
         hnorm = float(abs(sp.diags(s) @ a @ sp.diags(s)).sum(axis=0).max())
-        cond_s = hnorm * _onenorm_inverse(lambda v: np.asarray(factor(v / s)).ravel() / s, n)
-        cond = anorm * _onenorm_inverse(lambda v: np.asarray(factor(v)).ravel(), n)
+        cond_s = hnorm * onenorm_inverse(lambda v: np.asarray(factor(v / s)).ravel() / s, n)
+        cond = anorm * onenorm_inverse(lambda v: np.asarray(factor(v)).ravel(), n)
     bound = cond_s * eps
     if not (np.isfinite(eta) and np.isfinite(cond_s)) or eta > RESIDUAL_FAIL:
         status = Status.unavailable(
