@@ -24,8 +24,13 @@ from pathlib import Path
 
 import pandas as pd
 
-TABLE_I = "CSAIL,intel,manhattan,kitti_00,city10000,ais2klinik"
-TABLE_II = "tinyGrid3D,smallGrid3D,parking-garage,sphere2500,torus3D,cubicle"
+TABLE_I = ["CSAIL", "intel", "manhattan", "kitti_00", "city10000", "ais2klinik"]
+TABLE_II = ["tinyGrid3D", "smallGrid3D", "parking-garage", "sphere2500", "torus3D", "cubicle"]
+
+
+def datasets(names: list[str]) -> list[str]:
+    """``--datasets NAME`` once per dataset (the option is repeatable)."""
+    return [arg for name in names for arg in ("--datasets", name)]
 
 
 def posecrb(*args: str) -> None:
@@ -42,9 +47,9 @@ def main() -> None:
 
     with tempfile.TemporaryDirectory() as tmp:
         out1, out2 = Path(tmp, "table1"), Path(tmp, "table2")
-        posecrb("tables", "--datasets", f"{TABLE_I},{TABLE_II}", "--table", "1", "--table", "2",
+        posecrb("tables", *datasets(TABLE_I + TABLE_II), "--table", "1", "--table", "2",
                 "--compare-paper", "--repeat", "1", "--out", str(out1), "--plot", str(args.figures / "tables.png"))
-        posecrb("tables", "--datasets", TABLE_II, "--table", "2", "--as-published", "--compare-paper",
+        posecrb("tables", *datasets(TABLE_II), "--table", "2", "--as-published", "--compare-paper",
                 "--repeat", "1", "--out", str(out2))
         rows = pd.concat([pd.read_csv(out1 / "table1.csv"), pd.read_csv(out2 / "table2.csv")])
 
