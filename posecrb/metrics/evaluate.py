@@ -12,7 +12,7 @@ from typing import Any
 
 from ..core.errors import PosecrbError
 from ..core.graph import PoseGraph
-from ..core.timing import timed
+from ..core.timing import Repeat, measure
 from ..models.paper.bounds import BoundsResult, compute_bounds
 from ..models.paper.fim import PaperFim, fim_symbolic_choice, paper_fim, trace_fim
 from ..solver.estimate import Estimate, get_estimate
@@ -22,14 +22,15 @@ from ..solver.estimate import Estimate, get_estimate
 class EvaluationSettings:
     """``anchor``: internal index of the anchored pose; ``estimate``: "solve", "vertices", a file,
     or "none" (bounds only); ``solver``: options of the certified solver; ``repeat``: the timing
-    protocol's repeats (1: each step runs once, untimed warm-up skipped); ``ordering``: the
+    protocol's repeats (``posecrb.core.timing.measure``; 1: each step runs once, untimed warm-up
+    skipped; "auto": adaptive); ``ordering``: the
     fill-reducing ordering of every factorization (``posecrb.linalg.ordering.ORDERINGS``; the
     values never depend on it beyond rounding)."""
 
     anchor: int = 0
     rotation_model: str = "eq59"
     fim_variant: str = "consistent"
-    repeat: int = 1
+    repeat: Repeat = 1
     estimate: str = "solve"
     solver: Mapping[str, Any] = field(default_factory=dict)
     ordering: str = "auto"
@@ -46,25 +47,28 @@ class DatasetMetrics:
     fim: PaperFim | None = None
     fim_logdet: float | None = None
     times: dict[str, float] = field(default_factory=dict)    # fim_build, fim_logdet (median of repeat)
+    runs: dict[str, int] = field(default_factory=dict)       # per key of times: how many runs its median is of
     error: PosecrbError | None = None
     ordering: dict[str, str] = field(default_factory=dict)   # orderings used: lb, ub (bounds), fim
 
 
-    def to_row(self, times: Mapping[str, float] | None = None) -> dict:
+    def to_row(self, times: Mapping[str, float] | None = None, runs: Mapping[str, int] | None = None) -> dict:
         """The ``bounds`` command's row: the graph, ``BoundsResult.to_row()``, the times (``times``
-        first, e.g. the parse time, then the bounds', the FIM's and the solve's) and, when an
+        first, e.g. the parse time, then the bounds', the FIM's and the solve's; ``runs``: how many
+        runs each of them is the median of, ``runs`` first) and, when an
         estimate was evaluated, the FIM log-det, trace (eq. 69/70) and variant, the estimate's source,
         certificate and objective; ``status`` is ``"uncertified"`` when the solver did not certify."""
         g, b = self.graph, self.bounds
         row: dict = {"dataset": g.name, "path": g.path, "sha256": g.sha256, "dim": g.dim, "poses": g.n,
                      "edges": g.m, "components": g.n_components, **b.to_row(),
-                     "times": {**(times or {}), **b.times}}
+                     "times": {**(times or {}), **b.times}, "runs": {**(runs or {}), **b.runs}}
         if self.estimate is not None and self.fim is not None:
             est, fim = self.estimate, self.fim
             row.update(fim_logdet=self.fim_logdet, trace_fim=trace_fim(fim), fim_variant=fim.variant,
                        estimate={"source": est.source, "certified": est.certified, "objective": est.objective})
             row["times"].update(fim_build=self.times["fim_build"], fim_logdet=self.times["fim_logdet"],
                                 solve=est.solve_time)
+            row["runs"].update(fim_build=self.runs["fim_build"], fim_logdet=self.runs["fim_logdet"], solve=1)
             if est.certified is False:
                 row["status"] = "uncertified"
         return row
@@ -89,18 +93,21 @@ def evaluate(graph: PoseGraph, settings: EvaluationSettings, *, step: Callable[[
         say("solve")
         est = get_estimate(graph, settings.estimate, **settings.solver)
         say("fim")
-        fim, t_build = timed(lambda: paper_fim(graph, est.rot, est.trans, settings.anchor, settings.rotation_model,
-                                               variant=settings.fim_variant), settings.repeat)
+        m_build = measure(lambda: paper_fim(graph, est.rot, est.trans, settings.anchor, settings.rotation_model,
+                                            variant=settings.fim_variant), settings.repeat)
+        fim = m_build.value
 
         def logdet() -> float:
             sym, choice = fim_symbolic_choice(fim, settings.ordering)
             used["fim"] = str(choice)
             return sym.factor_logdet(fim.matrix, name="paper FIM")[1]
 
-        ld, t_ld = timed(logdet, settings.repeat)
+        m_ld = measure(logdet, settings.repeat)
+        ld = m_ld.value
     except PosecrbError as exc:
         if errors != "keep":
             raise
         return DatasetMetrics(graph=graph, bounds=b, estimate=est, error=exc, ordering=used)
     return DatasetMetrics(graph=graph, bounds=b, estimate=est, fim=fim, fim_logdet=ld,
-                          times={"fim_build": t_build, "fim_logdet": t_ld}, ordering=used)
+                          times={"fim_build": m_build.seconds, "fim_logdet": m_ld.seconds},
+                          runs={"fim_build": m_build.runs, "fim_logdet": m_ld.runs}, ordering=used)

@@ -2,8 +2,10 @@
 
 One ``dataset_row`` per dataset computes everything (parse, bounds, certified
 solve, FIM at the optimum and its log-det, construction times); the four tables
-are column views of those rows. Timing protocol: ``time.perf_counter`` around
-exactly the measured work, warm-up once, median of ``repeat`` runs:
+are column views of those rows. Timing protocol (``posecrb.core.timing.measure``):
+``time.perf_counter`` around exactly the measured work, run as ``repeat`` says (1: once, the
+library's default; k: warm-up, then the median of k; "auto": adaptive, the command line's
+default); ``runs`` of a row says how many runs each time is the median of:
 
 * ``lb_time`` / ``ub_time`` / ``ub_lambda_time``: see ``posecrb.models.paper.bounds.compute_bounds``;
 * ``fim_time``: ordering + numeric Cholesky + log-det of the anchored FIM (Table I/II "Time");
@@ -26,7 +28,7 @@ import numpy as np
 from ..core import provenance
 from ..core.errors import DatasetNotFound, InternalError, PosecrbError, UsageError, status_of
 from ..core.status import put
-from ..core.timing import timed
+from ..core.timing import Repeat, timed
 from ..datasets import search as datasets
 from ..datasets.manifest import load_manifest
 from ..io import load
@@ -46,7 +48,7 @@ class TableSettings:
     """``rotation_model`` / ``fim_variant``: the model's quantities by default (eq. 59, the model's
     Fisher information); ``published()`` gives the settings that reproduce the printed Table II."""
 
-    repeat: int = 3
+    repeat: Repeat = 1
     rotation_model: str = "eq59"
     data_dir: str | None = None
     solver: dict = field(default_factory=dict)
@@ -107,9 +109,13 @@ def dataset_row(name: str, settings: TableSettings,
         put(row, "ub", b.ub, b.ub_status)
         row.update(ub_lambda=b.ub_lambda, lb_time=b.times["lb"], ub_time=b.times["ub"],
                    ub_lambda_time=b.times["ub_lambda"], laplacians_build_time=b.times["laplacians"])
+        runs = {"parse_time": 1, "lb_time": b.runs["lb"], "ub_time": b.runs["ub"],
+                "ub_lambda_time": b.runs["ub_lambda"], "laplacians_build_time": b.runs["laplacians"]}
         est = m.estimate
         if est is not None:
             row.update(objective=est.objective, certified=est.certified, solve_time=est.solve_time)
+            runs["solve_time"] = 1
+        row["runs"] = runs
         if m.error is not None:
             raise m.error       # reported below, with what was computed before it
         if est is None or m.fim is None or m.fim_logdet is None:
@@ -119,6 +125,7 @@ def dataset_row(name: str, settings: TableSettings,
                    fim_time=m.times["fim_logdet"], fim_build_time=m.times["fim_build"])
         row.update(gap_ub_rel=None if b.ub is None else (b.ub - b.lb) / b.lb, gap_fim_rel=(ld - b.lb) / b.lb,
                    parse_time=t_parse, ordering=m.ordering)
+        runs.update(fim_time=m.runs["fim_logdet"], fim_build_time=m.runs["fim_build"])
         if not est.certified:
             row["status"] = "uncertified"
     except PosecrbError as exc:

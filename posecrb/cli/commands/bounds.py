@@ -7,6 +7,7 @@ import click
 
 from ...core.errors import PosecrbError, status_of
 from ...core.status import log_status
+from ...core.timing import Repeat
 from ...metrics.evaluate import EvaluationSettings, evaluate
 from ...report.render import print_rows
 from ..options import (
@@ -14,7 +15,7 @@ from ..options import (
     data_dir_option,
     fim_variant_option,
     format_option,
-    load_dataset,
+    load_dataset_timed,
     make_estimate_option,
     ordering_option,
     repeat_option,
@@ -30,10 +31,11 @@ HEADERS = {"times.lb": "lb time [s]", "times.ub": "ub time [s]", "ub_lambda": "u
            "times.fim_logdet": "FIM time [s]", "estimate.source": "estimate", "fim_variant": "FIM variant"}
 
 
-def bounds_row(name_or_path: str, data_dir: str | None, anchor_id: int | None, repeat: int,
+def bounds_row(name_or_path: str, data_dir: str | None, anchor_id: int | None, repeat: Repeat,
                rotation_model: str, estimate: str = "none", fim_variant: str | None = None,
                ordering: str = "auto") -> dict:
-    graph, t_parse = load_dataset(name_or_path, data_dir, repeat)
+    parsed = load_dataset_timed(name_or_path, data_dir, repeat)
+    graph = parsed.value
     anchor = graph.anchor_index(anchor_id)
     m = evaluate(graph, EvaluationSettings(anchor=anchor, rotation_model=rotation_model,
                                            fim_variant=fim_variant or "consistent", repeat=repeat, estimate=estimate,
@@ -43,7 +45,7 @@ def bounds_row(name_or_path: str, data_dir: str | None, anchor_id: int | None, r
     log_status(log, f"{graph.name}: ub", b.ub_status)
     log_status(log, f"{graph.name}: lambda_min(L_w)", b.lambda_min_rot_status)
     log_status(log, f"{graph.name}: Lemma 4 gap bound", b.gap_bound_status)
-    row = m.to_row(times={"parse": t_parse})
+    row = m.to_row(times={"parse": parsed.seconds}, runs={"parse": parsed.runs})
     row["ordering"] = {"requested": ordering, **m.ordering}
     return row
 
@@ -68,7 +70,8 @@ def command(files, anchor, repeat, rotation_model, estimate, fim_variant, orderi
     fim_logdet is log det of the anchored FIM at --estimate: the model's Fisher information
     (fim_variant=consistent) unless --fim-variant eq64 (eq. 64 as printed); same in 2D.
     lambda_min_rot and gap_bound carry a status when double precision cannot resolve them.
-    Times are medians of --repeat runs after a warm-up; the lb time covers the
+    Times follow --repeat (auto: one run of a stage that takes >= 1 s, else the median of a few
+    after a warm-up; the JSON's runs says how many); the lb time covers the
     ordering and both factorizations, ub/ub_lambda their own extra work. --ordering changes
     the cost only; the JSON key "ordering" names the ordering of each factorization.
     """
