@@ -95,7 +95,7 @@ def measure(fn: Callable[[], T], repeat: Repeat = 1, warmup: bool = True) -> Tim
         value, first = _run(fn)
         if first >= AUTO_SINGLE_PASS:
             return Timing(value, first, 1, False)
-        spent, times = first, []
+        spent, times = first, list[float]()
         while len(times) < AUTO_MAX_RUNS and (not times or spent + times[-1] <= AUTO_BUDGET):
             value, t = _run(fn)
             times.append(t)
