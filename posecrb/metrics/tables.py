@@ -154,8 +154,9 @@ def build_rows(names: Sequence[str], settings: TableSettings, jobs: int = 1,
                on_done: Callable[[str, dict], None] | None = None,
                on_step: Callable[[str, str], None] | None = None, *, executor: str = "local",
                scheduler: str | None = None, client: Any = None) -> list[dict]:
-    """Rows in the order of ``names``; with jobs > 1 datasets run in a process pool
-    (timings then include contention for the machine's cores: use --jobs 1 for timing).
+    """Rows in the order of ``names``; with jobs > 1 datasets run in a process pool whose workers
+    run every BLAS/OpenMP pool at one thread (timings then include contention for the machine's
+    cores: use --jobs 1 for timing).
 
     ``executor="dask"``: one dataset per task on a Dask cluster through the Monte Carlo engine
     (posecrb.sim.montecarlo): the cluster at ``scheduler`` (or the given ``client``), otherwise a
@@ -189,7 +190,9 @@ def build_rows(names: Sequence[str], settings: TableSettings, jobs: int = 1,
         return rows
 
     out: dict[str, dict] = {}
-    with ProcessPoolExecutor(max_workers=jobs) as pool:
+    from ..linalg.threads import single_threaded_worker  # noqa: PLC0415 -- threadpoolctl only for pools
+
+    with ProcessPoolExecutor(max_workers=jobs, initializer=single_threaded_worker) as pool:
         futures = {pool.submit(_run_one, (n, settings)): n for n in names}
 
         for fut in as_completed(futures):

@@ -15,10 +15,10 @@ from dataclasses import dataclass, field, fields, replace
 from typing import Any
 
 import numpy as np
-from threadpoolctl import ThreadpoolController
 
 from ..core.errors import NotPositiveDefinite, PosecrbError, UsageError
 from ..core.graph import PoseGraph
+from ..linalg.threads import python_blas_single_threaded
 from .chordal import chordal_rotations
 from .problem import Problem
 from .rounding import anchor_estimate, recover_translations, round_rotations, se_objective
@@ -114,32 +114,18 @@ class SolverOptions:
         return {**out, **self.trust_region}
 
 
-_BLAS_CONTROLLER = None
-
-
-def _blas_controller():
-    """threadpoolctl's controller, built once: scanning the loaded libraries costs ~1.5 ms,
-    which was a tenth of a small problem's solve when done on every call."""
-    global _BLAS_CONTROLLER
-    if _BLAS_CONTROLLER is None:
-        _BLAS_CONTROLLER = ThreadpoolController()
-    return _BLAS_CONTROLLER
-
-
 def solve(graph: PoseGraph, options: SolverOptions | None = None, **keywords: Any) -> SolveResult:
     """Certifiably correct maximum-likelihood estimate of a pose graph (see :func:`_solve`).
 
     ``solve(graph, SolverOptions(anchor=3, rmax=8))``; the keyword form ``solve(graph, anchor=3)``
     is the same call (``SolverOptions.from_keywords``: an unknown name is a UsageError) and may
-    refine ``options``. BLAS runs single-threaded inside: the work is many small dense products,
-    for which OpenBLAS's thread start-up costs more than it saves (and CHOLMOD does the heavy part).
+    refine ``options``. numpy's and scipy's BLAS run single-threaded inside: their work is many
+    small dense products, for which OpenBLAS's thread start-up costs more than it saves. CHOLMOD's
+    BLAS, which does the factorizations' dense work, keeps every core (posecrb.linalg.threads).
     """
     if keywords or options is None:
         options = SolverOptions.from_keywords(options, **keywords)
-    controller = _blas_controller()
-    if not controller:  # pragma: no cover - threadpoolctl missing
-        return _solve(graph, **options.keywords())
-    with controller.limit(limits=1, user_api="blas"):
+    with python_blas_single_threaded():
         return _solve(graph, **options.keywords())
 
 

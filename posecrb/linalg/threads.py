@@ -1,0 +1,80 @@
+"""Which BLAS runs with how many threads (docs/performance.md#threads).
+
+Two BLAS libraries are usually loaded: the one CHOLMOD links (the system's ``libblas.so.3``,
+the threaded OpenBLAS that ``make install`` installs), which does the supernodal factorizations'
+dense work, and the private copy numpy and scipy bring in their wheels (a ``<package>.libs``
+directory), which does posecrb's own small dense products. The factorizations are where the
+flops are, so CHOLMOD's BLAS keeps every core; the many small products of the solver run with
+one thread, where OpenBLAS's thread synchronisation costs more than it saves.
+
+Process pools run each worker with every pool at one thread (``single_threaded_worker``), so
+``--jobs`` workers never oversubscribe the cores.
+
+Rounding: a threaded BLAS splits a product into blocks by thread, so a factorization's last bits
+can depend on the number of threads (never on the run: for a fixed count the blocking, hence the
+result, is the same). Every tolerance of the test suite is derived from the factorization's
+backward error (condition number x eps), which covers any blocking.
+"""
+from __future__ import annotations
+
+import contextlib
+import functools
+import os
+import sys
+from collections.abc import Iterator
+from typing import Any
+
+# Modules that load a BLAS or OpenMP library: the controller is rebuilt when one more is imported.
+_LOADERS = ("numpy", "scipy.linalg", "sksparse.cholmod", "numba")
+
+
+def controller() -> Any:
+    """threadpoolctl's controller of the libraries loaded now; scanning them costs ~1.5 ms, a
+    tenth of a small problem's solve, so it is rebuilt only after a module that loads a BLAS."""
+    return _controller(tuple(m in sys.modules for m in _LOADERS))
+
+
+@functools.lru_cache(maxsize=4)
+def _controller(_loaded: tuple[bool, ...]) -> Any:
+    from threadpoolctl import ThreadpoolController  # noqa: PLC0415 -- only where threads are set
+
+    return ThreadpoolController()
+
+
+def _vendored(info: dict) -> bool:
+    # auditwheel and delocate put a wheel's private libraries in <package>.libs / .dylibs
+    parent = os.path.basename(os.path.dirname(info.get("filepath") or ""))
+    return parent.endswith((".libs", ".dylibs"))
+
+
+def python_blas() -> Any:
+    """The BLAS libraries numpy/scipy brought in their wheels, when CHOLMOD has another one;
+    every BLAS otherwise (one library shared by all: limiting it limits CHOLMOD too)."""
+    ctl = controller()
+    blas = [c for c in ctl.lib_controllers if c.user_api == "blas"]
+    own = [c for c in blas if _vendored(c.info())]
+    if own and len(own) < len(blas):
+        return ctl.select(filepath=[c.filepath for c in own])
+    return ctl.select(user_api="blas")
+
+
+@contextlib.contextmanager
+def python_blas_single_threaded() -> Iterator[None]:
+    """numpy's and scipy's BLAS at one thread inside; CHOLMOD's keeps its threads."""
+    with python_blas().limit(limits=1):
+        yield
+
+
+def all_single_threaded() -> Any:
+    """Every BLAS and OpenMP pool at one thread (a context manager)."""
+    return controller().limit(limits=1)
+
+
+def single_threaded_worker() -> None:
+    """Initializer of a process pool's workers: every BLAS/OpenMP pool at one thread for the
+    worker's life (the workers share the cores; threads inside each would oversubscribe them)."""
+    import numpy  # noqa: F401, PLC0415 -- load the libraries first: threadpoolctl sets the loaded ones
+    import sksparse.cholmod  # noqa: F401, PLC0415
+    from threadpoolctl import threadpool_limits  # noqa: PLC0415 -- only in pool workers
+
+    threadpool_limits(limits=1)
