@@ -68,7 +68,8 @@ class DatasetMetrics:
                        estimate={"source": est.source, "certified": est.certified, "objective": est.objective})
             row["times"].update(fim_build=self.times["fim_build"], fim_logdet=self.times["fim_logdet"],
                                 solve=est.solve_time)
-            row["runs"].update(fim_build=self.runs["fim_build"], fim_logdet=self.runs["fim_logdet"], solve=1)
+            row["runs"].update(fim_build=self.runs["fim_build"], fim_logdet=self.runs["fim_logdet"],
+                               solve=None if est.solve_time is None else 1)
             if est.certified is False:
                 row["status"] = "uncertified"
         return row
