@@ -11,14 +11,16 @@ against the first candidate's:
                   through scikit-sparse): --ordering auto = nested dissection of the pose graph
   <ordering>      CHOLMOD called directly (benchmarks/_cholmod.py) with CHOLMOD's ordering of the
                   scalar matrix: nesdis, metis, amd
-  pose-nesdis     the pose graph's nested dissection expanded to 6x6 blocks, CHOLMOD's default
-                  supernodal amalgamation; pose-nesdis-relax with 4x larger relaxed supernodes
+  pose-metis      the pose graph's nested dissection (METIS; pose-nesdis: CHOLMOD's NESDIS) expanded
+                  to 6x6 blocks, CHOLMOD's default supernodal amalgamation (posecrb's `auto` on this
+                  graph, without scikit-sparse); pose-nesdis-relax with 4x larger relaxed supernodes
                   (nrelax 16/64/256, zrelax 0.8/0.2/0.1)
   split           two halves of the pose graph (CHOLMOD's METIS bisection), each factored with the
                   separator ordered last, in two threads at one BLAS thread each (CHOLMOD releases
                   the GIL here), then the separator's Schur complement S = L1 L1^T + L2 L2^T - A_ss
-                  assembled from the two trailing blocks (LAPACK dlauum) and factored densely (dpotrf)
-                  with every BLAS thread
+                  assembled from the two trailing blocks (LAPACK dlauum, one thread: threaded lauum
+                  collapses when another process holds a core) and factored densely (dpotrf) with
+                  every BLAS thread
 each with the BLAS of CHOLMOD at one thread ("1t") and at every core ("all"), where it applies.
 
 The limit is the fewest flops of any candidate divided by the dgemm rate of all cores (the
@@ -44,7 +46,7 @@ from _common import child_env, print_header, run_process
 from grids import DEFAULT_SIGMA, cache_dir, grid_file
 
 CANDIDATES = ["posecrb/1t", "posecrb/all", "nesdis/1t", "nesdis/all", "metis/all", "amd/all",
-              "pose-nesdis/1t", "pose-nesdis/all", "pose-nesdis-relax/all", "split/all"]
+              "pose-metis/1t", "pose-metis/all", "pose-nesdis/all", "pose-nesdis-relax/all", "split/all"]
 RELAX = {"nrelax": (16, 64, 256), "zrelax": (0.8, 0.2, 0.1)}
 
 
@@ -74,14 +76,14 @@ def _limit_blas(threads: str):
     return threadpool_limits(limits=1 if threads == "1t" else None)
 
 
-def _pose_perm(a, por):
+def _pose_perm(a, por, method: str):
     import numpy as np
 
     from posecrb.linalg.ordering import expand_permutation, pose_adjacency_of, pose_permutation
 
     n_poses = int(np.max(por)) + 1
     adj = pose_adjacency_of(a, por, n_poses)
-    return adj, expand_permutation(pose_permutation(adj, "nesdis"), por)
+    return adj, expand_permutation(pose_permutation(adj, method), por)
 
 
 def run_one(name: str, path: Path) -> dict:
@@ -113,7 +115,7 @@ def run_one(name: str, path: Path) -> dict:
             kw = RELAX if kind.endswith("-relax") else {}
             t0 = time.perf_counter()
             if kind.startswith("pose-"):
-                _, perm = _pose_perm(a, por)
+                _, perm = _pose_perm(a, por, kind.split("-")[1])
                 f = _cholmod.Factorization(a, perm=perm, **kw)
             else:
                 f = _cholmod.Factorization(a, kind)
@@ -180,12 +182,13 @@ def _split(a, por) -> dict:
     t2 = time.perf_counter()
     # S = L1 L1^T + L2 L2^T - A_ss; L L^T = J lauum(J L J) J with J the reversal (lauum forms U U^T)
     s = -a[sep_rows][:, sep_rows].toarray(order="F")
-    for _, lss, _, _ in results:
-        u = np.asfortranarray(lss[::-1, ::-1])
-        uut, info = lapack.dlauum(u, lower=0, overwrite_c=1)
-        if info:
-            raise RuntimeError(f"dlauum info {info}")
-        s += np.triu(uut)[::-1, ::-1]       # lower triangle of L L^T
+    with threadpool_limits(limits=1):
+        for _, lss, _, _ in results:
+            u = np.asfortranarray(lss[::-1, ::-1])
+            uut, info = lapack.dlauum(u, lower=0, overwrite_c=1)
+            if info:
+                raise RuntimeError(f"dlauum info {info}")
+            s += np.triu(uut)[::-1, ::-1]       # lower triangle of L L^T
     c, info = lapack.dpotrf(s, lower=1, overwrite_a=1, clean=0)
     if info:
         raise RuntimeError(f"dpotrf of the Schur complement: info {info}")
