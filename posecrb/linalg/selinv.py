@@ -32,7 +32,6 @@ them with explicit zeros before the analysis.
 """
 from __future__ import annotations
 
-import contextlib
 import logging
 from types import ModuleType
 
@@ -61,10 +60,6 @@ def _kernels():
 # that carry nearly all the flops (3D grid of 21,952 poses: 344 of 11,239 supernodes, 99% of the
 # Z_SS Y products), so the Python loop over them costs milliseconds.
 _WIDE = 32
-# A wide supernode whose dense work (flops of dsymm + dpotri + dtrsm, about 2 s^2 w + w^3 for w
-# columns and s rows below) reaches this runs with every BLAS thread, a smaller one with one:
-# about 2 ms of one core, where two threads start to pay for their synchronisation.
-_THREADED_FLOPS = 1e8
 
 
 def _wide_supernode(k: ModuleType, indptr: np.ndarray, indices: np.ndarray, val: np.ndarray, bounds: np.ndarray,
@@ -112,29 +107,26 @@ def _takahashi_inplace(indptr: np.ndarray, indices: np.ndarray, val: np.ndarray)
     posbuf = np.empty(n, np.int64)
     wide = np.flatnonzero(np.diff(bounds) >= _WIDE)
     hi = bounds.size - 1
-    # BLAS threads only for the supernodes with enough work: most calls are small, where OpenBLAS
-    # threads only add synchronisation, and they collapse when another process holds the other
-    # core (2D grid of 10^4 poses on a loaded 2-core machine: the wide supernodes' calls take
-    # 0.66 s with two threads, 0.03 s with one); the few near the root carry nearly all the flops.
+    # One BLAS thread (numpy's/scipy's own OpenBLAS): the calls are many and mostly small, where
+    # OpenBLAS threads only add synchronisation, and its threads collapse when another process
+    # holds a core (2D grid of 10^4 poses on a loaded 2-core machine: the wide supernodes' calls
+    # take 0.66 s with two threads, 0.03 s with one; 2D grid of 30,276 poses, load average 7: the
+    # whole inversion 4.0-15.1 s with two threads, 0.87-0.94 s with one). The factorization before
+    # it (CHOLMOD's BLAS) keeps every core.
     import scipy.linalg.blas  # noqa: F401, PLC0415 -- loads scipy's BLAS before its threads are set
 
     from .threads import python_blas  # noqa: PLC0415
 
-    blas = python_blas()
-    width = np.diff(bounds)
-    below = indptr[bounds[:-1] + 1] - indptr[bounds[:-1]] - width
-    for sn in [*wide[::-1].tolist(), -1]:
-        status = k._takahashi_range(indptr, indices, val, bounds, col2sn, hi, sn + 1, posbuf)
-        if status:
-            return f"Cholesky pattern not closed at column {status - 1}"
-        if sn >= 0:
-            w, s = float(width[sn]), float(below[sn])
-            threaded = 2.0 * s * s * w + w ** 3 >= _THREADED_FLOPS
-            with contextlib.nullcontext() if threaded else blas.limit(limits=1):
+    with python_blas().limit(limits=1):
+        for sn in [*wide[::-1].tolist(), -1]:
+            status = k._takahashi_range(indptr, indices, val, bounds, col2sn, hi, sn + 1, posbuf)
+            if status:
+                return f"Cholesky pattern not closed at column {status - 1}"
+            if sn >= 0:
                 why = _wide_supernode(k, indptr, indices, val, bounds, col2sn, sn, posbuf)
-            if why:
-                return why
-        hi = sn
+                if why:
+                    return why
+            hi = sn
     return None
 
 
