@@ -26,15 +26,21 @@ def test_python_blas_is_the_vendored_one_when_cholmod_has_its_own():
         assert chosen == {i["filepath"] for i in infos}
 
 
-def test_python_blas_single_threaded_restores():
+def test_solver_threads_and_factorization_threads_restore():
     before = _blas_threads()
-    with threads.python_blas_single_threaded():
-        inside = _blas_threads()
-        for c in threads.python_blas().lib_controllers:
-            assert inside[c.filepath] == 1
-        others = set(before) - {c.filepath for c in threads.python_blas().lib_controllers}
-        assert all(inside[p] == before[p] for p in others)
+    cholmod = {c.filepath for c in threads.cholmod_blas().lib_controllers}
+    n = threads.cholmod_threads()
+    with threads.solver_threads(n):
+        assert set(_blas_threads().values()) == {1}
+        with threads.factorization_threads():
+            inside = _blas_threads()
+            assert all(inside[p] == (n if p in cholmod else 1) for p in inside)
+        assert set(_blas_threads().values()) == {1}
     assert _blas_threads() == before
+    with threads.solver_threads(1), threads.factorization_threads():
+        assert set(_blas_threads().values()) == {1}
+    with threads.factorization_threads():        # outside the solver: nothing changes
+        assert _blas_threads() == before
 
 
 def _worker_threads() -> list[int]:

@@ -18,11 +18,15 @@ backward error (condition number x eps), which covers any blocking.
 from __future__ import annotations
 
 import contextlib
+import contextvars
 import functools
 import os
 import sys
 from collections.abc import Iterator
 from typing import Any
+
+# Threads of CHOLMOD's BLAS inside ``factorization_threads`` (None: leave them as they are).
+_FACTOR_THREADS: contextvars.ContextVar[int | None] = contextvars.ContextVar("factor_threads", default=None)
 
 # Modules that load a BLAS or OpenMP library: the controller is rebuilt when one more is imported.
 _LOADERS = ("numpy", "scipy.linalg", "sksparse.cholmod", "numba")
@@ -58,10 +62,39 @@ def python_blas() -> Any:
     return ctl.select(user_api="blas")
 
 
+def cholmod_blas() -> Any:
+    """The BLAS libraries that are not numpy's/scipy's own (``python_blas``): CHOLMOD's."""
+    ctl = controller()
+    own = {c.filepath for c in python_blas().lib_controllers}
+    return ctl.select(filepath=[c.filepath for c in ctl.lib_controllers
+                                if c.user_api == "blas" and c.filepath not in own])
+
+
+def cholmod_threads() -> int:
+    """How many threads CHOLMOD's BLAS has now (1 when it cannot be told apart)."""
+    return max([c.num_threads for c in cholmod_blas().lib_controllers], default=1)
+
+
 @contextlib.contextmanager
-def python_blas_single_threaded() -> Iterator[None]:
-    """numpy's and scipy's BLAS at one thread inside; CHOLMOD's keeps its threads."""
-    with python_blas().limit(limits=1):
+def solver_threads(factor_threads: int) -> Iterator[None]:
+    """Every BLAS at one thread inside, except CHOLMOD's in ``factorization_threads`` blocks,
+    which get ``factor_threads``."""
+    token = _FACTOR_THREADS.set(factor_threads)
+    try:
+        with controller().limit(limits=1, user_api="blas"):
+            yield
+    finally:
+        _FACTOR_THREADS.reset(token)
+
+
+@contextlib.contextmanager
+def factorization_threads() -> Iterator[None]:
+    """CHOLMOD's BLAS at the count ``solver_threads`` chose, for one factorization."""
+    n = _FACTOR_THREADS.get()
+    if n is None or n <= 1:
+        yield
+        return
+    with cholmod_blas().limit(limits=n):
         yield
 
 

@@ -18,7 +18,8 @@ import numpy as np
 
 from ..core.errors import NotPositiveDefinite, PosecrbError, UsageError
 from ..core.graph import PoseGraph
-from ..linalg.threads import python_blas_single_threaded
+from ..linalg.ordering import AUTO_ND_MIN_POSES
+from ..linalg.threads import cholmod_threads, solver_threads
 from .chordal import chordal_rotations
 from .problem import Problem
 from .rounding import anchor_estimate, recover_translations, round_rotations, se_objective
@@ -119,13 +120,15 @@ def solve(graph: PoseGraph, options: SolverOptions | None = None, **keywords: An
 
     ``solve(graph, SolverOptions(anchor=3, rmax=8))``; the keyword form ``solve(graph, anchor=3)``
     is the same call (``SolverOptions.from_keywords``: an unknown name is a UsageError) and may
-    refine ``options``. numpy's and scipy's BLAS run single-threaded inside: their work is many
-    small dense products, for which OpenBLAS's thread start-up costs more than it saves. CHOLMOD's
-    BLAS, which does the factorizations' dense work, keeps every core (posecrb.linalg.threads).
+    refine ``options``. BLAS runs single-threaded inside: the work is many small dense products
+    and triangular solves, for which OpenBLAS's threads cost more than they save. The exception
+    is the factorizations of M_red of 3D graphs with at least ``AUTO_ND_MIN_POSES`` poses, whose
+    dense separators take CHOLMOD's BLAS threads as they were at the call (posecrb.linalg.threads).
     """
     if keywords or options is None:
         options = SolverOptions.from_keywords(options, **keywords)
-    with python_blas_single_threaded():
+    large = graph.dim == 3 and graph.n >= AUTO_ND_MIN_POSES
+    with solver_threads(cholmod_threads() if large else 1):
         return _solve(graph, **options.keywords())
 
 
