@@ -15,9 +15,10 @@ exponent of time (and memory) against poses. `--repeat 1` is passed to bounds so
 once (its default, auto, computes a stage once only when it takes >= 1 s). Every BLAS pool keeps
 all cores unless --threads T caps them.
 
-Flop limit (--flops, on by default): per grid, CHOLMOD's flop count of the FIM factorization with
+Flop limit (on unless --no-flops): per grid, CHOLMOD's flop count of the FIM factorization with
 the ordering posecrb uses (posecrb.linalg.ordering, auto), through benchmarks/_cholmod.py, and
-once per run the dgemm rate of all cores of the system BLAS (CHOLMOD's); the FIM log-det phase of
+right before the grid's runs the dgemm rate of all cores of the system BLAS (CHOLMOD's); the FIM
+log-det phase of
 `fim` and `bounds vertices` is printed as a multiple of flops / rate. --plot FILE draws time and
 peak memory against poses (log-log, one line per command, 2D and 3D), --json FILE keeps the
 results, --markdown prints the table for docs/performance.md.
@@ -267,6 +268,8 @@ def main(argv: list[str] | None = None) -> int:
             programs, skipped = {}, []
             flops = ({} if args.no_flops or not {"fim", "bounds-vertices"} & set(commands)
                      else run_child("flops", path, env))
+            if flops:   # the rate right before this grid's runs: the machine's load drifts
+                rate = run_child("dgemm", None, env)
             limit = flops["flops"] / (rate["dgemm_all"] * 1e9) if "flops" in flops and "dgemm_all" in rate else None
             for c in commands:
                 hist = results.get((d, c), [])
@@ -292,7 +295,7 @@ def main(argv: list[str] | None = None) -> int:
                         ld = json.loads(r.stdout).get("times", {}).get("fim_logdet")
                         if isinstance(ld, (int, float)):
                             rec.update(fim_logdet=ld, limit=limit, ratio=ld / limit, flops=flops["flops"],
-                                       ordering=flops["ordering"])
+                                       ordering=flops["ordering"], dgemm=rate["dgemm_all"])
                             text += (f"; FIM log-det {ld / limit:.2f}x the limit ({flops['flops'] / 1e9:.1f} Gflop, "
                                      f"{flops['ordering']})")
                     if r.ok:
@@ -317,7 +320,7 @@ def main(argv: list[str] | None = None) -> int:
         b = fit_exponent(ns, [h[2] for h in hist])
         print(f"{d:3d} {c:16s} {len(hist):5d} {a:9.2f} {a_in:6.2f} {b:8.2f}")
     note = (f"Limit = CHOLMOD's flops of the FIM factorization / the dgemm rate of all {rate['cores']} cores "
-            f"({rate['dgemm_all']:.1f} GF/s, system BLAS, measured in this run)." if "dgemm_all" in rate else "")
+            "(system BLAS, measured right before each grid's runs)." if "dgemm_all" in rate else "")
     if note:
         print(note)
     if args.markdown:
