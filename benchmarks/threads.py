@@ -3,11 +3,10 @@
 On a noisy grid (benchmarks/grids.py; default the 2D grid of 30,276 poses), alternating the two
 settings run by run, each in a fresh process:
 
-  solve    posecrb.solver.solve(load(FILE)) in-process, with CHOLMOD's BLAS at 1 thread
-           (OPENBLAS_NUM_THREADS=1) or at every core: wall and CPU seconds, Hessian-vector
-           products and the objective (the solver keeps numpy's/scipy's BLAS at one thread
-           either way, and CHOLMOD's too except in the M_red factorizations of large 3D graphs;
-           this measures what the environment's thread count does to it)
+  solve    posecrb.solver.solve(load(FILE)) in-process: "1" as the library runs it (every BLAS at
+           one thread, except CHOLMOD's in the M_red factorizations of 3D graphs >= 10,000
+           poses), "all" with CHOLMOD's BLAS on every core throughout (numpy's/scipy's still at
+           one thread): wall and CPU seconds, Hessian-vector products and the objective
   selinv   the selected inversion (posecrb.linalg.selinv.SelectedInverse) of the FIM at the
            file's vertices, with numpy's/scipy's OpenBLAS at 1 thread or at every core (after a
            warm-up call that compiles the kernels)
@@ -36,7 +35,16 @@ from posecrb.io import load
 g = load(path)
 out = {}
 if what == "solve":
-    from posecrb.solver.solve import solve
+    import contextlib
+    import posecrb.solver.solve as ps
+    from posecrb.linalg import threads as th
+    if threads == "all":
+        @contextlib.contextmanager
+        def python_blas_only(n):
+            with th.python_blas().limit(limits=1):
+                yield
+        ps.solver_threads = python_blas_only
+    solve = ps.solve
     t, c = time.perf_counter(), time.process_time()
     r = solve(g)
     out = {"wall": time.perf_counter() - t, "cpu": time.process_time() - c, "objective": r.objective,
@@ -83,7 +91,7 @@ def main(argv: list[str] | None = None) -> int:
         runs: dict[str, list[dict]] = {"1": [], "all": []}
         for k in range(args.rounds):
             for threads in (("1", "all") if k % 2 == 0 else ("all", "1")):
-                env = child_env(threads=1 if threads == "1" and what != "selinv" else None)
+                env = child_env(threads=1 if threads == "1" and what == "logdet" else None)
                 load = os.getloadavg()[0]
                 r = subprocess.run([sys.executable, "-c", CHILD, what, str(path), threads], env=env,
                                    capture_output=True, text=True, check=False)
