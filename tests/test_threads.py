@@ -62,3 +62,42 @@ def test_controller_cached_until_a_loader_is_imported(monkeypatch):
     else:
         monkeypatch.setitem(sys.modules, "numba", None)
     assert threads.controller() is not a
+
+
+def test_factorizations_threaded_only_for_large_3d_block_matrices():
+    """CHOLMOD's BLAS keeps its threads only in the factorizations ``threaded_matrix`` names; every
+    other factorization runs it at one thread, and the value is the same either way."""
+    import scipy.sparse as sp
+
+    from posecrb.linalg import ordering as ordmod
+    from posecrb.linalg.cholesky import SymbolicCholesky
+
+    assert ordmod.threaded_matrix(3, ordmod.AUTO_ND_MIN_POSES, "fim")
+    assert not ordmod.threaded_matrix(3, ordmod.AUTO_ND_MIN_POSES, "lb")
+    assert not ordmod.threaded_matrix(3, ordmod.AUTO_ND_MIN_POSES - 1, "ub")
+    assert not ordmod.threaded_matrix(2, 10 ** 6, "solver")
+    seen = []
+    real = threads.cholmod_single_threaded
+
+    def spy():
+        seen.append(True)
+        return real()
+
+    a = sp.random(60, 60, density=0.1, random_state=1)
+    a = (a @ a.T + 60 * sp.identity(60)).tocsc()
+    import posecrb.linalg.cholesky as chol
+    orig = chol.cholmod_single_threaded
+    chol.cholmod_single_threaded = spy
+    try:
+        ld1 = SymbolicCholesky(a).factor_logdet(a)[1]
+        assert seen == [True]
+        ld2 = SymbolicCholesky(a, threaded=True).factor_logdet(a)[1]
+        assert seen == [True]
+    finally:
+        chol.cholmod_single_threaded = orig
+    # the same factorization; a different BLAS blocking may change its rounding, within the
+    # backward error of a Cholesky log-det: n eps cond(a) (times a margin of 10)
+    import numpy as np
+
+    tol = 10 * a.shape[0] * np.finfo(float).eps * np.linalg.cond(a.toarray())
+    assert abs(ld1 - ld2) <= tol

@@ -92,6 +92,15 @@ def auto_ordering(dim: int, poses: int, matrix: str) -> str:
     return "amd"
 
 
+def threaded_matrix(dim: int, poses: int, matrix: str) -> bool:
+    """Whether ``matrix`` of a graph is factored with CHOLMOD's BLAS on its threads: the block
+    matrices of 3D graphs with at least ``AUTO_ND_MIN_POSES`` poses, whose nested-dissection
+    separators are dense blocks of thousands of rows (posecrb.linalg.threads)."""
+    if matrix not in MATRICES:
+        raise UsageError(f"matrix must be one of {MATRICES}, got {matrix!r}")
+    return dim == 3 and matrix != "lb" and poses >= AUTO_ND_MIN_POSES
+
+
 def resolve_ordering(ordering: str, *, dim: int, poses: int, matrix: str) -> OrderingChoice:
     """``ordering`` (``ORDERINGS``) made concrete for one matrix of a graph."""
     check_ordering(ordering)
@@ -164,15 +173,16 @@ def ordered_symbolic(a: sp.spmatrix, ordering: str, *, dim: int, poses: int, mat
         n_poses = rows
     n_poses = int(n_poses if n_poses is not None else (int(np.max(pose_of_row)) + 1 if rows else 0))
     choice = resolve_ordering(ordering, dim=dim, poses=poses, matrix=matrix)
+    threaded = threaded_matrix(dim, poses, matrix)
     if rows == 0 or choice.method == "amd":
-        return SymbolicCholesky(a, mode=mode, ordering_method="amd"), choice
+        return SymbolicCholesky(a, mode=mode, ordering_method="amd", threaded=threaded), choice
     if choice.method == "colamd":
-        return SymbolicCholesky(a, mode=mode, permutation=colamd_permutation(a)), choice
+        return SymbolicCholesky(a, mode=mode, permutation=colamd_permutation(a), threaded=threaded), choice
     if n_poses == rows and pose_adjacency is None:
-        return SymbolicCholesky(a, mode=mode, ordering_method=choice.method), choice
+        return SymbolicCholesky(a, mode=mode, ordering_method=choice.method, threaded=threaded), choice
     adj = pose_adjacency if pose_adjacency is not None else pose_adjacency_of(a, pose_of_row, n_poses)
     perm = expand_permutation(pose_permutation(adj, choice.method), pose_of_row)
-    return SymbolicCholesky(a, mode=mode, permutation=perm), choice
+    return SymbolicCholesky(a, mode=mode, permutation=perm, threaded=threaded), choice
 
 
 def block_cholesky(a: sp.spmatrix, ordering: str, *, dim: int, poses: int, matrix: str, block: int,

@@ -1,11 +1,23 @@
-"""Which BLAS runs with how many threads (docs/performance.md#threads).
+"""Which BLAS runs with how many threads (docs/performance.md, "Threads").
 
 Two BLAS libraries are usually loaded: the one CHOLMOD links (the system's ``libblas.so.3``,
 the threaded OpenBLAS that ``make install`` installs), which does the supernodal factorizations'
 dense work, and the private copy numpy and scipy bring in their wheels (a ``<package>.libs``
-directory), which does posecrb's own small dense products. The factorizations are where the
-flops are, so CHOLMOD's BLAS keeps every core; the many small products of the solver run with
-one thread, where OpenBLAS's thread synchronisation costs more than it saves.
+directory), which does posecrb's own small dense products.
+
+* CHOLMOD's BLAS keeps its threads (every core by default) in the factorizations of the block
+  matrices (FIM, ub, CRLB, the solver's M_red) of 3D graphs with at least 10,000 poses, whose
+  nested-dissection separators are dense blocks of thousands of rows: there two threads pay
+  (``SymbolicCholesky(threaded=True)``, set by ``posecrb.linalg.ordering.ordered_symbolic``).
+* Every other factorization runs CHOLMOD's BLAS at one thread: small supernodes, where threads
+  only add synchronisation and collapse when another process holds a core (FIM of the 2D grid of
+  30,276 poses at load average 7: 0.64-1.01 s with one thread, 2.5-3.8 s with two;
+  benchmarks/threads.py).
+* The solver runs every BLAS at one thread (many small products and triangular solves), except
+  CHOLMOD's in the M_red factorizations of those large 3D graphs (``solver_threads``,
+  ``factorization_threads``).
+* numpy's/scipy's OpenBLAS stays at one thread in the solver and the selected inversion: its
+  threads collapse under load (posecrb.linalg.selinv).
 
 Process pools run each worker with every pool at one thread (``single_threaded_worker``), so
 ``--jobs`` workers never oversubscribe the cores.
@@ -73,6 +85,14 @@ def cholmod_blas() -> Any:
 def cholmod_threads() -> int:
     """How many threads CHOLMOD's BLAS has now (1 when it cannot be told apart)."""
     return max([c.num_threads for c in cholmod_blas().lib_controllers], default=1)
+
+
+def cholmod_single_threaded() -> Any:
+    """CHOLMOD's BLAS at one thread inside (a context manager; nothing to do when it has one)."""
+    ctl = cholmod_blas()
+    if all(c.num_threads == 1 for c in ctl.lib_controllers):
+        return contextlib.nullcontext()
+    return ctl.limit(limits=1)
 
 
 @contextlib.contextmanager
