@@ -11,7 +11,8 @@ settings run by run, each in a fresh process:
            file's vertices, with numpy's/scipy's OpenBLAS at 1 thread or at every core (after a
            warm-up call that compiles the kernels)
   logdet   the FIM log-det (posecrb.models.paper.fim: analysis + factorization) with CHOLMOD's
-           BLAS at 1 thread or at every core
+           BLAS at 1 thread or at every core (SymbolicCholesky's ``threaded``, which the library
+           sets only for the block matrices of 3D graphs >= 10,000 poses)
 
 Usage: python benchmarks/threads.py [--dim 2] [--poses 30000] [--rounds 2] [--what solve,selinv,logdet]
 """
@@ -54,7 +55,9 @@ else:
     fim = paper_fim(g, g.vertex_rot, g.vertex_trans, 0, "eq59", variant="consistent")
     if what == "logdet":
         t, c = time.perf_counter(), time.process_time()
-        f = fim_symbolic(fim).factor(fim.matrix)
+        sym = fim_symbolic(fim)
+        sym.threaded = threads == "all"
+        f = sym.factor(fim.matrix)
         out = {"wall": time.perf_counter() - t, "cpu": time.process_time() - c}
     else:
         import scipy.linalg.blas
@@ -91,7 +94,7 @@ def main(argv: list[str] | None = None) -> int:
         runs: dict[str, list[dict]] = {"1": [], "all": []}
         for k in range(args.rounds):
             for threads in (("1", "all") if k % 2 == 0 else ("all", "1")):
-                env = child_env(threads=1 if threads == "1" and what == "logdet" else None)
+                env = child_env(threads=None)
                 load = os.getloadavg()[0]
                 r = subprocess.run([sys.executable, "-c", CHILD, what, str(path), threads], env=env,
                                    capture_output=True, text=True, check=False)
