@@ -37,7 +37,8 @@ g = load(path)
 out = {}
 if what == "solve":
     import contextlib
-    import posecrb.solver.solve as ps
+    import posecrb.solver.solve
+    ps = sys.modules["posecrb.solver.solve"]   # the package exports a function of the same name
     from posecrb.linalg import threads as th
     if threads == "all":
         @contextlib.contextmanager
