@@ -1,5 +1,6 @@
 # Set-up and main jobs. `make run` and `make test` first install what is missing:
-#  * with apt-get (through sudo only when not root): libsuitesparse-dev and libopenblas0-serial; for a
+#  * with apt-get (through sudo only when not root): libsuitesparse-dev and libopenblas0-pthread (the
+#    threaded OpenBLAS: CHOLMOD's supernodal factorizations use every core); for a
 #    Debian-packaged interpreter its venv and header packages (python3.X-venv, python3.X-dev); gcc when
 #    scikit-sparse has to be compiled and there is no C compiler;
 #  * the virtual environment .venv, made from $(PYTHON), with every runtime and development dependency
@@ -51,7 +52,7 @@ system:
 	missing=""
 	has() { dpkg-query -W -f='$${Status}' "$$1" 2>/dev/null | grep -q "ok installed"; }
 	[ -f /usr/include/suitesparse/cholmod.h ] || missing="$$missing libsuitesparse-dev"
-	has libopenblas0-serial || missing="$$missing libopenblas0-serial"
+	has libopenblas0-pthread || missing="$$missing libopenblas0-pthread"
 	if dpkg -S "$$base" >/dev/null 2>&1; then
 	  $(PYTHON) -c 'import ensurepip' 2>/dev/null || missing="$$missing python$$ver-venv"
 	  $(PYTHON) -c 'import os, sys, sysconfig; sys.exit(not os.path.isfile(os.path.join(sysconfig.get_paths()["include"], "Python.h")))' \

@@ -10,7 +10,11 @@ calls are invisible to cProfile: CHOLMOD's solves count in the own time of their
 overhead inflates Python-heavy stages; the wall time of the same command unprofiled is printed
 next to it, and the phase times posecrb reports itself.
 
-Usage: python benchmarks/profile_solve.py [--top N] [--sesync-compat] [--threads T] NAME|FILE ...
+--cpu times with the process's CPU time instead of the wall clock (time.process_time): on a
+machine shared with other jobs their share of the cores then does not count (only meaningful with
+one thread, the default).
+
+Usage: python benchmarks/profile_solve.py [--top N] [--sesync-compat] [--threads T] [--cpu] NAME|FILE ...
 """
 from __future__ import annotations
 
@@ -25,11 +29,11 @@ from pathlib import Path
 from _common import child_env, data_dir, posecrb_command, print_header, run_process
 
 DRIVER = """
-import cProfile, sys
-prof = cProfile.Profile()
+import cProfile, sys, time
+prof = cProfile.Profile(time.process_time) if sys.argv[2] == "cpu" else cProfile.Profile()
 prof.enable()
 from posecrb.cli import main
-code = main(sys.argv[2:])
+code = main(sys.argv[3:])
 prof.disable()
 prof.dump_stats(sys.argv[1])
 """
@@ -85,6 +89,7 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--top", type=int, default=15)
     ap.add_argument("--sesync-compat", action="store_true")
     ap.add_argument("--threads", type=int, default=1)
+    ap.add_argument("--cpu", action="store_true", help="profile CPU time (time.process_time), not wall time")
     args = ap.parse_args(argv)
     d = data_dir(args.data_dir)
     env = child_env(args.threads)
@@ -99,7 +104,8 @@ def main(argv: list[str] | None = None) -> int:
         js = json.loads(plain.stdout) if plain.ok else {}
         with tempfile.TemporaryDirectory() as tmp:
             prof = Path(tmp) / "solve.prof"
-            proc = subprocess.run([sys.executable, "-c", DRIVER, str(prof), *cli], env=env,
+            clock = "cpu" if args.cpu else "wall"
+            proc = subprocess.run([sys.executable, "-c", DRIVER, str(prof), clock, *cli], env=env,
                                   capture_output=True, text=True, check=False)
             if not prof.exists():
                 print(f"{name}: profiling failed: {proc.stderr.strip()[-300:]}")
@@ -111,7 +117,7 @@ def main(argv: list[str] | None = None) -> int:
               f"{js.get('iterations')} TR iterations, {js.get('hessian_vector_products')} HVPs; "
               f"unprofiled whole process {plain.wall:.3f} s; posecrb's own phases: "
               + ", ".join(f"{k} {v:.3f}" for k, v in t.items() if isinstance(v, (int, float))))
-        print(f"   profiled total {total:.3f} s")
+        print(f"   profiled total {total:.3f} s ({'CPU' if args.cpu else 'wall'} time)")
         print(f"   {'stage':48s} {'cum s':>8s} {'share':>6s} {'calls':>7s}")
         for label, ct, calls in stage_times(stats):
             if calls:

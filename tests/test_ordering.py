@@ -10,6 +10,7 @@ from posecrb.linalg import ordering as ordmod
 from posecrb.linalg.cholesky import SymbolicCholesky
 from posecrb.linalg.ordering import (
     AUTO_ND_MIN_POSES,
+    AUTO_ND_MIN_POSES_2D,
     ORDERINGS,
     anchored_logdet,
     auto_ordering,
@@ -173,15 +174,17 @@ def test_expand_permutation_for_the_blocks_layout():
 
 # ---------------------------------------------------------------- the rule of ``auto``
 def test_auto_rule():
-    assert AUTO_ND_MIN_POSES == 10000
+    assert (AUTO_ND_MIN_POSES, AUTO_ND_MIN_POSES_2D) == (10000, 50000)
     for matrix in ("lb", "ub", "fim", "crlb", "solver"):
-        assert auto_ordering(2, 10 ** 6, matrix) == "amd"              # 2D: always AMD
-        assert auto_ordering(3, AUTO_ND_MIN_POSES - 1, matrix) == "amd"  # small 3D
+        assert auto_ordering(2, AUTO_ND_MIN_POSES_2D - 1, matrix) == "amd"  # 2D up to 5*10^4 poses
+        assert auto_ordering(3, AUTO_ND_MIN_POSES - 1, matrix) == "amd"     # small 3D
     assert auto_ordering(3, 10 ** 5, "lb") == "amd"                      # the Laplacians: AMD
+    assert auto_ordering(2, 10 ** 6, "lb") == "amd"
     for matrix in ("ub", "fim", "crlb", "solver"):
-        assert auto_ordering(3, AUTO_ND_MIN_POSES, matrix) == "nesdis"  # large 3D block matrices
+        assert auto_ordering(3, AUTO_ND_MIN_POSES, matrix) == "metis"    # large block matrices
+        assert auto_ordering(2, AUTO_ND_MIN_POSES_2D, matrix) == "metis"
     c = resolve_ordering("auto", dim=3, poses=21952, matrix="fim")
-    assert (c.method, c.pose_level, str(c)) == ("nesdis", True, "nesdis (pose graph)")
+    assert (c.method, c.pose_level, str(c)) == ("metis", True, "metis (pose graph)")
     c = resolve_ordering("colamd", dim=3, poses=21952, matrix="fim")
     assert (c.method, c.pose_level) == ("colamd", False)
     from posecrb.core.errors import UsageError
@@ -199,12 +202,17 @@ def test_auto_reports_its_choice_small_and_large(monkeypatch):
     # the same small graph taken as "large": the pose-level nested dissection path, same values
     monkeypatch.setattr(ordmod, "AUTO_ND_MIN_POSES", 10)
     b2 = compute_bounds(g)
-    assert b2.ordering == {"lb": "amd", "ub": "nesdis (pose graph)"}
-    assert str(fim_symbolic_choice(fim)[1]) == "nesdis (pose graph)"
+    assert b2.ordering == {"lb": "amd", "ub": "metis (pose graph)"}
+    assert str(fim_symbolic_choice(fim)[1]) == "metis (pose graph)"
     ref = dense_reference(g, 0)
     assert b2.ub == pytest.approx(ref["ub"], abs=ref["tol"]["ub"])
     g2 = _graph(2, 60)
     assert compute_bounds(g2).ordering == {"lb": "amd", "ub": "amd"}
+    monkeypatch.setattr(ordmod, "AUTO_ND_MIN_POSES_2D", 10)     # a 2D graph taken as large
+    b3 = compute_bounds(g2)
+    assert b3.ordering == {"lb": "amd", "ub": "metis (pose graph)"}
+    ref2 = dense_reference(g2, 0)
+    assert b3.ub == pytest.approx(ref2["ub"], abs=ref2["tol"]["ub"])
 
 
 def test_lb_laplacian_pattern_is_the_pose_graph():
@@ -244,3 +252,21 @@ def test_bounds_and_fim_json_say_which_ordering(tmp_path, ordering):
     row = json.loads(res.stdout)
     row = row[0] if isinstance(row, list) else row
     assert row["ordering"] == {"requested": ordering, "fim": want}
+
+
+
+@pytest.mark.parametrize("dim", [2, 3])
+def test_solver_with_large_graph_ordering_same_optimum(monkeypatch, dim):
+    """The solver's M_red under ``auto``'s large-graph rule (pose-level nested dissection) reaches
+    the same certified optimum: the ordering changes the factor's rounding, not the iterates beyond
+    the solver's stopping tolerance (relative decrease 1e-9; regress compares objectives to 1e-6)."""
+    from posecrb.solver.solve import solve
+
+    g = _graph(dim, 91, n=60)
+    ref = solve(g)
+    monkeypatch.setattr(ordmod, "AUTO_ND_MIN_POSES", 10)
+    monkeypatch.setattr(ordmod, "AUTO_ND_MIN_POSES_2D", 10)
+    assert ordmod.auto_ordering(dim, g.n, "solver") == "metis"
+    res = solve(g)
+    assert ref.certified and res.certified
+    assert res.objective == pytest.approx(ref.objective, rel=1e-6)

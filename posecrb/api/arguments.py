@@ -18,7 +18,7 @@ import numpy as np
 
 from ..core.errors import ArgumentError, UsageError
 from ..core.graph import PoseGraph
-from ..core.timing import timed
+from ..core.timing import Repeat, measure
 from ..datasets import search
 from ..io import load as read_graph
 from ..io import parse_bytes, parse_text
@@ -99,14 +99,29 @@ def resolve_source(source: Any, data_dir: Any = None) -> str:
 
 
 def load_graph(source: Any, data_dir: Any = None, *, quaternions: str = "normalize",
-               repeat: int = 1) -> tuple[PoseGraph, dict[str, float]]:
+               repeat: Repeat = 1) -> tuple[PoseGraph, dict[str, float]]:
     """``(graph, times)``: ``source`` itself when it is a ``PoseGraph`` (no time), else the file
-    it names read with ``quaternions``, and ``{"parse": seconds}`` (median of ``repeat``)."""
+    it names read with ``quaternions``, and ``{"parse": seconds}`` (``load_graph_timed``)."""
+    graph, times, _ = load_graph_timed(source, data_dir, quaternions=quaternions, repeat=repeat)
+    return graph, times
+
+
+def load_graph_timed(source: Any, data_dir: Any = None, *, quaternions: str = "normalize",
+                     repeat: Repeat = 1) -> tuple[PoseGraph, dict[str, float], dict[str, int]]:
+    """``(graph, times, runs)`` as ``load_graph``; the parse time is the median of ``runs["parse"]``
+    runs by the timing protocol (``posecrb.core.timing.measure``)."""
     if isinstance(source, PoseGraph):
-        return source, {}
+        return source, {}, {}
     path = resolve_source(source, data_dir)
-    graph, t_parse = timed(lambda: read_graph(path, quaternions=quaternions), repeat=repeat)
-    return graph, {"parse": t_parse}
+    parsed = measure(lambda: read_graph(path, quaternions=quaternions), repeat)
+    return parsed.value, {"parse": parsed.seconds}, {"parse": parsed.runs}
+
+
+def repeat_setting(value: Any) -> Repeat:
+    """``repeat``: ``"auto"`` (the adaptive protocol) or a number of runs from 1 to 1000."""
+    if isinstance(value, str) and value == "auto":
+        return "auto"
+    return integer("repeat", value, 1, 1000)
 
 
 def parse_content(text: Any) -> PoseGraph:

@@ -204,7 +204,7 @@ def solve(source: Source, *, r0: int | None = None, rmax: int = 10, init: str = 
     return replace(res, times=times, saved=target)
 
 
-def bounds(source: Source, *, anchor: int | None = None, repeat: int = 1, rotation_weight: str = "eq59",
+def bounds(source: Source, *, anchor: int | None = None, repeat: int | str = 1, rotation_weight: str = "eq59",
            estimate: EstimateSpec = "solve", fim_variant: str | None = None, ordering: str = "auto",
            data_dir: str | os.PathLike[str] | None = None) -> BoundsResult:
     """D-optimality of a pose graph: the graph-only bounds on the FIM's log-det (the paper's
@@ -216,8 +216,11 @@ def bounds(source: Source, *, anchor: int | None = None, repeat: int = 1, rotati
         A graph, a path or a dataset name (see ``load``).
     anchor : int, optional
         The anchored pose id; default the smallest id.
-    repeat : int
-        Timing: warm up once, then the median of ``repeat`` runs (1: each step once).
+    repeat : int or "auto"
+        Timing of each stage (``times``; ``runs`` says how many runs each is the median of): 1,
+        each step once (the default here); K > 1, a warm-up, then the median of K runs;
+        ``"auto"`` (the command's default), one run when a stage takes 1 s or more, else a warm-up
+        and the median of the runs that fit in about 2 s (at most 5).
     rotation_weight : {"eq59", "table2"}
         3D rotation weight: eq. (59), or the empirical fit to the paper's printed Table II.
     estimate : "solve", "vertices", path, SolveResult, Estimate or None
@@ -257,11 +260,11 @@ def bounds(source: Source, *, anchor: int | None = None, repeat: int = 1, rotati
     from ..models.paper.fim import FIM_VARIANTS  # noqa: PLC0415 -- lazy: start-up time
 
     ids = _one_anchor(anchor)
-    repeat = arg.integer("repeat", repeat, 1, 1000)
+    repeat = arg.repeat_setting(repeat)
     arg.choice("rotation_weight", rotation_weight, ROTATION_WEIGHTS)
     variant = "consistent" if fim_variant is None else arg.choice("fim_variant", fim_variant, FIM_VARIANTS)
     arg.choice("ordering", ordering, ORDERINGS)
-    graph, times = arg.load_graph(source, data_dir, repeat=repeat)
+    graph, times, runs = arg.load_graph_timed(source, data_dir, repeat=repeat)
     idx = graph.anchor_index(ids[0] if ids else None)
     given = arg.resolve_estimate(graph, estimate) if arg.is_pose_object(estimate) else None
     spec = "none" if given is not None else arg.estimate_spec(estimate, allow_none=True)
@@ -269,10 +272,11 @@ def bounds(source: Source, *, anchor: int | None = None, repeat: int = 1, rotati
                                   estimate=spec, solver={"anchor": idx} if spec == "solve" else {},
                                   ordering=ordering)
     m = evaluate(graph, settings, estimate=given)
-    return _bounds_result(m, times, ordering)
+    return _bounds_result(m, times, runs, ordering)
 
 
-def _bounds_result(m: DatasetMetrics, times: dict[str, float], ordering: str) -> BoundsResult:
+def _bounds_result(m: DatasetMetrics, times: dict[str, float], runs: dict[str, int],
+                   ordering: str) -> BoundsResult:
     from ..models.paper.fim import trace_fim  # noqa: PLC0415 -- lazy: start-up time
     from .results import BoundsResult  # noqa: PLC0415 -- lazy: start-up time
 
@@ -280,19 +284,22 @@ def _bounds_result(m: DatasetMetrics, times: dict[str, float], ordering: str) ->
     est = m.estimate
     extra: dict[str, Any] = {}
     all_times = {**times, **b.times}
+    all_runs: dict[str, int] = {**runs, **b.runs}
     if est is not None and m.fim is not None:
         extra = {"fim_logdet": m.fim_logdet, "fim_logdet_status": m.fim_logdet_status,
                  "trace_fim": trace_fim(m.fim), "fim_variant": m.fim.variant, "estimate": est}
         all_times.update(fim_build=m.times["fim_build"], fim_logdet=m.times["fim_logdet"])
+        all_runs.update(fim_build=m.runs["fim_build"], fim_logdet=m.runs["fim_logdet"])
         if est.solve_time is not None:
             all_times["solve"] = est.solve_time
+            all_runs["solve"] = 1
     return BoundsResult(
         dataset=g.name, path=g.path, sha256=g.sha256, dim=g.dim, poses=g.n, edges=g.m, components=g.n_components,
         anchor=b.anchor_id, rotation_weight=b.rotation_model, lb=b.lb, ub=b.ub, ub_status=b.ub_status,
         ub_lambda=b.ub_lambda, lambda_inf=b.lambda_inf, lambda_min_rot=b.lambda_min_rot,
         lambda_min_rot_status=b.lambda_min_rot_status, lambda_min_rot_lower=b.lambda_min_rot_lower,
         gap_bound=b.gap_bound, gap_bound_status=b.gap_bound_status, t_opt_graph=b.t_opt_graph,
-        t_opt_approx=b.t_opt_approx, total_degree=b.total_degree, times=all_times,
+        t_opt_approx=b.t_opt_approx, total_degree=b.total_degree, times=all_times, runs=all_runs,
         ordering={"requested": ordering, **m.ordering}, **extra)
 
 

@@ -57,6 +57,8 @@ class BoundsResult(Result):
         Sum of the degrees of the free poses.
     times : dict of str to float
         Seconds per step (medians of ``repeat`` runs).
+    runs : dict of str to int
+        Per key of ``times``: how many runs its median is of.
     fim_logdet, trace_fim : float or None
         log det and trace of the FIM at the estimate (None without one). ``fim_logdet_status``
         is a warning when the log-det's rounding-error bound (``posecrb.linalg.accuracy``)
@@ -101,6 +103,7 @@ class BoundsResult(Result):
     t_opt_approx: float
     total_degree: int
     times: dict[str, float] = field(default_factory=dict)
+    runs: dict[str, int] = field(default_factory=dict)
     fim_logdet: float | None = optional_field()
     fim_logdet_status: Status = status_field("FIM log-det")
     trace_fim: float | None = optional_field()

@@ -10,7 +10,7 @@ from typing import TYPE_CHECKING, Any
 import click
 
 from ..core.errors import UsageError
-from ..core.timing import timed
+from ..core.timing import AUTO, Repeat, Timing, measure
 from ..datasets import search as datasets
 from .paths import InputDir, InputFile
 
@@ -116,17 +116,45 @@ anchor_option = click.option(
     "--anchor", type=POSE_ID, default=None,
     help="Pose id (as in the file) anchored to the origin; default: the smallest id.")
 
+
+class RepeatCount(click.ParamType):
+    """``auto`` or a whole number of timed runs from 1 to 1000."""
+
+    name = "auto|K"
+
+    def convert(self, value, param, ctx):
+        if value == AUTO:
+            return AUTO
+        if isinstance(value, int) and not isinstance(value, bool):
+            text = str(value)
+        else:
+            text = str(value).strip()
+        if text.lower() == AUTO:
+            return AUTO
+        if re.fullmatch(r"[0-9]+", text) is None or not 1 <= int(text) <= 1000:
+            self.fail(f"{value!r} is neither 'auto' nor a whole number from 1 to 1000", param, ctx)
+        return int(text)
+
+
 repeat_option = click.option(
-    "--repeat", type=PlainInt(1, 1000), default=3, show_default=True,
-    help="Timing: warm-up once, then the median of K runs.")
+    "--repeat", type=RepeatCount(), default=AUTO, show_default=True,
+    help="Timing of each stage: auto = one run when it takes >= 1 s, else a warm-up and the median of "
+         "the runs that fit in about 2 s (at most 5); K = a warm-up, then the median of K runs; "
+         "1 = one run. The JSON's runs says how many runs each time is the median of.")
 
 
-def load_dataset(name_or_path: str, data_dir: str | None = None, repeat: int = 1) -> tuple[PoseGraph, float]:
+def load_dataset(name_or_path: str, data_dir: str | None = None, repeat: Repeat = 1) -> tuple[PoseGraph, float]:
     """Resolve a path or bare name and parse it; returns the graph and the median parse time."""
+    timing = load_dataset_timed(name_or_path, data_dir, repeat)
+    return timing.value, timing.seconds
+
+
+def load_dataset_timed(name_or_path: str, data_dir: str | None = None, repeat: Repeat = 1) -> Timing[PoseGraph]:
+    """``load_dataset`` with the whole timing (``posecrb.core.timing.measure``: runs, warm-up)."""
     from ..io import load  # noqa: PLC0415 -- lazy: start-up time (numpy)
 
     path = datasets.resolve(name_or_path, data_dir)
-    return timed(lambda: load(path), repeat=repeat)
+    return measure(lambda: load(path), repeat=repeat)
 
 
 def executor_settings(executor: str, jobs: int, scheduler: str | None) -> dict:
@@ -157,8 +185,9 @@ ordering_option = click.option(
          "to rounding). amd: CHOLMOD's AMD. colamd: true COLAMD (the paper's Algorithm 1; CHOLMOD "
          "would apply AMD to a symmetric matrix, so COLAMD's permutation of A A^T is computed and passed "
          "in; more fill than AMD here). metis, nesdis: nested dissection of the pose graph, expanded to "
-         "each pose's rows. auto: amd, but nesdis for the FIM/ub/CRLB of 3D graphs with >= 10000 poses "
-         "(measured, see docs/performance.md). The JSON key 'ordering' says what was used.")
+         "each pose's rows. auto: amd, but metis for the FIM/ub/CRLB of 3D graphs with >= 10000 poses "
+         "and 2D graphs with >= 50000 (measured, see docs/performance.md). The JSON key 'ordering' says "
+         "what was used.")
 
 
 model_option = click.option(

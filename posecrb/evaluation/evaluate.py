@@ -13,7 +13,7 @@ from typing import Any
 from ..core.errors import PosecrbError
 from ..core.graph import PoseGraph
 from ..core.status import OK, Status
-from ..core.timing import timed
+from ..core.timing import Repeat, measure
 from ..linalg.accuracy import logdet_accuracy
 from ..models.paper.bounds import GraphBounds, compute_bounds
 from ..models.paper.fim import PaperFim, fim_symbolic_choice, paper_fim
@@ -24,14 +24,15 @@ from ..solver.estimate import Estimate, get_estimate
 class EvaluationSettings:
     """``anchor``: internal index of the anchored pose; ``estimate``: "solve", "vertices", a file,
     or "none" (bounds only); ``solver``: options of the certified solver; ``repeat``: the timing
-    protocol's repeats (1: each step runs once, untimed warm-up skipped); ``ordering``: the
+    protocol's repeats (``posecrb.core.timing.measure``; 1: each step runs once, untimed warm-up
+    skipped; "auto": adaptive); ``ordering``: the
     fill-reducing ordering of every factorization (``posecrb.linalg.ordering.ORDERINGS``; the
     values never depend on it beyond rounding)."""
 
     anchor: int = 0
     rotation_model: str = "eq59"
     fim_variant: str = "consistent"
-    repeat: int = 1
+    repeat: Repeat = 1
     estimate: str = "solve"
     solver: Mapping[str, Any] = field(default_factory=dict)
     ordering: str = "auto"
@@ -49,6 +50,7 @@ class DatasetMetrics:
     fim_logdet: float | None = None
     fim_logdet_status: Status = OK      # its accuracy (posecrb.linalg.accuracy.logdet_accuracy)
     times: dict[str, float] = field(default_factory=dict)    # fim_build, fim_logdet (median of repeat)
+    runs: dict[str, int] = field(default_factory=dict)       # per key of times: how many runs its median is of
     error: PosecrbError | None = None
     ordering: dict[str, str] = field(default_factory=dict)   # orderings used: lb, ub (bounds), fim
 
@@ -75,8 +77,9 @@ def evaluate(graph: PoseGraph, settings: EvaluationSettings, *, step: Callable[[
         say("solve")
         est = estimate if estimate is not None else get_estimate(graph, settings.estimate, **settings.solver)
         say("fim")
-        fim, t_build = timed(lambda: paper_fim(graph, est.rot, est.trans, settings.anchor, settings.rotation_model,
-                                               variant=settings.fim_variant), settings.repeat)
+        m_build = measure(lambda: paper_fim(graph, est.rot, est.trans, settings.anchor, settings.rotation_model,
+                                            variant=settings.fim_variant), settings.repeat)
+        fim = m_build.value
 
         factor: list[Any] = []
 
@@ -87,7 +90,8 @@ def evaluate(graph: PoseGraph, settings: EvaluationSettings, *, step: Callable[[
             factor[:] = [f]
             return value
 
-        ld, t_ld = timed(logdet, settings.repeat)
+        m_ld = measure(logdet, settings.repeat)
+        ld = m_ld.value
         # how many digits of it to trust: after the timed region, with the last run's factor
         accuracy = logdet_accuracy(fim.matrix, factor[0], ld, "paper FIM")
     except PosecrbError as exc:
@@ -95,5 +99,6 @@ def evaluate(graph: PoseGraph, settings: EvaluationSettings, *, step: Callable[[
             raise
         return DatasetMetrics(graph=graph, bounds=b, estimate=est, error=exc, ordering=used)
     return DatasetMetrics(graph=graph, bounds=b, estimate=est, fim=fim, fim_logdet=ld,
-                          fim_logdet_status=accuracy.status, times={"fim_build": t_build, "fim_logdet": t_ld},
-                          ordering=used)
+                          fim_logdet_status=accuracy.status,
+                          times={"fim_build": m_build.seconds, "fim_logdet": m_ld.seconds},
+                          runs={"fim_build": m_build.runs, "fim_logdet": m_ld.runs}, ordering=used)

@@ -2,8 +2,10 @@
 
 One ``dataset_row`` per dataset computes everything (parse, bounds, certified
 solve, FIM at the optimum and its log-det, construction times); the four tables
-are column views of those rows. Timing protocol: ``time.perf_counter`` around
-exactly the measured work, warm-up once, median of ``repeat`` runs:
+are column views of those rows. Timing protocol (``posecrb.core.timing.measure``):
+``time.perf_counter`` around exactly the measured work, run as ``repeat`` says (1: once, the
+library's default; k: warm-up, then the median of k; "auto": adaptive, the command line's
+default); ``runs`` of a row says how many runs each time is the median of:
 
 * ``lb_time`` / ``ub_time`` / ``ub_lambda_time``: see ``posecrb.models.paper.bounds.compute_bounds``;
 * ``fim_time``: ordering + numeric Cholesky + log-det of the anchored FIM (Table I/II "Time");
@@ -27,7 +29,7 @@ import numpy as np
 from ..core import provenance
 from ..core.errors import DatasetNotFound, InternalError, PosecrbError, UsageError, status_of
 from ..core.status import put
-from ..core.timing import timed
+from ..core.timing import Repeat, timed
 from ..datasets import search as datasets
 from ..datasets.manifest import load_manifest
 from ..io import load
@@ -47,7 +49,7 @@ class TableSettings:
     """``rotation_model`` / ``fim_variant``: the model's quantities by default (eq. 59, the model's
     Fisher information); ``published()`` gives the settings that reproduce the printed Table II."""
 
-    repeat: int = 3
+    repeat: Repeat = 1
     rotation_model: str = "eq59"
     data_dir: str | None = None
     solver: dict = field(default_factory=dict)
@@ -108,9 +110,13 @@ def dataset_row(name: str, settings: TableSettings,
         put(row, "ub", b.ub, b.ub_status)
         row.update(ub_lambda=b.ub_lambda, lb_time=b.times["lb"], ub_time=b.times["ub"],
                    ub_lambda_time=b.times["ub_lambda"], laplacians_build_time=b.times["laplacians"])
+        runs = {"parse_time": 1, "lb_time": b.runs["lb"], "ub_time": b.runs["ub"],
+                "ub_lambda_time": b.runs["ub_lambda"], "laplacians_build_time": b.runs["laplacians"]}
         est = m.estimate
         if est is not None:
             row.update(objective=est.objective, certified=est.certified, solve_time=est.solve_time)
+            runs["solve_time"] = 1
+        row["runs"] = runs
         if m.error is not None:
             raise m.error       # reported below, with what was computed before it
         if est is None or m.fim is None or m.fim_logdet is None:
@@ -124,6 +130,7 @@ def dataset_row(name: str, settings: TableSettings,
         row.update(gap_ub_rel=None if b.ub is None else (b.ub - b.lb) / b.lb,
                    gap_fim_rel=(ld - b.lb) / b.lb if m.fim_logdet_status.available else None,
                    parse_time=t_parse, ordering=m.ordering)
+        runs.update(fim_time=m.runs["fim_logdet"], fim_build_time=m.runs["fim_build"])
         if not est.certified:
             row["status"] = "uncertified"
     except PosecrbError as exc:
@@ -152,8 +159,9 @@ def build_rows(names: Sequence[str], settings: TableSettings, jobs: int = 1,
                on_done: Callable[[str, dict], None] | None = None,
                on_step: Callable[[str, str], None] | None = None, *, executor: str = "local",
                scheduler: str | None = None, client: Any = None) -> list[dict]:
-    """Rows in the order of ``names``; with jobs > 1 datasets run in a process pool
-    (timings then include contention for the machine's cores: use --jobs 1 for timing).
+    """Rows in the order of ``names``; with jobs > 1 datasets run in a process pool whose workers
+    run every BLAS/OpenMP pool at one thread (timings then include contention for the machine's
+    cores: use --jobs 1 for timing).
 
     ``executor="dask"``: one dataset per task on a Dask cluster through the Monte Carlo engine
     (posecrb.sim.montecarlo): the cluster at ``scheduler`` (or the given ``client``), otherwise a
@@ -187,7 +195,9 @@ def build_rows(names: Sequence[str], settings: TableSettings, jobs: int = 1,
         return rows
 
     out: dict[str, dict] = {}
-    with ProcessPoolExecutor(max_workers=jobs) as pool:
+    from ..linalg.threads import single_threaded_worker  # noqa: PLC0415 -- threadpoolctl only for pools
+
+    with ProcessPoolExecutor(max_workers=jobs, initializer=single_threaded_worker) as pool:
         futures = {pool.submit(_run_one, (n, settings)): n for n in names}
 
         for fut in as_completed(futures):

@@ -17,6 +17,7 @@ from sksparse.cholmod import CholmodNotPositiveDefiniteError, Factor, analyze
 
 from ..core.errors import NotPositiveDefinite, NumericalError, UsageError
 from .lanczos import largest_eigenpair
+from .threads import cholmod_single_threaded
 
 log = logging.getLogger("posecrb")
 
@@ -78,6 +79,10 @@ class SymbolicCholesky:
     """A CHOLMOD symbolic analysis (fill-reducing ordering + elimination tree) reused across
     matrices sharing one sparsity pattern.
 
+    ``threaded``: factor with CHOLMOD's BLAS on its threads (the matrices with dense separators of
+    thousands of rows, ``posecrb.linalg.ordering.threaded_matrix``); otherwise with one thread,
+    where threads cost more than they save and collapse under load (posecrb.linalg.threads).
+
     ``permutation`` (optional) is a fill-reducing ordering computed elsewhere
     (``posecrb.linalg.ordering``: COLAMD, or a pose-level ordering expanded to each pose's rows):
     scikit-sparse cannot hand CHOLMOD a user permutation, so the pattern is permuted here, analysed
@@ -86,8 +91,9 @@ class SymbolicCholesky:
     """
 
     def __init__(self, pattern: sp.spmatrix, mode: str = "auto", ordering_method: str = "default",
-                 permutation: np.ndarray | None = None):
+                 permutation: np.ndarray | None = None, threaded: bool = False):
         self.shape = pattern.shape
+        self.threaded = threaded
         self._perm: np.ndarray | None = None
         if permutation is None:
             self._symbolic: Factor = analyze(_as_csc(pattern), mode=mode, ordering_method=ordering_method)
@@ -135,7 +141,11 @@ class SymbolicCholesky:
         if self._perm is not None:
             a = self._permuted(a)
         try:
-            f = self._symbolic.cholesky(a, beta=beta)
+            if self.threaded:
+                f = self._symbolic.cholesky(a, beta=beta)
+            else:
+                with cholmod_single_threaded():
+                    f = self._symbolic.cholesky(a, beta=beta)
         except CholmodNotPositiveDefiniteError as exc:
             raise NotPositiveDefinite(name, str(exc).split(": ", 1)[-1]) from None
         if self._perm is not None:

@@ -18,13 +18,18 @@ the flops) and the rounding, never the value beyond rounding. The choices:
   ``ub`` matrix, q = d + d_r in the FIM): the partitioner sees n_p vertices instead of q n_p,
   and the separators cut whole poses. For the Laplacians of ``lb`` (one row per pose) this is
   CHOLMOD's ordering of the matrix itself.
-* ``auto``: ``auto_ordering``, measured with benchmarks/orderings.py: AMD, except nested
-  dissection (``nesdis`` on the pose graph) for the block matrices (FIM, ``ub``, CRLB, the
-  solver's M_red) of 3D graphs with at least ``AUTO_ND_MIN_POSES`` poses. AMD's fill grows
-  faster than nested dissection's on large 3D graphs (on a 3D grid of 21,952 poses the FIM
-  factor takes 1.5x nested dissection's time), while on 2D graphs and 3D graphs up to a few
-  thousand poses AMD is as good and its analysis is cheaper. The Laplacians of ``lb`` always use AMD (their factors are
-  cheap whatever the ordering; nested dissection's analysis costs more than it saves).
+* ``auto``: ``auto_ordering``, measured with benchmarks/orderings.py and CHOLMOD's flop counts
+  (benchmarks/factor_candidates.py): AMD, except METIS's nested dissection of the pose graph for
+  the block matrices (FIM, ``ub``, CRLB, the solver's M_red) of 3D graphs with at least
+  ``AUTO_ND_MIN_POSES`` poses and 2D graphs with at least ``AUTO_ND_MIN_POSES_2D``. AMD's fill
+  grows faster than nested dissection's on large graphs (3D grid of 21,952 poses: the FIM factor
+  669 Gflop with AMD, 387 with ``nesdis`` and 341 with ``metis`` on the pose graph, 331 with
+  CHOLMOD's nesdis of the scalar matrix, whose analysis costs 1.5 s instead of 0.2 s; 2D grid of
+  100,489 poses: 18.1 Gflop and 31.6M nonzeros with AMD, 10.5 Gflop and 24.0M with ``metis``,
+  the solver's M_red 15.9 against 10.5 Gflop), while on the 2D datasets (up to 15,115 poses) and
+  3D graphs up to a few thousand poses AMD is as good and its analysis is cheaper. The Laplacians
+  of ``lb`` always use AMD (their factors are cheap whatever the ordering; nested dissection's
+  analysis costs more than it saves).
 """
 from __future__ import annotations
 
@@ -47,6 +52,12 @@ MATRICES = ("lb", "ub", "fim", "crlb", "solver")
 # (nested dissection 0.94-1.3x of AMD's time), on 3D grids of 10,648 and 21,952 poses nested
 # dissection takes 0.74x and 0.65x of it.
 AUTO_ND_MIN_POSES = 10000
+# 2D graphs from this many poses on (2D grids: 30,276 poses M_red 2.0 Gflop AMD against 1.7
+# metis, 100,489 poses 15.9 against 10.5; the 2D datasets, up to 15,115 poses, gain nothing).
+AUTO_ND_MIN_POSES_2D = 50000
+# The nested dissection ``auto`` uses: METIS on the pose graph (fewest flops on the 3D grids, the
+# same as nesdis on 2D grids and on M_red; both are deterministic).
+AUTO_ND_METHOD = "metis"
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -71,13 +82,24 @@ def check_ordering(ordering: str) -> str:
 
 def auto_ordering(dim: int, poses: int, matrix: str) -> str:
     """The method ``auto`` picks for ``matrix`` (one of ``MATRICES``) of a graph with ``poses``
-    poses in dimension ``dim``: ``nesdis`` for the block matrices of 3D graphs with at least
-    ``AUTO_ND_MIN_POSES`` poses, ``amd`` otherwise (module docstring)."""
+    poses in dimension ``dim``: ``AUTO_ND_METHOD`` for the block matrices of 3D graphs with at
+    least ``AUTO_ND_MIN_POSES`` poses and of 2D graphs with at least ``AUTO_ND_MIN_POSES_2D``,
+    ``amd`` otherwise (module docstring)."""
     if matrix not in MATRICES:
         raise UsageError(f"matrix must be one of {MATRICES}, got {matrix!r}")
-    if dim == 3 and matrix != "lb" and poses >= AUTO_ND_MIN_POSES:
-        return "nesdis"
+    large = poses >= (AUTO_ND_MIN_POSES if dim == 3 else AUTO_ND_MIN_POSES_2D)
+    if matrix != "lb" and large:
+        return AUTO_ND_METHOD
     return "amd"
+
+
+def threaded_matrix(dim: int, poses: int, matrix: str) -> bool:
+    """Whether ``matrix`` of a graph is factored with CHOLMOD's BLAS on its threads: the block
+    matrices of 3D graphs with at least ``AUTO_ND_MIN_POSES`` poses, whose nested-dissection
+    separators are dense blocks of thousands of rows (posecrb.linalg.threads)."""
+    if matrix not in MATRICES:
+        raise UsageError(f"matrix must be one of {MATRICES}, got {matrix!r}")
+    return dim == 3 and matrix != "lb" and poses >= AUTO_ND_MIN_POSES
 
 
 def resolve_ordering(ordering: str, *, dim: int, poses: int, matrix: str) -> OrderingChoice:
@@ -152,15 +174,16 @@ def ordered_symbolic(a: sp.spmatrix, ordering: str, *, dim: int, poses: int, mat
         n_poses = rows
     n_poses = int(n_poses if n_poses is not None else (int(np.max(pose_of_row)) + 1 if rows else 0))
     choice = resolve_ordering(ordering, dim=dim, poses=poses, matrix=matrix)
+    threaded = threaded_matrix(dim, poses, matrix)
     if rows == 0 or choice.method == "amd":
-        return SymbolicCholesky(a, mode=mode, ordering_method="amd"), choice
+        return SymbolicCholesky(a, mode=mode, ordering_method="amd", threaded=threaded), choice
     if choice.method == "colamd":
-        return SymbolicCholesky(a, mode=mode, permutation=colamd_permutation(a)), choice
+        return SymbolicCholesky(a, mode=mode, permutation=colamd_permutation(a), threaded=threaded), choice
     if n_poses == rows and pose_adjacency is None:
-        return SymbolicCholesky(a, mode=mode, ordering_method=choice.method), choice
+        return SymbolicCholesky(a, mode=mode, ordering_method=choice.method, threaded=threaded), choice
     adj = pose_adjacency if pose_adjacency is not None else pose_adjacency_of(a, pose_of_row, n_poses)
     perm = expand_permutation(pose_permutation(adj, choice.method), pose_of_row)
-    return SymbolicCholesky(a, mode=mode, permutation=perm), choice
+    return SymbolicCholesky(a, mode=mode, permutation=perm, threaded=threaded), choice
 
 
 def block_cholesky(a: sp.spmatrix, ordering: str, *, dim: int, poses: int, matrix: str, block: int,
@@ -202,14 +225,16 @@ def anchored_logdet_accuracy(matrix: sp.spmatrix, q: int, anchors: list[int], na
 def solver_symbolic(pattern: sp.spmatrix, dim: int, n: int, mode: str = "auto") -> SymbolicCholesky:
     """The symbolic analysis of the solver's M_red = [[L_red, V_red], [V_red^T, C + ...]]
     (posecrb.solver.problem: n - 1 translation rows for poses 1..n-1, then d rotation rows per pose
-    0..n-1). Under ``auto``'s rule for 3D graphs of at least ``AUTO_ND_MIN_POSES`` poses: nested
-    dissection of the pose graph expanded to each pose's rows (benchmarks/orderings.py: M_red's
-    factorization about 0.75x of CHOLMOD's default choice on a 3D grid of 21,952 poses);
-    otherwise CHOLMOD's default ordering, as before. ``mode``: CHOLMOD's factorization kind
+    0..n-1). Under ``auto``'s rule for large graphs (``auto_ordering``): nested dissection of the
+    pose graph expanded to each pose's rows (benchmarks/orderings.py: M_red's factorization about
+    0.75x of CHOLMOD's default choice on a 3D grid of 21,952 poses; 10.5 instead of 15.9 Gflop
+    and 23.8M instead of 29.8M nonzeros on a 2D grid of 100,489 poses); otherwise CHOLMOD's
+    default ordering, as before. ``mode``: CHOLMOD's factorization kind
     (auto | simplicial | supernodal; the solver picks it, posecrb.solver.problem)."""
 
-    if auto_ordering(dim, n, "solver") == "amd" or n < 2:
+    method = auto_ordering(dim, n, "solver")
+    if method == "amd" or n < 2:
         return SymbolicCholesky(pattern, mode=mode)
     pose_of_row = np.concatenate([np.arange(1, n), np.repeat(np.arange(n), dim)])
-    return ordered_symbolic(pattern, "nesdis", dim=dim, poses=n, matrix="solver", pose_of_row=pose_of_row,
+    return ordered_symbolic(pattern, method, dim=dim, poses=n, matrix="solver", pose_of_row=pose_of_row,
                             n_poses=n, mode=mode)[0]

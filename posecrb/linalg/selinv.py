@@ -37,7 +37,6 @@ from types import ModuleType
 
 import numpy as np
 import scipy.sparse as sp
-from threadpoolctl import threadpool_limits
 
 from ..core.errors import NumericalError, UsageError
 from ..core.status import OK, Status
@@ -53,10 +52,6 @@ def _kernels():
     from . import _selinv_kernels  # noqa: PLC0415 -- lazy: start-up time (numba)
 
     return _selinv_kernels
-
-
-def _one_blas_thread():
-    return threadpool_limits(limits=1, user_api="blas")
 
 
 # Supernodes at least this wide go through LAPACK/BLAS from Python (triangular solve, dpotri,
@@ -112,11 +107,17 @@ def _takahashi_inplace(indptr: np.ndarray, indices: np.ndarray, val: np.ndarray)
     posbuf = np.empty(n, np.int64)
     wide = np.flatnonzero(np.diff(bounds) >= _WIDE)
     hi = bounds.size - 1
-    # One BLAS thread: the calls are many and mostly small, where OpenBLAS threads only add
-    # synchronisation, and they collapse when another process holds the other core (2D grid of
-    # 10^4 poses on a loaded 2-core machine: the wide supernodes' calls take 0.66 s with two
-    # threads, 0.03 s with one).
-    with _one_blas_thread():
+    # One BLAS thread (numpy's/scipy's own OpenBLAS): the calls are many and mostly small, where
+    # OpenBLAS threads only add synchronisation, and its threads collapse when another process
+    # holds a core (2D grid of 10^4 poses on a loaded 2-core machine: the wide supernodes' calls
+    # take 0.66 s with two threads, 0.03 s with one; 2D grid of 30,276 poses, load average 7: the
+    # whole inversion 4.0-15.1 s with two threads, 0.87-0.94 s with one). The factorization before
+    # it (CHOLMOD's BLAS) keeps every core.
+    import scipy.linalg.blas  # noqa: F401, PLC0415 -- loads scipy's BLAS before its threads are set
+
+    from .threads import python_blas  # noqa: PLC0415
+
+    with python_blas().limit(limits=1):
         for sn in [*wide[::-1].tolist(), -1]:
             status = k._takahashi_range(indptr, indices, val, bounds, col2sn, hi, sn + 1, posbuf)
             if status:

@@ -49,6 +49,7 @@ from ..core.graph import PoseGraph
 from ..linalg.cholesky import SymbolicCholesky, cholesky
 from ..linalg.laplacian import reduced_laplacian
 from ..linalg.ordering import solver_symbolic
+from ..linalg.threads import factorization_threads
 
 # CHOLMOD's simplicial factorization for the solver's block matrices (M_red, the chordal
 # initialisation's connection Laplacian) when the pose-level fill is low: ``b * sum c_j^2 / sum c_j``
@@ -306,7 +307,8 @@ class Problem:
         self._full_parts()
         if self._full_symbolic is None:  # set by _full_parts
             raise InternalError("M_red: pattern not analysed")
-        return self._full_symbolic.factor(self.full_matrix(lam_blocks, shift), name=name)
+        with factorization_threads():
+            return self._full_symbolic.factor(self.full_matrix(lam_blocks, shift), name=name)
 
     def schur_solve(self, factor: Factor, W: np.ndarray) -> np.ndarray:
         """(Q - Lambda + s I)^{-1} W, the rotation block of M_red(s)^{-1} [0; W]."""

@@ -15,13 +15,14 @@ from dataclasses import dataclass, field, fields, replace
 from typing import Any
 
 import numpy as np
-from threadpoolctl import ThreadpoolController
 
 from ..core.errors import ArgumentError, NotPositiveDefinite, PosecrbError, UsageError
 from ..core.graph import PoseGraph
 from ..core.result import Result, array_field, optional_field
 from ..core.status import OK, Status
 from ..io.rotations import rot_to_quat
+from ..linalg.ordering import AUTO_ND_MIN_POSES
+from ..linalg.threads import cholmod_threads, solver_threads
 from .chordal import chordal_rotations
 from .problem import Problem
 from .rounding import anchor_estimate, recover_translations, round_rotations, se_objective
@@ -192,32 +193,21 @@ class SolverOptions:
                        trust_region={**base.trust_region, **tuning})
 
 
-_BLAS_CONTROLLER: Any = None
-
-
-def _blas_controller() -> Any:
-    """threadpoolctl's controller, built once: scanning the loaded libraries costs ~1.5 ms, a
-    tenth of a small problem's solve."""
-    global _BLAS_CONTROLLER
-    if _BLAS_CONTROLLER is None:
-        _BLAS_CONTROLLER = ThreadpoolController()
-    return _BLAS_CONTROLLER
-
 
 def solve(graph: PoseGraph, options: SolverOptions | None = None, **keywords: Any) -> SolveResult:
     """Certifiably correct maximum-likelihood estimate of a pose graph (see :func:`_solve`).
 
     ``solve(graph, SolverOptions(anchor=3, rmax=8))``; the keyword form ``solve(graph, anchor=3)``
     is the same call (``SolverOptions.from_keywords``: an unknown name is a UsageError) and may
-    refine ``options``. BLAS runs single-threaded inside: the work is many small dense products,
-    for which OpenBLAS's thread start-up costs more than it saves (and CHOLMOD does the heavy part).
+    refine ``options``. BLAS runs single-threaded inside: the work is many small dense products
+    and triangular solves, for which OpenBLAS's threads cost more than they save. The exception
+    is the factorizations of M_red of 3D graphs with at least ``AUTO_ND_MIN_POSES`` poses, whose
+    dense separators take CHOLMOD's BLAS threads as they were at the call (posecrb.linalg.threads).
     """
     if keywords or options is None:
         options = SolverOptions.from_keywords(options, **keywords)
-    controller = _blas_controller()
-    if not controller:  # pragma: no cover - threadpoolctl missing
-        return _solve(graph, options)
-    with controller.limit(limits=1, user_api="blas"):
+    large = graph.dim == 3 and graph.n >= AUTO_ND_MIN_POSES
+    with solver_threads(cholmod_threads() if large else 1):
         return _solve(graph, options)
 
 

@@ -50,7 +50,8 @@ def command(files, anchor, repeat, rotation_model, estimate, fim_variant, orderi
     fim_logdet is log det of the anchored FIM at --estimate: the model's Fisher information
     (fim_variant=consistent) unless --fim-variant eq64 (eq. 64 as printed); same in 2D.
     lambda_min_rot and gap_bound carry a status when double precision cannot resolve them.
-    Times are medians of --repeat runs after a warm-up; the lb time covers the
+    Times follow --repeat (auto: one run of a stage that takes >= 1 s, else the median of a few
+    after a warm-up; the JSON's runs says how many); the lb time covers the
     ordering and both factorizations, ub/ub_lambda their own extra work. --ordering changes
     the cost only; the JSON key "ordering" names the ordering of each factorization.
     """

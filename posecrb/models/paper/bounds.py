@@ -29,7 +29,7 @@ from ...core.errors import NotPositiveDefinite
 from ...core.graph import PoseGraph
 from ...core.noise import isotropic_precisions, rotation_weight
 from ...core.status import OK, Status, put
-from ...core.timing import timed
+from ...core.timing import Repeat, measure
 from ...linalg.cholesky import Factor, SymbolicCholesky
 from ...linalg.lanczos import largest_eigenpair
 from ...linalg.laplacian import kron_identity, reduced_index, reduced_laplacian
@@ -236,6 +236,7 @@ class GraphBounds:
     gap_bound_status: Status = OK
     ub_status: Status = OK
     ordering: dict[str, str] = field(default_factory=dict)   # {"lb": ..., "ub": ...}: the orderings used
+    runs: dict[str, int] = field(default_factory=dict)       # per key of times: how many runs its median is of
 
     def to_row(self) -> dict:
         """The bounds' part of a ``bounds`` row (keys and order of the command's JSON); a number
@@ -252,14 +253,15 @@ class GraphBounds:
 
 
 def compute_bounds(graph: PoseGraph, anchor: int | None = None, rotation_model: str = "eq59",
-                   repeat: int = 1, *, ordering: str = "auto") -> GraphBounds:
+                   repeat: Repeat = 1, *, ordering: str = "auto") -> GraphBounds:
     """All graph-only metrics; ``anchor`` is an internal index (default 0 = smallest id).
 
-    Timed regions (median of ``repeat`` after one warm-up): ``laplacians`` = weights from the
-    information matrices + both reduced Laplacians; ``lb`` = one symbolic analysis + two numeric
-    factorizations (Algorithm 1); ``ub`` = Psi blocks + the augmented rotation matrix + its
-    analysis and factorization; ``ub_lambda`` = lambda_inf + one factorization of L_w + lambda_inf I
-    reusing lb's ordering. ``d logdet(L_tau)`` is shared by all three and timed in ``lb`` only.
+    Timed regions (``posecrb.core.timing.measure`` with ``repeat``: 1 = one run, k = median of k
+    after a warm-up, "auto" = adaptive; ``runs`` says how many runs each time is the median of):
+    ``laplacians`` = weights from the information matrices + both reduced Laplacians; ``lb`` = one
+    symbolic analysis + two numeric factorizations (Algorithm 1); ``ub`` = Psi blocks + the augmented
+    rotation matrix + its analysis and factorization; ``ub_lambda`` = lambda_inf + one factorization
+    of L_w + lambda_inf I reusing lb's ordering. ``d logdet(L_tau)`` is shared by all three and timed in ``lb`` only.
     ``ordering``: the fill-reducing ordering (``posecrb.linalg.ordering.ORDERINGS``) of lb's
     Laplacians and of ub's matrix, whose pose graph is L_w's (d_r rows per pose); the choices made
     are in ``ordering`` of the result.
@@ -267,7 +269,8 @@ def compute_bounds(graph: PoseGraph, anchor: int | None = None, rotation_model: 
     graph.require_connected()
     anchor = 0 if anchor is None else int(anchor)
     d, dr = graph.dim, graph.rot_dim
-    lap, t_lap = timed(lambda: weighted_laplacians(graph, anchor, rotation_model), repeat)
+    m_lap = measure(lambda: weighted_laplacians(graph, anchor, rotation_model), repeat)
+    lap = m_lap.value
 
     n_p = graph.n - 1
 
@@ -279,7 +282,8 @@ def compute_bounds(graph: PoseGraph, anchor: int | None = None, rotation_model: 
         return sym, f_w, ld_tau, ld_w
 
     used: dict[str, str] = {}
-    (sym, f_w, ld_tau, ld_w), t_lb = timed(lower_terms, repeat)
+    m_lb = measure(lower_terms, repeat)
+    sym, f_w, ld_tau, ld_w = m_lb.value
 
     def upper():
         psi, _ = source_terms(graph, lap.tau, anchor)
@@ -293,7 +297,8 @@ def compute_bounds(graph: PoseGraph, anchor: int | None = None, rotation_model: 
         except NotPositiveDefinite as exc:
             return exc
 
-    ld_psi, t_ub = timed(upper, repeat)
+    m_ub = measure(upper, repeat)
+    ld_psi = m_ub.value
     ub_status = OK
     if isinstance(ld_psi, NotPositiveDefinite):
         # L_w is positive definite (its factorization succeeded) and every Psi_i is positive
@@ -310,7 +315,8 @@ def compute_bounds(graph: PoseGraph, anchor: int | None = None, rotation_model: 
         lam = float(xi.max()) if xi.size else 0.0
         return lam, sym.factor_logdet(lap.l_w, "L_w + lambda_inf I", beta=lam)[1]
 
-    (lam_inf, ld_w_lam), t_ubl = timed(upper_lambda, repeat)
+    m_ubl = measure(upper_lambda, repeat)
+    lam_inf, ld_w_lam = m_ubl.value
 
     eig = rotation_lambda_min(lap, graph, sym, f_w)
     tree = tree_lambda_min_bound(graph.n, graph.src, graph.dst, lap.w, anchor)
@@ -337,7 +343,8 @@ def compute_bounds(graph: PoseGraph, anchor: int | None = None, rotation_model: 
         ub_lambda=d * float(ld_tau) + dr * float(ld_w_lam), lambda_inf=lam_inf,
         lambda_min_rot=eig.value, gap_bound=gap, t_opt_graph=t_graph, t_opt_approx=t_approx,
         total_degree=total_degree,
-        times={"laplacians": t_lap, "lb": t_lb, "ub": t_ub, "ub_lambda": t_ubl},
+        times={"laplacians": m_lap.seconds, "lb": m_lb.seconds, "ub": m_ub.seconds, "ub_lambda": m_ubl.seconds},
+        runs={"laplacians": m_lap.runs, "lb": m_lb.runs, "ub": m_ub.runs, "ub_lambda": m_ubl.runs},
         lambda_min_rot_lower=lower if lower > 0 else None, lambda_min_rot_status=eig.status,
         gap_bound_status=gap_status, ub_status=ub_status, ordering=used,
     )

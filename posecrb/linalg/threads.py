@@ -1,0 +1,133 @@
+"""Which BLAS runs with how many threads (docs/performance.md, "Threads").
+
+Two BLAS libraries are usually loaded: the one CHOLMOD links (the system's ``libblas.so.3``,
+the threaded OpenBLAS that ``make install`` installs), which does the supernodal factorizations'
+dense work, and the private copy numpy and scipy bring in their wheels (a ``<package>.libs``
+directory), which does posecrb's own small dense products.
+
+* CHOLMOD's BLAS keeps its threads (every core by default) in the factorizations of the block
+  matrices (FIM, ub, CRLB, the solver's M_red) of 3D graphs with at least 10,000 poses, whose
+  nested-dissection separators are dense blocks of thousands of rows: there two threads pay
+  (``SymbolicCholesky(threaded=True)``, set by ``posecrb.linalg.ordering.ordered_symbolic``).
+* Every other factorization runs CHOLMOD's BLAS at one thread: small supernodes, where threads
+  only add synchronisation and collapse when another process holds a core (FIM of the 2D grid of
+  30,276 poses at load average 7: 0.64-1.01 s with one thread, 2.5-3.8 s with two;
+  benchmarks/threads.py).
+* The solver runs every BLAS at one thread (many small products and triangular solves), except
+  CHOLMOD's in the M_red factorizations of those large 3D graphs (``solver_threads``,
+  ``factorization_threads``).
+* numpy's/scipy's OpenBLAS stays at one thread in the solver and the selected inversion: its
+  threads collapse under load (posecrb.linalg.selinv).
+
+Process pools run each worker with every pool at one thread (``single_threaded_worker``), so
+``--jobs`` workers never oversubscribe the cores.
+
+Rounding: a threaded BLAS splits a product into blocks by thread, so a factorization's last bits
+can depend on the number of threads (never on the run: for a fixed count the blocking, hence the
+result, is the same). Every tolerance of the test suite is derived from the factorization's
+backward error (condition number x eps), which covers any blocking.
+"""
+from __future__ import annotations
+
+import contextlib
+import contextvars
+import functools
+import os
+import sys
+from collections.abc import Iterator
+from typing import Any
+
+# Threads of CHOLMOD's BLAS inside ``factorization_threads`` (None: leave them as they are).
+_FACTOR_THREADS: contextvars.ContextVar[int | None] = contextvars.ContextVar("factor_threads", default=None)
+
+# Modules that load a BLAS or OpenMP library: the controller is rebuilt when one more is imported.
+_LOADERS = ("numpy", "scipy.linalg", "sksparse.cholmod", "numba")
+
+
+def controller() -> Any:
+    """threadpoolctl's controller of the libraries loaded now; scanning them costs ~1.5 ms, a
+    tenth of a small problem's solve, so it is rebuilt only after a module that loads a BLAS."""
+    return _controller(tuple(m in sys.modules for m in _LOADERS))
+
+
+@functools.lru_cache(maxsize=4)
+def _controller(_loaded: tuple[bool, ...]) -> Any:
+    from threadpoolctl import ThreadpoolController  # noqa: PLC0415 -- only where threads are set
+
+    return ThreadpoolController()
+
+
+def _vendored(info: dict) -> bool:
+    # auditwheel and delocate put a wheel's private libraries in <package>.libs / .dylibs
+    parent = os.path.basename(os.path.dirname(info.get("filepath") or ""))
+    return parent.endswith((".libs", ".dylibs"))
+
+
+def python_blas() -> Any:
+    """The BLAS libraries numpy/scipy brought in their wheels, when CHOLMOD has another one;
+    every BLAS otherwise (one library shared by all: limiting it limits CHOLMOD too)."""
+    ctl = controller()
+    blas = [c for c in ctl.lib_controllers if c.user_api == "blas"]
+    own = [c for c in blas if _vendored(c.info())]
+    if own and len(own) < len(blas):
+        return ctl.select(filepath=[c.filepath for c in own])
+    return ctl.select(user_api="blas")
+
+
+def cholmod_blas() -> Any:
+    """The BLAS libraries that are not numpy's/scipy's own (``python_blas``): CHOLMOD's."""
+    ctl = controller()
+    own = {c.filepath for c in python_blas().lib_controllers}
+    return ctl.select(filepath=[c.filepath for c in ctl.lib_controllers
+                                if c.user_api == "blas" and c.filepath not in own])
+
+
+def cholmod_threads() -> int:
+    """How many threads CHOLMOD's BLAS has now (1 when it cannot be told apart)."""
+    return max([c.num_threads for c in cholmod_blas().lib_controllers], default=1)
+
+
+def cholmod_single_threaded() -> Any:
+    """CHOLMOD's BLAS at one thread inside (a context manager; nothing to do when it has one)."""
+    ctl = cholmod_blas()
+    if all(c.num_threads == 1 for c in ctl.lib_controllers):
+        return contextlib.nullcontext()
+    return ctl.limit(limits=1)
+
+
+@contextlib.contextmanager
+def solver_threads(factor_threads: int) -> Iterator[None]:
+    """Every BLAS at one thread inside, except CHOLMOD's in ``factorization_threads`` blocks,
+    which get ``factor_threads``."""
+    token = _FACTOR_THREADS.set(factor_threads)
+    try:
+        with controller().limit(limits=1, user_api="blas"):
+            yield
+    finally:
+        _FACTOR_THREADS.reset(token)
+
+
+@contextlib.contextmanager
+def factorization_threads() -> Iterator[None]:
+    """CHOLMOD's BLAS at the count ``solver_threads`` chose, for one factorization."""
+    n = _FACTOR_THREADS.get()
+    if n is None or n <= 1:
+        yield
+        return
+    with cholmod_blas().limit(limits=n):
+        yield
+
+
+def all_single_threaded() -> Any:
+    """Every BLAS and OpenMP pool at one thread (a context manager)."""
+    return controller().limit(limits=1)
+
+
+def single_threaded_worker() -> None:
+    """Initializer of a process pool's workers: every BLAS/OpenMP pool at one thread for the
+    worker's life (the workers share the cores; threads inside each would oversubscribe them)."""
+    import numpy  # noqa: F401, PLC0415 -- load the libraries first: threadpoolctl sets the loaded ones
+    import sksparse.cholmod  # noqa: F401, PLC0415
+    from threadpoolctl import threadpool_limits  # noqa: PLC0415 -- only in pool workers
+
+    threadpool_limits(limits=1)

@@ -1,0 +1,103 @@
+"""BLAS thread policy (posecrb.linalg.threads): numpy's/scipy's own BLAS single-threaded in the
+solver while CHOLMOD's keeps its threads; pool workers single-threaded."""
+from __future__ import annotations
+
+import multiprocessing
+import sys
+from concurrent.futures import ProcessPoolExecutor
+
+import scipy.linalg  # noqa: F401 -- its BLAS among the loaded ones
+import sksparse.cholmod  # noqa: F401
+
+from posecrb.linalg import threads
+
+
+def _blas_threads() -> dict[str, int]:
+    return {i["filepath"]: i["num_threads"] for i in threads.controller().info() if i["user_api"] == "blas"}
+
+
+def test_python_blas_is_the_vendored_one_when_cholmod_has_its_own():
+    infos = [i for i in threads.controller().info() if i["user_api"] == "blas"]
+    chosen = {c.filepath for c in threads.python_blas().lib_controllers}
+    vendored = {i["filepath"] for i in infos if threads._vendored(i)}
+    if vendored and len(vendored) < len(infos):
+        assert chosen == vendored
+    else:   # one library for everything: limiting it is the only choice
+        assert chosen == {i["filepath"] for i in infos}
+
+
+def test_solver_threads_and_factorization_threads_restore():
+    before = _blas_threads()
+    cholmod = {c.filepath for c in threads.cholmod_blas().lib_controllers}
+    n = threads.cholmod_threads()
+    with threads.solver_threads(n):
+        assert set(_blas_threads().values()) == {1}
+        with threads.factorization_threads():
+            inside = _blas_threads()
+            assert all(inside[p] == (n if p in cholmod else 1) for p in inside)
+        assert set(_blas_threads().values()) == {1}
+    assert _blas_threads() == before
+    with threads.solver_threads(1), threads.factorization_threads():
+        assert set(_blas_threads().values()) == {1}
+    with threads.factorization_threads():        # outside the solver: nothing changes
+        assert _blas_threads() == before
+
+
+def _worker_threads() -> list[int]:
+    from threadpoolctl import threadpool_info
+    return [i["num_threads"] for i in threadpool_info()]
+
+
+def test_pool_workers_single_threaded():
+    ctx = multiprocessing.get_context("fork")
+    with ProcessPoolExecutor(1, mp_context=ctx, initializer=threads.single_threaded_worker) as pool:
+        assert set(pool.submit(_worker_threads).result()) == {1}
+
+
+def test_controller_cached_until_a_loader_is_imported(monkeypatch):
+    a = threads.controller()
+    assert threads.controller() is a
+    if "numba" in sys.modules:
+        monkeypatch.delitem(sys.modules, "numba")
+    else:
+        monkeypatch.setitem(sys.modules, "numba", None)
+    assert threads.controller() is not a
+
+
+def test_factorizations_threaded_only_for_large_3d_block_matrices():
+    """CHOLMOD's BLAS keeps its threads only in the factorizations ``threaded_matrix`` names; every
+    other factorization runs it at one thread, and the value is the same either way."""
+    import scipy.sparse as sp
+
+    from posecrb.linalg import ordering as ordmod
+    from posecrb.linalg.cholesky import SymbolicCholesky
+
+    assert ordmod.threaded_matrix(3, ordmod.AUTO_ND_MIN_POSES, "fim")
+    assert not ordmod.threaded_matrix(3, ordmod.AUTO_ND_MIN_POSES, "lb")
+    assert not ordmod.threaded_matrix(3, ordmod.AUTO_ND_MIN_POSES - 1, "ub")
+    assert not ordmod.threaded_matrix(2, 10 ** 6, "solver")
+    seen = []
+    real = threads.cholmod_single_threaded
+
+    def spy():
+        seen.append(True)
+        return real()
+
+    a = sp.random(60, 60, density=0.1, random_state=1)
+    a = (a @ a.T + 60 * sp.identity(60)).tocsc()
+    import posecrb.linalg.cholesky as chol
+    orig = chol.cholmod_single_threaded
+    chol.cholmod_single_threaded = spy
+    try:
+        ld1 = SymbolicCholesky(a).factor_logdet(a)[1]
+        assert seen == [True]
+        ld2 = SymbolicCholesky(a, threaded=True).factor_logdet(a)[1]
+        assert seen == [True]
+    finally:
+        chol.cholmod_single_threaded = orig
+    # the same factorization; a different BLAS blocking may change its rounding, within the
+    # backward error of a Cholesky log-det: n eps cond(a) (times a margin of 10)
+    import numpy as np
+
+    tol = 10 * a.shape[0] * np.finfo(float).eps * np.linalg.cond(a.toarray())
+    assert abs(ld1 - ld2) <= tol
