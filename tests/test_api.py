@@ -19,7 +19,7 @@ from posecrb.io import write_g2o
 
 from .helpers import make_random_graph, run_cli
 
-VOLATILE = ("times", "path", "saved")   # timings and absolute paths differ between two runs
+VOLATILE = ("times", "runs", "path", "saved")   # timings (and their run counts), absolute paths differ
 
 
 def _stable(d):
@@ -95,6 +95,7 @@ def test_cli_json_is_the_library_results_dict(shifted_file, command, flags, keyw
     assert json.loads(json.dumps(d, allow_nan=False)) == d          # JSON-serialisable as it is
     assert _stable(d) == _stable(cli)
     assert set(d) == set(cli) and set(d["times"]) == set(cli["times"])
+    assert set(d.get("runs", {})) == set(cli.get("runs", {}))
     if "anchor" in keywords:                                         # anchors are pose ids, never indices
         want = _fill(keywords["anchor"], ids)
         assert (d.get("anchors") or [d["anchor"]]) == (want if isinstance(want, list) else [want])
@@ -198,7 +199,7 @@ def test_statuses_travel_through_the_dict():
          "ub_lambda": 2.0, "lambda_inf": 3.0, "lambda_min_rot": 0.5,
          "lambda_min_rot_status": {"status": "warning", "reason": "wide interval"},
          "lambda_min_rot_lower": 0.4, "gap_bound": 9.0, "t_opt_graph": 1.0, "t_opt_approx": 2.0, "total_degree": 8,
-         "times": {"lb": 0.1}, "ordering": {"requested": "auto", "lb": "amd"}}
+         "times": {"lb": 0.1}, "runs": {"lb": 1}, "ordering": {"requested": "auto", "lb": "amd"}}
     res = posecrb.BoundsResult.from_dict(d)
     assert res.ub is None and res.ub_status == Status.unavailable("breaks down", "use ub_lambda")
     assert res.to_dict() == d

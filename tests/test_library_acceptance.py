@@ -28,7 +28,7 @@ def _cli(*args: str) -> dict:
 def _stable(d):
     """Without what differs between two runs: timings and absolute paths."""
     if isinstance(d, dict):
-        return {k: _stable(v) for k, v in d.items() if k not in ("times", "path", "saved")}
+        return {k: _stable(v) for k, v in d.items() if k not in ("times", "runs", "path", "saved")}
     if isinstance(d, list):
         return [_stable(v) for v in d]
     return d
