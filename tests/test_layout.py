@@ -6,7 +6,7 @@ from pathlib import Path
 
 import posecrb
 
-ORDER = ["core", "lie", "io", "datasets", "linalg", "models", "solver", "sim", "selection", "experiments",
+ORDER = ["core", "lie", "io", "datasets", "linalg", "models", "solver", "sim", "selection", "timeline", "experiments",
          "metrics", "report", "cli"]
 ROOT = Path(posecrb.__file__).resolve().parent
 

@@ -1,0 +1,112 @@
+"""`posecrb timeline FILE`: D- and T-optimality of every prefix as the graph grows (posecrb.timeline)."""
+from __future__ import annotations
+
+import json
+import logging
+from typing import TYPE_CHECKING
+
+import click
+
+from ...core.errors import PosecrbError
+from ...core.files import check_output_file
+from ...core.status import log_status
+from ...report.render import print_rows, to_rich_table
+from ..options import (
+    data_dir_option,
+    estimate_inputs,
+    fim_variant_option,
+    format_option,
+    load_dataset,
+    make_estimate_option,
+    rotation_weight_option,
+)
+
+if TYPE_CHECKING:
+    from ...timeline import TimelineResult
+
+log = logging.getLogger("posecrb")
+
+ROW_COLUMNS = ["poses", "pose", "edges", "loop_closures", "components", "lb", "ub", "t_opt_graph", "fim_logdet",
+               "gain"]
+METRIC_HEADERS = {"final": "final value", "per_dimension": "per dimension", "raw_monotone": "monotone",
+                  "raw_decreases": "decreases", "raw_first_break": "first decrease",
+                  "per_dimension_monotone": "monotone / dim", "per_dimension_decreases": "decreases / dim",
+                  "per_dimension_first_break": "first decrease / dim"}
+TOP_COLUMNS = ["rank", "poses", "pose", "source", "target", "line", "gain"]
+
+
+def _show_summary(res: TimelineResult) -> None:
+    """The table view: final values and monotonicity per metric, the top loop closures."""
+    from rich.console import Console  # noqa: PLC0415 -- lazy: start-up time (rich only for table output)
+
+    metrics, top = res.summary_rows()
+    est = res.estimate
+    title = (f"{res.dataset}: {res.dim}D, {res.n_poses} poses, {res.n_edges} edges; steps {res.first}..{res.last} "
+             "poses" + (f", FIM at {est['source']}" if est else ", graph only"))
+    console = Console(soft_wrap=False, width=250)
+    console.print(to_rich_table(metrics, ["metric", "final", "per_dimension", "raw_monotone", "raw_decreases",
+                                          "raw_first_break", "per_dimension_monotone", "per_dimension_decreases",
+                                          "per_dimension_first_break"], title=title, headers=METRIC_HEADERS))
+    if top:
+        console.print(to_rich_table(top, TOP_COLUMNS, title=f"Top {len(top)} loop closures by gain (increase of lb)"))
+    else:
+        console.print("No loop closure with a gain in this range.")
+
+
+@click.command("timeline")
+@click.argument("file")
+@make_estimate_option("estimate", allow_none=True)
+@click.option("--every", type=click.IntRange(1, None), default=1, show_default=True,
+              help="Keep every N-th step from --from on, and the last one (all steps are computed).")
+@click.option("--from", "start", type=click.IntRange(2, None), default=None, metavar="K",
+              help="First step, as its number of poses (default 2).")
+@click.option("--to", "stop", type=click.IntRange(2, None), default=None, metavar="K",
+              help="Last step, as its number of poses (default: all).")
+@rotation_weight_option
+@fim_variant_option
+@click.option("--plot", "plot_path", type=click.Path(dir_okay=False), default=None, metavar="FILE",
+              help="Write the figure (.png or .svg): lb-ub band and FIM log-det against the step, loop closures "
+                   "marked.")
+@data_dir_option
+@format_option()
+def command(file, estimate, every, start, stop, rotation_model, fim_variant, plot_path, data_dir, fmt):
+    """D- and T-optimality of every prefix of FILE as the graph grows: lb, ub, t_opt_graph and the FIM
+    log-det per step, computed incrementally, and the gain of every loop closure.
+
+    Step K is the graph on the K poses with the smallest ids, anchored at the smallest id: the same
+    lb, ub (eq. 75) and t_opt_graph (eq. 73) as `posecrb bounds`, and fim_logdet at --estimate (default:
+    the certified optimum of the whole graph, restricted to each prefix). A loop closure's gain is its
+    sequential increase of lb in file order; a step's gain is the sum over its loop closures. A
+    disconnected prefix has a status and no values. The table view is a summary (final values,
+    monotonicity of each metric raw and per dimension, the top 10 loop closures); json, csv and
+    markdown give every row.
+    """
+    from ...timeline import timeline  # noqa: PLC0415 -- lazy: start-up time
+
+    graph, _ = load_dataset(file, data_dir)
+    if plot_path:
+        from ...report.plots import check_figure_path  # noqa: PLC0415 -- matplotlib, only for --plot
+
+        check_output_file(plot_path, [graph.path, *estimate_inputs(estimate)], option="--plot", create_parents=True)
+        check_figure_path(plot_path)
+    res = timeline(graph, estimate=estimate, every=every, start=start, stop=stop, rotation_model=rotation_model,
+                   fim_variant=fim_variant or "consistent")
+    for name, st in (("lb", res.lb_status), ("ub", res.ub_status), ("fim_logdet", res.fim_status)):
+        log_status(log, f"{graph.name}: {name}", st)
+    uncertified = res.estimate is not None and res.estimate.get("certified") is False
+    if plot_path:
+        from ...report.plots import plot_timeline  # noqa: PLC0415 -- matplotlib, only for --plot
+
+        plot_timeline(res, plot_path)
+    if fmt == "json":
+        # to_dict() is plain JSON already (no NaN, no numpy scalars): dumped as print_rows would,
+        # without its recursive conversion pass over every row and loop closure
+        click.echo(json.dumps(res.to_dict(), indent=2, allow_nan=False))
+    elif fmt == "table":
+        _show_summary(res)
+    else:
+        print_rows(res.rows(), fmt, columns=[c for c in ROW_COLUMNS if c != "fim_logdet" or res.estimate]
+                   if fmt == "markdown" else None)
+    if uncertified:
+        raise PosecrbError(f"the solver did not certify the estimate of {graph.name} (fim_logdet is at an "
+                           "uncertified estimate)")
