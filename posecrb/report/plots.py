@@ -247,7 +247,7 @@ def plot_timeline(result: TimelineResult, path: str | os.PathLike) -> Path:
     k = result.poses.astype(float)
     q = result.dim + (1 if result.dim == 2 else 3)
     dims = q * np.maximum(k - 1, 1)
-    fig, axes = plt.subplots(3, 1, sharex=True, figsize=(8.0, 7.2), gridspec_kw={"height_ratios": [1.2, 1.2, 1]})
+    fig, axes = plt.subplots(3, 1, sharex=True, figsize=(8.0, 7.2), gridspec_kw={"height_ratios": [0.8, 1.3, 1]})
     top = result.top_closures()
     for ax, scale, label in ((axes[0], 1.0, "log det"), (axes[1], dims, "log det / (q (K − 1))")):
         lb, ub = result.lb / scale, result.ub / scale
@@ -265,19 +265,22 @@ def plot_timeline(result: TimelineResult, path: str | os.PathLike) -> Path:
     axes[0].legend(fontsize=8, loc="upper left")
     gain = np.where(np.isfinite(result.gain), result.gain, 0.0)
     has = result.loop_closures > 0
-    axes[2].vlines(k[has], 0, gain[has], color="0.35", lw=0.6, label="steps with loop closures")
-    for c in top:
+    axes[2].vlines(k[has], 0, gain[has], color="0.35", lw=0.6 if has.sum() < 2000 else 0.3,
+                   label="gain of a step's loop closures")
+    for rank, c in enumerate(top):
+        # labels staggered in height so that neighbours stay readable
         axes[2].annotate(str(c.pose), (c.poses, c.gain or 0.0), fontsize=7, color="tab:red",
-                         xytext=(0, 2), textcoords="offset points", ha="center", va="bottom")
+                         xytext=(0, 3 + 9 * (rank % 3)), textcoords="offset points", ha="center", va="bottom")
         for ax in axes[:2]:
             ax.axvline(c.poses, color="tab:red", lw=0.5, alpha=0.4)
     if top:
         axes[2].plot([c.poses for c in top], [c.gain for c in top], "v", color="tab:red", ms=4,
-                     label=f"top {len(top)} loop closures (pose id)")
+                     label=f"top {len(top)} loop closures (new pose id)")
+        axes[2].set_ylim(0, 1.3 * max(c.gain or 0.0 for c in top))
     axes[2].set_ylabel("gain: increase of lb\nby the loop closures")
     axes[2].set_xlabel("poses K (step: the K poses with the smallest ids)")
     axes[2].grid(True, alpha=0.3)
-    axes[2].legend(fontsize=8, loc="upper left")
+    axes[2].legend(fontsize=8, loc="upper right", framealpha=0.9)
     where = "every step" if result.every == 1 else f"every {result.every}-th step"
     fig.suptitle(f"{result.dataset}: information timeline ({result.dim}D, {where})", fontsize=10)
     return _save(fig, path)

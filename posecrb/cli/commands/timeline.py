@@ -42,15 +42,19 @@ def _show_summary(res: TimelineResult) -> None:
     metrics, top = res.summary_rows()
     est = res.estimate
     title = (f"{res.dataset}: {res.dim}D, {res.n_poses} poses, {res.n_edges} edges; steps {res.first}..{res.last} "
-             "poses" + (f", FIM at {est['source']}" if est else ", graph only"))
+             "poses; " + (f"FIM at {est['source']}" if est else "graph only") + "; first decrease: number of poses "
+             "(newest id)")
     console = Console(soft_wrap=False, width=250)
+    console.print(title, markup=False, highlight=False)
     console.print(to_rich_table(metrics, ["metric", "final", "per_dimension", "raw_monotone", "raw_decreases",
                                           "raw_first_break", "per_dimension_monotone", "per_dimension_decreases",
-                                          "per_dimension_first_break"], title=title, headers=METRIC_HEADERS))
+                                          "per_dimension_first_break"], headers=METRIC_HEADERS))
     if top:
-        console.print(to_rich_table(top, TOP_COLUMNS, title=f"Top {len(top)} loop closures by gain (increase of lb)"))
+        console.print(f"Top {len(top)} loop closures by gain (the increase of lb each brings, in file order):",
+                      markup=False, highlight=False)
+        console.print(to_rich_table(top, TOP_COLUMNS))
     else:
-        console.print("No loop closure with a gain in this range.")
+        console.print("No loop closure with a gain in this range.", markup=False, highlight=False)
 
 
 @click.command("timeline")
