@@ -32,14 +32,14 @@ def path_updates(indptr, indices, lval, parent, rows, vals, fam, bptr, mark, wor
     lval (nnz, F): the values of F factors with that pattern, updated in place; parent (n,): the
     elimination tree; rows (V, p): permuted rows of each update vector (-1: no entry); vals (V, p)
     its values; fam (V,): the factor (column of lval) it updates; bptr (B + 1,): batch b is the
-    updates ``bptr[b]:bptr[b + 1]``, at most ``work.shape[1]`` of them; mark (n,) and work (n, R)
+    updates ``bptr[b]:bptr[b + 1]``, at most ``work.shape[0]`` of them; mark (n,) and work (R, n)
     all zero on entry, and left so.
     """
     nv, p = rows.shape
     nf = lval.shape[1]
     inc = np.zeros(nv)
     grow = np.zeros(nv)          # prod_j (1 + t_j^2) - 1 so far, flushed into inc before it overflows
-    r_max = work.shape[1]
+    r_max = work.shape[0]
     starts = np.empty(r_max * p, np.int64)
     cs = np.empty(r_max)
     ic = np.empty(r_max)
@@ -58,7 +58,7 @@ def path_updates(indptr, indices, lval, parent, rows, vals, fam, bptr, mark, wor
                 if row >= 0:
                     starts[ns] = row
                     ns += 1
-                    work[row, c] += vals[v0 + c, a]
+                    work[c, row] += vals[v0 + c, a]
         if ns == 0:
             continue
         stamp += 1
@@ -69,7 +69,7 @@ def path_updates(indptr, indices, lval, parent, rows, vals, fam, bptr, mark, wor
                 diag[f] = lval[q0, f]
             na = 0
             for c in range(r):
-                wj = work[j, c]
+                wj = work[c, j]
                 if wj == 0.0:
                     continue
                 f = fam[v0 + c]
@@ -89,7 +89,7 @@ def path_updates(indptr, indices, lval, parent, rows, vals, fam, bptr, mark, wor
                 actf[na] = f
                 na += 1
                 diag[f] *= root
-                work[j, c] = 0.0
+                work[c, j] = 0.0
             if na == 0:
                 continue
             for f in range(nf):
@@ -100,17 +100,19 @@ def path_updates(indptr, indices, lval, parent, rows, vals, fam, bptr, mark, wor
                 s0, c0, i0 = sn[0], cs[0], ic[0]
                 for q in range(q0 + 1, q1):
                     i = indices[q]
-                    lij = (lval[q, f] + s0 * work[i, c]) * i0
+                    lij = (lval[q, f] + s0 * work[c, i]) * i0
                     lval[q, f] = lij
-                    work[i, c] = c0 * work[i, c] - s0 * lij
+                    work[c, i] = c0 * work[c, i] - s0 * lij
                 continue
-            for q in range(q0 + 1, q1):
-                i = indices[q]
-                for k in range(na):
-                    c, f, s = act[k], actf[k], sn[k]
-                    lij = (lval[q, f] + s * work[i, c]) * ic[k]
+            # one pass over the column per update, in order: the entries of a pass are independent
+            # (the updates of one entry form a chain, so interleaving them would wait on it)
+            for k in range(na):
+                c, f, s, ck, ik = act[k], actf[k], sn[k], cs[k], ic[k]
+                for q in range(q0 + 1, q1):
+                    i = indices[q]
+                    lij = (lval[q, f] + s * work[c, i]) * ik
                     lval[q, f] = lij
-                    work[i, c] = cs[k] * work[i, c] - s * lij
+                    work[c, i] = ck * work[c, i] - s * lij
     for j in range(mark.shape[0]):
         mark[j] = 0
     for v in range(nv):

@@ -218,11 +218,14 @@ def timeline(graph: PoseGraph, *, estimate: str | Estimate | None = "solve", eve
 
     Examples
     --------
-    >>> from posecrb.sim.generators import grid2d
-    >>> g = grid2d(3, 3)
-    >>> res = timeline(g, estimate="none")
-    >>> [row["poses"] for row in res.to_dict()["rows"]][:3]
-    [2, 3, 4]
+    >>> from posecrb.sim.generators import grid
+    >>> res = timeline(grid(2, 3), estimate="none")          # a 3 x 3 grid walked row by row
+    >>> res.poses.tolist()
+    [2, 3, 4, 5, 6, 7, 8, 9]
+    >>> res.loop_closures.tolist()                           # the second and third rows close loops
+    [0, 0, 0, 1, 1, 0, 1, 1]
+    >>> [(c.pose, c.source, round(c.gain, 3)) for c in res.top_closures(2)]
+    [(4, 1, 4.159), (5, 0, 3.965)]
     """
     from ..models.paper.fim import FIM_VARIANTS  # noqa: PLC0415 -- lazy: start-up time
 

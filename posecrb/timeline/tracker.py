@@ -261,7 +261,7 @@ class Group:
         counts = self.v_start[1:]                                  # vectors entered up to each step
         budget = max(1, -(-int(counts[last] - counts[c]) // FIRST_SEGMENTS))
         mark = np.zeros(self.size, dtype=np.int64)
-        work = np.zeros((self.size, BATCH))
+        work = np.zeros((BATCH, self.size))
         span = last                                                # longest segment, in steps
         while c < last:
             c2 = int(np.searchsorted(counts, counts[c] + budget, side="left"))
@@ -284,6 +284,14 @@ class Group:
                 continue
             values[:, c + 1: c2 + 1] = run
             inc[lo:hi] = seg
+            for k in np.flatnonzero(bad):
+                # one step and still beyond the tolerance: its row is the fresh value, but the
+                # increments of its updates (the loop-closure gains) are not verified
+                if statuses[k].ok:
+                    statuses[k] = Status.warning(
+                        f"{self.families[k].name}: drift {drift[k]:.3g} above the tolerance {tol[k]:.3g} within "
+                        f"step {c2} (rows are factorizations from scratch there; its loop-closure gains are "
+                        "not verified)")
             ok = np.isfinite(fresh)
             values[ok, c2] = fresh[ok]
             base = np.where(ok, fresh, run[:, -1])   # a failed factorization: keep the tracked factor
