@@ -104,9 +104,23 @@ def path_updates(indptr, indices, lval, parent, rows, vals, fam, bptr, mark, wor
                     lval[q, f] = lij
                     work[c, i] = c0 * work[c, i] - s0 * lij
                 continue
-            # one pass over the column per update, in order: the entries of a pass are independent
-            # (the updates of one entry form a chain, so interleaving them would wait on it)
-            for k in range(na):
+            # the updates in order, two per pass over the column: the two rotations of one entry
+            # chain (the second reads what the first wrote), entries are independent, so a short
+            # chain per entry keeps the loop fed while sharing the index and value loads
+            k = 0
+            while k + 1 < na:
+                ca, fa, sa, cca, ia = act[k], actf[k], sn[k], cs[k], ic[k]
+                cb, fb, sb, ccb, ib = act[k + 1], actf[k + 1], sn[k + 1], cs[k + 1], ic[k + 1]
+                for q in range(q0 + 1, q1):
+                    i = indices[q]
+                    lij = (lval[q, fa] + sa * work[ca, i]) * ia
+                    lval[q, fa] = lij
+                    work[ca, i] = cca * work[ca, i] - sa * lij
+                    lij = (lval[q, fb] + sb * work[cb, i]) * ib
+                    lval[q, fb] = lij
+                    work[cb, i] = ccb * work[cb, i] - sb * lij
+                k += 2
+            if k < na:
                 c, f, s, ck, ik = act[k], actf[k], sn[k], cs[k], ic[k]
                 for q in range(q0 + 1, q1):
                     i = indices[q]
