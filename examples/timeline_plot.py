@@ -1,4 +1,4 @@
-"""Plot the information timeline of a pose graph with the library (posecrb.timeline).
+"""Plot the information timeline of a pose graph with the library (posecrb.incremental).
 
 Usage: python examples/timeline_plot.py [FILE_OR_DATASET] [OUT.png]
 
@@ -14,9 +14,9 @@ import sys
 from posecrb import load
 from posecrb.core.errors import DatasetNotFound
 from posecrb.datasets.search import resolve
+from posecrb.incremental import timeline
 from posecrb.report.plots import plot_timeline
 from posecrb.sim.generators import grid
-from posecrb.timeline import timeline
 
 
 def main(argv: list[str]) -> int:

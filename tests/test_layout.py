@@ -6,8 +6,8 @@ from pathlib import Path
 
 import posecrb
 
-ORDER = ["core", "lie", "io", "datasets", "linalg", "models", "solver", "sim", "selection", "timeline", "experiments",
-         "metrics", "report", "cli"]
+ORDER = ["core", "lie", "io", "datasets", "linalg", "models", "solver", "sim", "selection", "incremental",
+         "experiments", "metrics", "report", "cli"]
 ROOT = Path(posecrb.__file__).resolve().parent
 
 

@@ -12,10 +12,10 @@ import pytest
 from posecrb import load
 from posecrb.core.errors import UsageError
 from posecrb.core.noise import rotation_weight
+from posecrb.incremental import TimelineResult, timeline
 from posecrb.metrics.evaluate import EvaluationSettings, evaluate
 from posecrb.models.paper.bounds import compute_bounds
 from posecrb.models.paper.fim import paper_fim
-from posecrb.timeline import TimelineResult, timeline
 
 from .helpers import component_count, make_random_graph, random_pose_graph, run_cli
 from .numerics import MARGIN, logdet_atol, sum_atol
@@ -199,7 +199,7 @@ def test_loop_closure_gains_are_sequential_increases_of_lb():
 
 
 def test_drift_fallback_recomputes_segments_down_to_single_steps(monkeypatch):
-    import posecrb.timeline.tracker as tracker
+    import posecrb.incremental.tracker as tracker
 
     monkeypatch.setattr(tracker, "drift_tolerance", lambda level, *a: np.full(level.shape, -1.0))
     g = graphs(2)[4]

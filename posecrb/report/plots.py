@@ -27,7 +27,7 @@ if TYPE_CHECKING:
     from ..experiments.crlb_sweep import CrlbSweepResult
     from ..experiments.octagon import OctagonResult
     from ..experiments.thesis import ThesisResult
-    from ..timeline.result import TimelineResult
+    from ..incremental.result import TimelineResult
 
 DPI = 100
 FIGURE_FORMATS = (".png", ".svg")

@@ -1,4 +1,4 @@
-"""`posecrb timeline FILE`: D- and T-optimality of every prefix as the graph grows (posecrb.timeline)."""
+"""`posecrb timeline FILE`: D- and T-optimality of every prefix as the graph grows (posecrb.incremental)."""
 from __future__ import annotations
 
 import json
@@ -10,6 +10,7 @@ import click
 from ...core.errors import PosecrbError
 from ...core.files import check_output_file
 from ...core.status import log_status
+from ...datasets import search as datasets
 from ...report.render import print_rows, to_rich_table
 from ..options import (
     data_dir_option,
@@ -22,7 +23,7 @@ from ..options import (
 )
 
 if TYPE_CHECKING:
-    from ...timeline import TimelineResult
+    from ...incremental import TimelineResult
 
 log = logging.getLogger("posecrb")
 
@@ -85,14 +86,15 @@ def command(file, estimate, every, start, stop, rotation_model, fim_variant, plo
     monotonicity of each metric raw and per dimension, the top 10 loop closures); json, csv and
     markdown give every row.
     """
-    from ...timeline import timeline  # noqa: PLC0415 -- lazy: start-up time
+    from ...incremental import timeline  # noqa: PLC0415 -- lazy: start-up time
 
-    graph, _ = load_dataset(file, data_dir)
-    if plot_path:
+    path = str(datasets.resolve(file, data_dir))
+    if plot_path:                          # checked before any work, the inputs among the refused targets
         from ...report.plots import check_figure_path  # noqa: PLC0415 -- matplotlib, only for --plot
 
-        check_output_file(plot_path, [graph.path, *estimate_inputs(estimate)], option="--plot", create_parents=True)
+        check_output_file(plot_path, [path, *estimate_inputs(estimate)], option="--plot", create_parents=True)
         check_figure_path(plot_path)
+    graph, _ = load_dataset(path)
     res = timeline(graph, estimate=estimate, every=every, start=start, stop=stop, rotation_model=rotation_model,
                    fim_variant=fim_variant or "consistent")
     for name, st in (("lb", res.lb_status), ("ub", res.ub_status), ("fim_logdet", res.fim_status)):

@@ -13,7 +13,7 @@ rank as weight). For every step t the bridges not yet added are bridges of ``G_t
 take the latest-added one on a cycle, all the rest of the cycle was present when it was added,
 so it was no bridge. Hence the future poses hang off the prefix as trees joined to it by single
 edges, which is what lets the timeline keep one full-size matrix whose future part is closed form
-(``posecrb.timeline.compute``).
+(``posecrb.incremental.compute``).
 """
 from __future__ import annotations
 

@@ -12,8 +12,7 @@ from ..core.status import OK, Status, put
 if TYPE_CHECKING:
     import pandas as pd
 
-# Metrics of a row, in the order of the JSON keys.
-METRICS = ("lb", "ub", "t_opt_graph", "fim_logdet")
+# Loop closures in the summary (table view, JSON "top_loop_closures").
 TOP = 10
 _AFTER_DISCONNECTED = Status.unavailable("the previous prefix is disconnected").as_json()
 
@@ -146,7 +145,7 @@ class ClosureTable:
 
 @dataclass(frozen=True, eq=False)
 class TimelineResult:
-    """What ``posecrb.timeline.timeline`` computes (docs/design.md#timeline).
+    """What ``posecrb.incremental.timeline`` computes (docs/design.md#timeline).
 
     Graph: ``dataset``, ``path``, ``sha256``, ``dim``, ``n_poses``, ``n_edges``, ``anchor`` (the
     smallest id, anchored in every prefix), ``rotation_weight``, ``fim_variant`` and ``estimate``

@@ -8,7 +8,7 @@ logdet(L_w (x) I_dr + blkdiag(Psi))`` (eq. 75 middle with eq. 71), ``t_opt_graph
 the FIM log-det at an estimate (eq. 42 / 64, the estimate restricted to the prefix).
 
 **The full-size matrices.** Each matrix is kept at the size of the whole graph. Besides the
-prefix's edges it holds every *bridge* still to come (``posecrb.timeline.schedule``): the future
+prefix's edges it holds every *bridge* still to come (``posecrb.incremental.schedule``): the future
 poses then hang off the prefix as trees, each joined to it by one edge. Eliminating such a tree
 leaf by leaf leaves the prefix's matrix unchanged and multiplies the determinant by a closed form
 per edge, because the edge's Jacobian in its newer pose is invertible with determinant +-1:
@@ -21,7 +21,7 @@ and ``tau^d w^d_r`` (the FIM). So
 and the prefix's value never needs a factorization of its own. The matrix grows only by the
 loop closures (and the ub matrix by every edge's Psi): positive semidefinite low-rank terms,
 applied as rank-one updates of one fixed-pattern factor whose log-det increments are the matrix
-determinant lemma (``posecrb.timeline.tracker``, ``posecrb.timeline._kernels``); a step without
+determinant lemma (``posecrb.incremental.tracker``, ``posecrb.incremental._kernels``); a step without
 loop closures costs nothing beyond its closed form, for all steps at once. Components of the whole
 graph other than pose 0's are joined to pose 0 by a virtual unit edge (never added, closed form
 log 1 = 0), so the matrices stay positive definite; prefixes that are disconnected have no value.

@@ -4,11 +4,11 @@ A *family* is one matrix of the timeline (the translation Laplacian, the rotatio
 ``ub`` matrix, the FIM), written as a sum of terms ``U U^T`` of sparse rank-r blocks, each with
 the step at which it enters (``-1``: present from the start). Families whose matrices share one
 sparsity pattern form a *group*: one symbolic analysis, one elimination tree, and their factors
-updated together by ``posecrb.timeline._kernels.path_updates`` (one traversal of the tree paths
+updated together by ``posecrb.incremental._kernels.path_updates`` (one traversal of the tree paths
 for all of them).
 
 Every family also has a closed-form part: ``closed[t]`` is what step t adds to the log-det of the
-full-size matrix's future part (``posecrb.timeline.compute``), so that the prefix's log-det after
+full-size matrix's future part (``posecrb.incremental.compute``), so that the prefix's log-det after
 step t is ``log det(full-size matrix) - sum_{s > t} closed[s]``.
 
 Checkpoints: at chosen steps every family is factored from scratch (CHOLMOD, the group's
@@ -39,8 +39,9 @@ from ..linalg.cholesky import SymbolicCholesky
 TOLERANCE_MARGIN = 16.0
 # Rank-one updates applied in one traversal of the elimination tree (columns of the work array).
 BATCH = 16
-# The first segment holds about 1/FIRST_SEGMENTS of the updates of the range.
-FIRST_SEGMENTS = 8
+# The first segment holds about 1/FIRST_SEGMENTS of the updates of the range (then 1/2, then the rest
+# while the drift stays small: three checkpoints after the start).
+FIRST_SEGMENTS = 4
 _EPS = float(np.finfo(float).eps)
 
 
