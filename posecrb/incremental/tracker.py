@@ -39,6 +39,8 @@ from ..linalg.cholesky import SymbolicCholesky
 TOLERANCE_MARGIN = 16.0
 # Rank-one updates applied in one traversal of the elimination tree (columns of the work array).
 BATCH = 16
+# Vectors per kernel call (signals are handled between calls; a call costs microseconds).
+CALL = 2048
 # The first segment holds about 1/FIRST_SEGMENTS of the updates of the range (then 1/2, then the rest
 # while the drift stays small: three checkpoints after the start).
 FIRST_SEGMENTS = 4
@@ -322,9 +324,12 @@ class Group:
     def _run(self, kernel: Callable[..., np.ndarray], lval: np.ndarray, lo: int, hi: int, mark: np.ndarray,
              work: np.ndarray) -> np.ndarray:
         """The kernel over vectors ``lo:hi`` in batches of ``BATCH`` consecutive ones (a batch may span
-        steps: each vector's increment is its sequential one whatever the batching)."""
-        if hi <= lo:
-            return np.zeros(0)
-        bptr = np.append(np.arange(0, hi - lo, BATCH), hi - lo).astype(np.int64)
-        return kernel(self.lindptr, self.lindices, lval, self.parent, self.k_rows[lo:hi], self.v_vals[lo:hi],
-                      self.v_fam[lo:hi], bptr, mark, work)
+        steps: each vector's increment is its sequential one whatever the batching), ``CALL`` vectors
+        per call so that Python sees a signal (Ctrl-C, SIGTERM) within a fraction of a second."""
+        out = np.zeros(hi - lo)
+        for a in range(lo, hi, CALL):
+            b = min(a + CALL, hi)
+            bptr = np.append(np.arange(0, b - a, BATCH), b - a).astype(np.int64)
+            out[a - lo: b - lo] = kernel(self.lindptr, self.lindices, lval, self.parent, self.k_rows[a:b],
+                                         self.v_vals[a:b], self.v_fam[a:b], bptr, mark, work)
+        return out
