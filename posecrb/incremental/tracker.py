@@ -287,12 +287,12 @@ class Group:
                 continue
             values[:, c + 1: c2 + 1] = run
             inc[lo:hi] = seg
-            for k in np.flatnonzero(bad):
+            for kb in np.flatnonzero(bad).tolist():
                 # one step and still beyond the tolerance: its row is the fresh value, but the
                 # increments of its updates (the loop-closure gains) are not verified
-                if statuses[k].ok:
-                    statuses[k] = Status.warning(
-                        f"{self.families[k].name}: drift {drift[k]:.3g} above the tolerance {tol[k]:.3g} within "
+                if statuses[kb].ok:
+                    statuses[kb] = Status.warning(
+                        f"{self.families[kb].name}: drift {drift[kb]:.3g} above the tolerance {tol[kb]:.3g} within "
                         f"step {c2} (rows are factorizations from scratch there; its loop-closure gains are "
                         "not verified)")
             ok = np.isfinite(fresh)
