@@ -3,6 +3,7 @@
 For each graph, alternating run by run after one warm-up of each (benchmarks/_common.py):
   posecrb timeline FILE --estimate none --format json      every step, graph only (lb, ub, t_opt_graph)
   posecrb bounds FILE --estimate none --repeat 1 --format json
+(``--format table``: both in their default output, the timeline's summary table)
 and the ratio of the medians (target: at most 3), of the wall times and of the CPU times (user +
 system of the process): on a loaded machine the wall times also measure the other programs, the
 CPU times much less. The timeline's stdout (every row and loop closure as JSON) is read and
@@ -13,7 +14,8 @@ at one, and the load average before and after.
 Graphs: city10000 (2D), sphere2500 (3D) and the 2D grid of 10^5 poses of benchmarks/grids.py
 (317^2 = 100,489 poses, generated and cached on first use) unless named on the command line.
 
-Usage: python benchmarks/timeline.py [--repeat K] [--data-dir DIR] [--posecrb CMD] [--threads T] [FILE ...]
+Usage: python benchmarks/timeline.py [--repeat K] [--format json|table] [--data-dir DIR] [--posecrb CMD]
+                                     [--threads T] [FILE ...]
 """
 from __future__ import annotations
 
@@ -46,6 +48,9 @@ def _load() -> str:
 def main(argv: list[str] | None = None) -> int:
     ap = process_parser(__doc__.splitlines()[0], with_data_dir=True, repeat=5)
     ap.add_argument("files", nargs="*", help="g2o files [default: city10000, sphere2500, the 2D 100k grid]")
+    ap.add_argument("--format", default="json", choices=("json", "table"),
+                    help="output format of both commands: json (every row and loop closure) or table (the "
+                         "summary) [default: json]")
     args = ap.parse_args(argv)
     env = child_env(args.threads)
     cmd = posecrb_command(args.posecrb)
@@ -65,11 +70,11 @@ def main(argv: list[str] | None = None) -> int:
         if not f.is_file():
             print(f"{f.name:28s} not found")
             continue
+        fmt = [] if args.format == "table" else ["--format", "json"]
         progs = {
-            "timeline": lambda f=f: run_process([*cmd, "timeline", str(f), "--estimate", "none", "--format", "json"],
-                                                env=env),
-            "bounds": lambda f=f: run_process([*cmd, "bounds", str(f), "--estimate", "none", "--repeat", "1",
-                                               "--format", "json"], env=env),
+            "timeline": lambda f=f: run_process([*cmd, "timeline", str(f), "--estimate", "none", *fmt], env=env),
+            "bounds": lambda f=f: run_process([*cmd, "bounds", str(f), "--estimate", "none", "--repeat", "1", *fmt],
+                                              env=env),
         }
         before = _load()
         runs = alternate(progs, args.repeat)
@@ -81,7 +86,9 @@ def main(argv: list[str] | None = None) -> int:
             continue
         tl, bd = median_wall(runs["timeline"]), median_wall(runs["bounds"])
         tc, bc = (statistics.median(r.cpu for r in runs[k]) for k in ("timeline", "bounds"))
-        out = json.loads(median_run(runs["timeline"]).stdout)
+        # the timeline's own figures: from its JSON (one more run when the table was measured)
+        out = json.loads(median_run(runs["timeline"]).stdout if fmt else run_process(
+            [*cmd, "timeline", str(f), "--estimate", "none", "--format", "json"], env=env).stdout)
         checks = out["checks"]
         cps = max(c["checkpoints"] for c in checks.values())
         drift = max(c["max_drift"] for c in checks.values())

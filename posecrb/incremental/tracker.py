@@ -115,35 +115,44 @@ class Group:
         from ..linalg.ordering import expand_permutation, pose_permutation  # noqa: PLC0415 -- lazy: start-up time
 
         size = self.size
-        keys = [np.arange(size, dtype=np.int64) * (size + 1)]          # the diagonal, always
+        # every entry any term of any family can touch, and the diagonal: each family's matrix
+        # lists all of them (zeros where it has nothing), so all have the analysed pattern
+        rows, cols = [np.arange(size)], [np.arange(size)]
+        self._slots: list[list[tuple[int, int, np.ndarray]]] = []
+        at = size
         for fam in self.families:
+            slots = []
             for pt in fam.parts:
                 p = pt.rows.shape[1]
-                r = np.repeat(pt.rows, p, axis=1).astype(np.int64)
-                c = np.tile(pt.rows, (1, p)).astype(np.int64)
+                r = np.repeat(pt.rows, p, axis=1).ravel()
+                c = np.tile(pt.rows, (1, p)).ravel()
                 ok = (r >= 0) & (c >= 0)
-                keys.append(c[ok] * size + r[ok])
-        uniq = np.unique(np.concatenate(keys))
-        self._uniq = uniq
-        self.indices = (uniq % size).astype(np.int32)
-        self.indptr = np.searchsorted(uniq // size, np.arange(size + 1)).astype(np.int32)
-        pattern = sp.csc_matrix((np.ones(uniq.size), self.indices, self.indptr), shape=(size, size))
+                rows.append(r[ok])
+                cols.append(c[ok])
+                slots.append((at, at + int(ok.sum()), ok))
+                at += int(ok.sum())
+            self._slots.append(slots)
+        self._rows, self._cols = np.concatenate(rows), np.concatenate(cols)
+        pattern = self._csc(np.ones(at))
         # Nested dissection of the pose graph: the updates walk elimination-tree paths, whose cost
         # is the factor's column counts along them (on city10000 0.62x of AMD's).
-        pose_adj = sp.csc_matrix((np.ones(uniq.size), (pose_of_row[uniq % size], pose_of_row[uniq // size])),
-                                 shape=(n_poses, n_poses))
+        coo = pattern.tocoo()
+        pose_adj = sp.csc_matrix((coo.data, (pose_of_row[coo.row], pose_of_row[coo.col])), shape=(n_poses, n_poses))
         try:
             pose_perm = pose_permutation(pose_adj, "metis")
         except Exception:  # pragma: no cover - CHOLMOD built without METIS
             pose_perm = pose_permutation(pose_adj, "amd")
         self.symbolic = SymbolicCholesky(pattern, mode="simplicial",
                                          permutation=expand_permutation(pose_perm, pose_of_row))
-        # The factor's pattern (zeros stay entries): from the identity on the full pattern.
-        eye = sp.csc_matrix(((uniq % size == uniq // size).astype(float), self.indices, self.indptr),
-                            shape=(size, size))
-        f = self.symbolic.factor(eye, name="pattern")
-        low = sp.csc_matrix(f.L())
-        low.sort_indices()
+
+    def _csc(self, values: np.ndarray) -> sp.csc_matrix:
+        """The group's pattern with ``values`` at the entries ``(self._rows, self._cols)`` (duplicates
+        summed, zeros kept: always the same structure)."""
+        return sp.coo_matrix((values, (self._rows, self._cols)), shape=(self.size, self.size)).tocsc()
+
+    def _structure(self, low: sp.csc_matrix, perm: np.ndarray) -> None:
+        """The factor's pattern (zeros stay entries), its elimination tree and the kernel's rows."""
+        size = self.size
         self.lindptr = low.indptr.astype(np.int64)
         self.lindices = low.indices.astype(np.int64)
         if np.any(self.lindices[self.lindptr[:-1]] != np.arange(size)):  # pragma: no cover - CHOLMOD's L
@@ -151,36 +160,21 @@ class Group:
         has_sub = np.diff(self.lindptr) > 1
         self.parent = np.full(size, -1, dtype=np.int64)
         self.parent[has_sub] = self.lindices[self.lindptr[:-1][has_sub] + 1]
-        self.perm = np.asarray(f.P(), dtype=np.int64)
-        self.iperm = np.empty_like(self.perm)
-        self.iperm[self.perm] = np.arange(size)
+        self.perm = perm
+        self.iperm = np.empty_like(perm)
+        self.iperm[perm] = np.arange(size)
         self.rowcount = np.bincount(self.lindices, minlength=size)
-        # positions of every term's entries in the pattern's data
-        self._pos: list[list[np.ndarray]] = []
-        for fam in self.families:
-            pos_f = []
-            for pt in fam.parts:
-                p = pt.rows.shape[1]
-                r = np.repeat(pt.rows, p, axis=1).reshape(-1, p, p).astype(np.int64)
-                c = np.tile(pt.rows, (1, p)).reshape(-1, p, p).astype(np.int64)
-                key = np.where((r >= 0) & (c >= 0), c * size + r, -1)
-                pos_f.append(np.where(key >= 0, np.searchsorted(uniq, key), -1))
-            self._pos.append(pos_f)
+        self.k_rows = np.where(self.v_rows >= 0, self.iperm[np.maximum(self.v_rows, 0)], -1)
 
     def matrix(self, k: int, step: int) -> sp.csc_matrix:
         """Family k's full-size matrix after ``step``, on the group's pattern (terms not yet entered
         are explicit zeros, so every matrix has the analysed pattern)."""
-        data = np.zeros(self._uniq.size)
-        for pt, pos in zip(self.families[k].parts, self._pos[k], strict=True):
-            live = pt.enter <= step
-            if not live.any():
-                continue
-            u = pt.U[live]
-            block = np.einsum("kar,kbr->kab", u, u)
-            ps = pos[live]
-            ok = ps >= 0
-            data += np.bincount(ps[ok], weights=block[ok], minlength=data.size)
-        return sp.csc_matrix((data, self.indices, self.indptr), shape=(self.size, self.size))
+        values = np.zeros(self._rows.size)
+        for pt, (a, b, ok) in zip(self.families[k].parts, self._slots[k], strict=True):
+            live = (pt.enter <= step).astype(float)
+            block = np.einsum("kar,kbr->kab", pt.U, pt.U) * live[:, None, None]
+            values[a:b] = block.ravel()[ok]
+        return self._csc(values)
 
     # ------------------------------------------------------------------ update vectors
     def _vectors(self) -> None:
@@ -207,7 +201,6 @@ class Group:
         v_rows = np.concatenate(rows) if rows else np.zeros((0, self.p), dtype=np.int64)
         order = np.lexsort((np.concatenate(rank), np.concatenate(step))) if rows else np.zeros(0, dtype=np.int64)
         self.v_rows = np.ascontiguousarray(v_rows[order])
-        self.k_rows = np.where(self.v_rows >= 0, self.iperm[np.maximum(self.v_rows, 0)], -1)
         self.v_vals = np.ascontiguousarray((np.concatenate(vals) if rows else np.zeros((0, self.p)))[order])
         self.v_fam = (np.concatenate(fam) if rows else np.zeros(0, dtype=np.int64))[order]
         self.v_step = (np.concatenate(step) if rows else np.zeros(0, dtype=np.int64))[order]
@@ -217,30 +210,46 @@ class Group:
     # ------------------------------------------------------------------ factors
     def _fresh(self, step: int) -> tuple[np.ndarray, np.ndarray, np.ndarray, list[Status]]:
         """Every family's full-size matrix after ``step`` factored from scratch: lval (nnz, F),
-        log-dets (F,) and rounding levels (F,) (NaN where the factorization failed) and statuses."""
+        log-dets (F,) and rounding levels (F,) (NaN where the factorization failed) and statuses.
+        The first factorization also gives the factor's structure."""
         nf = len(self.families)
-        lval = np.zeros((self.lindices.size, nf))
+        factors: list[sp.csc_matrix | None] = [None] * nf
         logdets = np.full(nf, np.nan)
         levels = np.full(nf, np.nan)
         statuses = [OK] * nf
+        diags = []
         for k, fam in enumerate(self.families):
             a = self.matrix(k, step)
+            diags.append(a.diagonal())
             try:
                 f, ld = self.symbolic.factor_logdet(a, name=fam.name)
             except NotPositiveDefinite as exc:
                 statuses[k] = Status.unavailable(
                     f"{fam.name} after step {step}: the factorization from scratch breaks down in double "
                     f"precision ({exc.reason})")
-                lval[self.lindptr[:-1], k] = 1.0
                 continue
             low = sp.csc_matrix(f.L())
             low.sort_indices()
-            if not (np.array_equal(low.indptr, self.lindptr) and np.array_equal(low.indices, self.lindices)):
+            if not hasattr(self, "lindptr"):
+                self._structure(low, np.asarray(f.P(), dtype=np.int64))
+            elif not (np.array_equal(low.indptr, self.lindptr) and np.array_equal(low.indices, self.lindices)):
                 raise InternalError(f"{fam.name}: the factor's pattern differs from the analysed one")
+            factors[k] = low
+            logdets[k] = ld
+        if not hasattr(self, "lindptr"):      # every factorization failed: the structure of the identity's
+            eye = self._csc(np.concatenate([np.ones(self.size), np.zeros(self._rows.size - self.size)]))
+            f = self.symbolic.factor(eye, name="pattern")
+            low = sp.csc_matrix(f.L())
+            low.sort_indices()
+            self._structure(low, np.asarray(f.P(), dtype=np.int64))
+        lval = np.zeros((self.lindices.size, nf))
+        for k, low in enumerate(factors):
+            if low is None:
+                lval[self.lindptr[:-1], k] = 1.0           # a placeholder; the family is unavailable
+                continue
             lval[:, k] = low.data
             d = low.data[self.lindptr[:-1]]
-            logdets[k] = ld
-            levels[k] = _EPS * float(np.sum(self.rowcount * a.diagonal()[self.perm] / (d * d)))
+            levels[k] = _EPS * float(np.sum(self.rowcount * diags[k][self.perm] / (d * d)))
         return lval, logdets, levels, statuses
 
     # ------------------------------------------------------------------ tracking
