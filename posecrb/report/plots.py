@@ -262,7 +262,6 @@ def plot_timeline(result: TimelineResult, path: str | os.PathLike) -> Path:
                     label=f"FIM log det (at {src})")
         ax.set_ylabel(label)
         ax.grid(True, alpha=0.3)
-    axes[0].legend(fontsize=8, loc="upper left")
     gain = np.where(np.isfinite(result.gain), result.gain, 0.0)
     has = result.loop_closures > 0
     axes[2].vlines(k[has], 0, gain[has], color="0.35", lw=0.6 if has.sum() < 2000 else 0.3,
@@ -280,7 +279,9 @@ def plot_timeline(result: TimelineResult, path: str | os.PathLike) -> Path:
     axes[2].set_ylabel("gain: increase of lb\nby the loop closures")
     axes[2].set_xlabel("poses K (step: the K poses with the smallest ids)")
     axes[2].grid(True, alpha=0.3)
-    axes[2].legend(fontsize=8, loc="upper right", framealpha=0.9)
+    # one legend, in the raw panel's empty upper left (the curves rise from the lower left)
+    handles = [h for ax in (axes[0], axes[2]) for h in ax.get_legend_handles_labels()[0]]
+    axes[0].legend(handles=handles, fontsize=8, loc="upper left", framealpha=0.9)
     where = "every step" if result.every == 1 else f"every {result.every}-th step"
     fig.suptitle(f"{result.dataset}: information timeline ({result.dim}D, {where})", fontsize=10)
     return _save(fig, path)
