@@ -3,7 +3,7 @@
 The library (``__all__``) in one page:
 
 * ``load(source)`` reads a g2o or TORO file by path or dataset name, ``parse(text)`` its content;
-* ``solve``, ``bounds``, ``fim``, ``crlb`` and ``select`` take a graph, a path or a name, and
+* ``solve``, ``bounds``, ``fim``, ``crlb``, ``select`` and ``timeline`` take a graph, a path or a name, and
   keywords named as the command-line options (snake case, same defaults; timing runs once);
 * each returns a frozen dataclass with ``to_dict()`` (the command's ``--format json`` object),
   ``from_dict()``, ``to_frame()`` (pandas), ``save``/``load`` (npz) and a ``status``;
@@ -38,10 +38,11 @@ from .core.errors import (
 )
 
 if TYPE_CHECKING:
-    from .api.functions import bounds, crlb, fim, load, parse, select, solve
+    from .api.functions import bounds, crlb, fim, load, parse, select, solve, timeline
     from .api.results import BoundsResult, SelectResult
     from .core.graph import PoseGraph
     from .core.status import Status
+    from .incremental.result import TimelineResult
     from .models.paper.crlb import InverseAccuracy
     from .models.results import CrlbResult, FimResult
     from .solver.estimate import Estimate
@@ -53,16 +54,17 @@ __version__ = "0.2.0"
 # only when a function or a result class is used: the command line's start-up needs none).
 _LAZY = {
     "load": "api.functions", "parse": "api.functions", "solve": "api.functions", "bounds": "api.functions",
-    "fim": "api.functions", "crlb": "api.functions", "select": "api.functions",
+    "fim": "api.functions", "crlb": "api.functions", "select": "api.functions", "timeline": "api.functions",
     "PoseGraph": "core.graph", "Status": "core.status", "Estimate": "solver.estimate",
     "SolveResult": "solver.solve", "BoundsResult": "api.results", "FimResult": "models.results",
     "CrlbResult": "models.results", "InverseAccuracy": "models.paper.crlb", "SelectResult": "api.results",
+    "TimelineResult": "incremental.result",
 }
 
 __all__ = [
-    "load", "parse", "solve", "bounds", "fim", "crlb", "select",
+    "load", "parse", "solve", "bounds", "fim", "crlb", "select", "timeline",
     "PoseGraph", "Estimate", "SolveResult", "BoundsResult", "FimResult", "CrlbResult", "InverseAccuracy",
-    "SelectResult", "Status",
+    "SelectResult", "TimelineResult", "Status",
     "PosecrbError", "UsageError", "ArgumentError", "ParseError", "DatasetNotFound", "DisconnectedGraph",
     "NumericalError", "NotPositiveDefinite", "SolverError",
     "__version__",

@@ -74,6 +74,11 @@ CASES = [
      {"budget": "40%", "method": "relax", "seed": 3, "anchor": "{a}"}),
     ("select", ["--budget", "2", "--objective", "fim", "--certify", "--estimate", "vertices"],
      {"budget": 2, "objective": "fim", "certify": True, "estimate": "vertices"}),
+    ("timeline", [], {}),
+    ("timeline", ["--estimate", "none", "--every", "3", "--from", "4", "--to", "12"],
+     {"estimate": None, "every": 3, "start": 4, "stop": 12}),
+    ("timeline", ["--estimate", "vertices", "--fim-variant", "eq64", "--rotation-weight", "table2"],
+     {"estimate": "vertices", "fim_variant": "eq64", "rotation_weight": "table2"}),
 ]
 
 

@@ -42,6 +42,7 @@ COMMANDS = {
                {"t"}),
     "regress": (lambda f, o: ["regress", "--datasets", f, "--expected", str(o / "expected.json"), "--update"],
                 {"expected.json"}),
+    "timeline": (lambda f, o: ["timeline", f, "--format", "json"], set()),
 }
 
 # numbers compared with the clean graph: graph-only ones to 1e-12 relative (the same floats
@@ -59,6 +60,8 @@ def _numbers(command: str, out: str, odir: Path) -> dict[str, float]:
     data = json.loads(out)
     if command == "tables":
         data = data["rows"][0]
+    if command == "timeline":
+        data = data["rows"][-1]
     keys = {"info": ["poses", "edges", "tau_min", "tau_max", "kappa_min", "kappa_max", "degree_mean",
                      "parallel_edges", "components"],
             "bounds": ["lb", "ub", "ub_lambda", "fim_logdet"],
@@ -67,7 +70,8 @@ def _numbers(command: str, out: str, odir: Path) -> dict[str, float]:
             "crlb": ["trace_crlb", "mse_bound", "trace_translation", "trace_rotation"],
             "fim-sed": ["logdet", "trace", "rank", "nullity"],
             "crlb-sed": ["trace_crlb", "mse_bound", "nullity"],
-            "tables": ["lb", "ub", "ub_lambda", "objective", "fim_logdet"]}[command]
+            "tables": ["lb", "ub", "ub_lambda", "objective", "fim_logdet"],
+            "timeline": ["lb", "ub", "t_opt_graph", "fim_logdet"]}[command]
     return {k: data[k] for k in keys}
 
 

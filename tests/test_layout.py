@@ -8,8 +8,8 @@ import pytest
 
 import posecrb
 
-ORDER = ["core", "lie", "io", "datasets", "linalg", "solver", "models", "sim", "selection", "experiments",
-         "evaluation", "api", "report", "cli"]
+ORDER = ["core", "lie", "io", "datasets", "linalg", "solver", "models", "sim", "selection", "incremental",
+         "experiments", "evaluation", "report", "api", "cli"]
 ROOT = Path(posecrb.__file__).resolve().parent
 
 

@@ -68,6 +68,9 @@ COMMANDS: dict[str, tuple[str, str]] = {
     "tables": ("tables", "Rebuild the paper's Tables I-IV: FIM log-det at the certified optimum, ub and lb with "
                          "their times (I/II) and the construction time of the whole FIM vs the weighted Laplacians "
                          "(III/IV)."),
+    "timeline": ("timeline", "D- and T-optimality of every prefix of FILE as the graph grows: lb, ub, t_opt_graph "
+                             "and the FIM log-det per step, computed incrementally, and the gain of every loop "
+                             "closure."),
 }
 
 

@@ -1,0 +1,421 @@
+"""The information timeline: every row against a from-scratch dense computation of its prefix, the
+last row against `bounds`, loop-closure gains against dense log-det differences, the real datasets,
+the command line."""
+from __future__ import annotations
+
+import json
+from dataclasses import replace
+
+import numpy as np
+import pytest
+
+from posecrb import load
+from posecrb.core.errors import UsageError
+from posecrb.core.noise import rotation_weight
+from posecrb.evaluation.evaluate import EvaluationSettings, evaluate
+from posecrb.incremental import TimelineResult, timeline
+from posecrb.models.paper.bounds import compute_bounds
+from posecrb.models.paper.fim import paper_fim
+
+from .helpers import component_count, make_random_graph, random_pose_graph, run_cli
+from .numerics import MARGIN, logdet_atol, sum_atol
+
+
+# ------------------------------------------------------------------ independent references
+def prefix(graph, t):
+    """The graph on poses 0..t (internal indices) and the edges among them, with its vertices."""
+    keep = (graph.src <= t) & (graph.dst <= t)
+    return replace(graph, ids=graph.ids[: t + 1], src=graph.src[keep], dst=graph.dst[keep], rot=graph.rot[keep],
+                   trans=graph.trans[keep], info=graph.info[keep],
+                   vertex_rot=None if graph.vertex_rot is None else graph.vertex_rot[: t + 1],
+                   vertex_trans=None if graph.vertex_trans is None else graph.vertex_trans[: t + 1],
+                   edge_lines=None)
+
+
+def dense_matrices(g, variant="consistent"):
+    """Reduced L_tau, L_w, the ub matrix L_w (x) I + blkdiag(Psi) (anchor: pose 0), and the FIM at
+    the graph's vertices, dense, one edge at a time from the paper's definitions."""
+    n, d, dr = g.n, g.dim, g.rot_dim
+    tau, w = g.tau, rotation_weight(g.kappa, d)
+    lt, lw = np.zeros((n, n)), np.zeros((n, n))
+    psi = np.zeros((n, dr, dr))
+    for e in range(g.m):
+        i, j = g.src[e], g.dst[e]
+        for lap, x in ((lt, tau[e]), (lw, w[e])):
+            lap[i, i] += x
+            lap[j, j] += x
+            lap[i, j] -= x
+            lap[j, i] -= x
+        p = g.trans[e]
+        psi[i] += tau[e] * (p @ p) if d == 2 else 0.5 * tau[e] * ((p @ p) * np.eye(3) - np.outer(p, p))
+    lt, lw = lt[1:, 1:], lw[1:, 1:]
+    m = np.kron(lw, np.eye(dr))
+    for i in range(1, n):
+        m[(i - 1) * dr: i * dr, (i - 1) * dr: i * dr] += psi[i]
+    fim = None
+    if g.vertex_rot is not None:
+        fim = paper_fim(g, g.vertex_rot, g.vertex_trans, variant=variant).matrix.toarray()
+    return lt, lw, m, fim
+
+
+def logdet(a):
+    sign, value = np.linalg.slogdet(a)       # LU: independent of the Cholesky code under test
+    assert sign > 0
+    return value
+
+
+def reference_rows(g, variant="consistent"):
+    """Per prefix t (1..n-1): None when disconnected, else (lb, ub, t_opt_graph, fim_logdet, tolerances)."""
+    d, dr = g.dim, g.rot_dim
+    # the timeline factors matrices of the size of the whole graph: their rounding counts too
+    # (of the largest connected prefix when the whole graph is disconnected)
+    last = max(t for t in range(1, g.n) if component_count(prefix(g, t)) == 1)
+    whole_tol = [logdet_atol(a) for a in dense_matrices(prefix(g, last), variant) if a is not None]
+    out = {}
+    for t in range(1, g.n):
+        s = prefix(g, t)
+        if component_count(s) != 1:
+            out[t] = None
+            continue
+        lt, lw, m, fim = dense_matrices(s, variant)
+        tol_lb = d * logdet_atol(lt) + dr * logdet_atol(lw) + (d + dr) * max(whole_tol)
+        tol_ub = d * logdet_atol(lt) + logdet_atol(m) + (d + 1) * max(whole_tol)
+        trace = d * np.trace(lt) + dr * np.trace(lw)
+        out[t] = {"lb": (d * logdet(lt) + dr * logdet(lw), tol_lb),
+                  "ub": (d * logdet(lt) + logdet(m), tol_ub),
+                  "t_opt_graph": (trace, sum_atol(np.concatenate([np.diag(lt), np.diag(lw)]) * (d + dr)))}
+        if fim is not None:
+            out[t]["fim_logdet"] = (logdet(fim), logdet_atol(fim) + max(whole_tol))
+    return out
+
+
+def check_rows(res, ref):
+    seen = 0
+    for row in res.rows():
+        t = row["poses"] - 1
+        if ref[t] is None:
+            assert row["components"] > 1 and row["status"]["status"] == "unavailable"
+            assert all(row[k] is None for k in ("lb", "ub", "t_opt_graph", "gain"))
+            continue
+        assert row["components"] == 1 and "status" not in row
+        for key, (value, tol) in ref[t].items():
+            assert abs(row[key] - value) <= tol, (row["poses"], key, row[key], value, tol)
+        seen += 1
+    return seen
+
+
+def graphs(dim):
+    """Random graphs: a random spanning tree in random id order (prefixes often disconnected,
+    parallel edges, ids with gaps, anisotropic information, random edge directions) and an odometry
+    chain with random loop closures."""
+    rng = np.random.default_rng(7 + dim)
+    out = [make_random_graph(rng, n=10, extra=7, dim=dim) for _ in range(3)]
+    out += [random_pose_graph(12, dim, rng, loop_closures=9, rot_noise=0.05, trans_noise=0.1)[0] for _ in range(3)]
+    return out
+
+
+# ------------------------------------------------------------------ small random graphs
+@pytest.mark.parametrize("dim", [2, 3])
+def test_every_row_equals_a_dense_computation_of_its_prefix(dim):
+    total = 0
+    for g in graphs(dim):
+        res = timeline(g, estimate="vertices")
+        total += check_rows(res, reference_rows(g))
+        assert res.poses.tolist() == list(range(2, g.n + 1))
+    assert total > 30
+
+
+def test_eq64_variant_in_3d():
+    g = graphs(3)[4]
+    res = timeline(g, estimate="vertices", fim_variant="eq64")
+    check_rows(res, reference_rows(g, "eq64"))
+    assert res.fim_variant == "eq64"
+
+
+def test_last_row_equals_bounds_and_the_fim_at_the_same_estimate():
+    for dim in (2, 3):
+        for g in graphs(dim)[3:]:
+            res = timeline(g, estimate="vertices")
+            last = res.rows()[-1]
+            b = compute_bounds(g)
+            m = evaluate(g, EvaluationSettings(estimate="vertices"))
+            lt, lw, mm, fim = dense_matrices(g)
+            tol = MARGIN * max(logdet_atol(a) for a in (lt, lw, mm, fim))
+            assert abs(last["lb"] - b.lb) <= tol
+            assert abs(last["ub"] - b.ub) <= tol
+            assert abs(last["t_opt_graph"] - b.t_opt_graph) <= sum_atol([b.t_opt_graph] * g.m)
+            assert abs(last["fim_logdet"] - m.fim_logdet) <= tol
+
+
+def _processing_order(g):
+    """Edges in the order the timeline adds them: by newer pose, the edge to the largest older id
+    (first in file order) first, then the others in file order; and which ones are loop closures."""
+    order, closure = [], []
+    for t in range(1, g.n):
+        edges = [e for e in range(g.m) if max(g.src[e], g.dst[e]) == t]
+        if not edges:
+            continue
+        first = max(edges, key=lambda e: (min(g.src[e], g.dst[e]), -e))
+        order += [first] + [e for e in edges if e != first]
+        closure += [False] + [True] * (len(edges) - 1)
+    return order, closure
+
+
+def test_loop_closure_gains_are_sequential_increases_of_lb():
+    for dim in (2, 3):
+        for g in graphs(dim):
+            res = timeline(g, estimate="none")
+            order, closure = _processing_order(g)
+            gains = [c.gain for c in res.closures]
+            expected = []
+            for k, e in enumerate(order):
+                if not closure[k]:
+                    continue
+                before = replace(g, src=g.src[order[:k]], dst=g.dst[order[:k]], rot=g.rot[order[:k]],
+                                 trans=g.trans[order[:k]], info=g.info[order[:k]])
+                t = max(g.src[e], g.dst[e])
+                pre, post = prefix(before, t), prefix(replace(g, src=g.src[order[: k + 1]], dst=g.dst[order[: k + 1]],
+                                                              rot=g.rot[order[: k + 1]], trans=g.trans[order[: k + 1]],
+                                                              info=g.info[order[: k + 1]]), t)
+                if component_count(pre) != 1:
+                    expected.append(None)
+                    continue
+                a, b = dense_matrices(pre)[:2], dense_matrices(post)[:2]
+                lb = [g.dim * logdet(x[0]) + g.rot_dim * logdet(x[1]) for x in (a, b)]
+                tol = 2 * g.dim * max(logdet_atol(x) for x in (*a, *b))
+                expected.append((lb[1] - lb[0], tol))
+            assert len(gains) == len(expected)
+            for got, exp in zip(gains, expected, strict=True):
+                if exp is None:
+                    assert got is None
+                else:
+                    assert abs(got - exp[0]) <= exp[1]
+            # a step's gain is the sum of its loop closures' gains
+            for row in res.rows():
+                if row["gain"] is not None:
+                    mine = [c.gain for c in res.closures if c.poses == row["poses"]]
+                    assert row["gain"] == pytest.approx(sum(mine), abs=sum_atol(mine) + 0.0)
+                    assert row["loop_closures"] == len(mine)
+
+
+def test_drift_fallback_recomputes_segments_down_to_single_steps(monkeypatch):
+    import posecrb.incremental.tracker as tracker
+
+    monkeypatch.setattr(tracker, "drift_tolerance", lambda level, *a: np.full(level.shape, -1.0))
+    g = graphs(2)[4]
+    res = timeline(g, estimate="vertices")
+    check_rows(res, reference_rows(g))
+    # no drift is accepted: every segment shrinks to a single step, whose row is the fresh value
+    assert res.checks["L_tau"]["checkpoints"] == g.n - 1
+
+
+def test_every_from_to_select_rows_of_the_same_computation():
+    g = graphs(2)[3]
+    full = {r["poses"]: r for r in timeline(g, estimate="vertices").rows()}
+    part = timeline(g, estimate="vertices", every=3, start=4, stop=11)
+    assert part.poses.tolist() == [4, 7, 10, 11]
+    tol = max(c["tolerance"] for c in part.checks.values()) + max(c["tolerance"] for c in
+                                                                 timeline(g, estimate="vertices").checks.values())
+    for row in part.rows():
+        for key in ("lb", "ub", "fim_logdet", "gain", "t_opt_graph"):
+            assert row[key] == pytest.approx(full[row["poses"]][key], abs=tol + 1e-300)
+    assert (part.first, part.last, part.every) == (4, 11, 3)
+    assert all(4 <= c.poses <= 11 for c in part.closures)
+
+
+@pytest.mark.parametrize("kwargs", [{"every": 0}, {"start": 1}, {"stop": 13}, {"start": 6, "stop": 5},
+                                    {"every": 1.5}, {"estimate": ""}, {"fim_variant": "x"}])
+def test_bad_arguments_are_usage_errors(kwargs):
+    g = graphs(2)[3]
+    with pytest.raises(UsageError):
+        timeline(g, **{"estimate": "none", **kwargs})
+
+
+def test_two_poses_and_parallel_edges():
+    g = random_pose_graph(2, 2, np.random.default_rng(1), loop_closures=0)[0]
+    two = replace(g, src=np.r_[g.src, g.dst], dst=np.r_[g.dst, g.src], rot=np.r_[g.rot, np.swapaxes(g.rot, 1, 2)],
+                  trans=np.r_[g.trans, -g.trans], info=np.r_[g.info, g.info])
+    res = timeline(two, estimate="vertices")
+    assert res.poses.tolist() == [2] and res.loop_closures.tolist() == [1]
+    check_rows(res, reference_rows(two))
+    assert res.closures[0].gain == pytest.approx(res.gain[0])
+
+
+def test_whole_graph_disconnected_keeps_the_connected_prefixes():
+    g = random_pose_graph(12, 3, np.random.default_rng(3), loop_closures=6)[0]
+    cut = ~((np.maximum(g.src, g.dst) >= 9) & (np.minimum(g.src, g.dst) < 9))    # poses 9..11 on their own
+    g = replace(g, src=g.src[cut], dst=g.dst[cut], rot=g.rot[cut], trans=g.trans[cut], info=g.info[cut])
+    assert component_count(g) == 2
+    res = timeline(g, estimate="vertices")
+    assert check_rows(res, reference_rows(g)) == 8
+    assert res.components[-1] == 2
+
+
+def test_protocol_round_trip_and_frames():
+    g = graphs(3)[0]
+    res = timeline(g, estimate="vertices")
+    d = res.to_dict()
+    again = TimelineResult.from_dict(json.loads(json.dumps(d)))
+    assert again.to_dict() == d
+    frame = res.to_frame()
+    assert list(frame.columns) == ["poses", "pose", "edges", "loop_closures", "components", "lb", "ub",
+                                   "t_opt_graph", "fim_logdet", "gain"]
+    assert len(frame) == len(d["rows"])
+    assert len(res.closures_frame()) == len(d["loop_closures"])
+    assert d["rows"][0]["pose"] == int(g.ids[1]) and d["anchor"] == int(g.ids[0])
+
+
+def test_monotonicity_against_the_rows():
+    g = graphs(2)[3]
+    res = timeline(g, estimate="vertices")
+    rows = res.rows()
+    q = g.q
+    for metric in ("lb", "ub", "t_opt_graph", "fim_logdet"):
+        for scale in ("raw", "per_dimension"):
+            vals = [(r["poses"], r[metric] / (1 if scale == "raw" else q * (r["poses"] - 1))) for r in rows]
+            drops = [k for (_, a), (k, b) in zip(vals, vals[1:]) if b < a]
+            mono = res.monotonicity[metric][scale]
+            assert mono.decreases == len(drops) and mono.monotone == (not drops)
+            if drops:
+                assert mono.first["poses"] == drops[0]
+
+
+# ------------------------------------------------------------------ real datasets
+def _real(shared_datasets, name):
+    path = shared_datasets / f"{name}.g2o"
+    if not path.is_file():
+        pytest.skip(f"{name}.g2o not in $POSECRB_DATA")
+    return load(str(path))
+
+
+@pytest.mark.slow
+def test_intel_prefixes_against_dense_and_bounds(shared_datasets):
+    g = _real(shared_datasets, "intel")
+    res = timeline(g, estimate="vertices")
+    rows = {r["poses"]: r for r in res.rows()}
+    for k in (2, 60, 271, 700):
+        s = prefix(g, k - 1)
+        lt, lw, m, fim = dense_matrices(s)
+        assert rows[k]["lb"] == pytest.approx(2 * logdet(lt) + logdet(lw), abs=2 * logdet_atol(lt) + logdet_atol(lw))
+        assert rows[k]["ub"] == pytest.approx(2 * logdet(lt) + logdet(m), abs=2 * logdet_atol(lt) + logdet_atol(m))
+        assert rows[k]["fim_logdet"] == pytest.approx(logdet(fim), abs=logdet_atol(fim))
+    b = compute_bounds(g)
+    last = rows[g.n]
+    tol = res.checks["L_tau"]["tolerance"] + res.checks["ub"]["tolerance"]
+    assert last["lb"] == pytest.approx(b.lb, abs=tol) and last["ub"] == pytest.approx(b.ub, abs=tol)
+    assert last["t_opt_graph"] == pytest.approx(b.t_opt_graph, abs=sum_atol([b.t_opt_graph] * g.m))
+    m = evaluate(g, EvaluationSettings(estimate="vertices"))
+    assert last["fim_logdet"] == pytest.approx(m.fim_logdet, abs=res.checks["fim"]["tolerance"])
+    # every 100th prefix against bounds from scratch (sparse Cholesky), to the timeline's tolerance
+    for k in range(100, g.n, 100):
+        bk = compute_bounds(prefix(g, k - 1))
+        assert rows[k]["lb"] == pytest.approx(bk.lb, abs=tol)
+        assert rows[k]["ub"] == pytest.approx(bk.ub, abs=tol)
+    assert all(c["max_drift"] <= c["tolerance"] for c in res.checks.values())
+
+
+@pytest.mark.slow
+def test_cubicle_disconnected_prefixes(shared_datasets):
+    g = _real(shared_datasets, "cubicle")
+    res = timeline(g, estimate="none")
+    # independent count: components of every prefix by union-find over the edges in step order
+    parent = list(range(g.n))
+
+    def find(x):
+        while parent[x] != x:
+            parent[x] = parent[parent[x]]
+            x = parent[x]
+        return x
+
+    hi = np.maximum(g.src, g.dst)
+    comps, expected, k = 0, [], 0
+    order = np.argsort(hi, kind="stable")
+    for t in range(g.n):
+        comps += 1
+        while k < g.m and hi[order[k]] == t:
+            a, b = find(g.src[order[k]]), find(g.dst[order[k]])
+            if a != b:
+                parent[a] = b
+                comps -= 1
+            k += 1
+        expected.append(comps)
+    assert res.components.tolist() == expected[1:]
+    rows = res.rows()
+    bad = [r for r in rows if r["components"] > 1]
+    assert len(bad) == sum(c > 1 for c in expected[1:]) >= 1
+    assert all(r["lb"] is None and r["status"]["status"] == "unavailable" for r in bad)
+    after = rows[rows.index(bad[-1]) + 1]
+    assert after["gain"] is None and after["gain_status"]["status"] == "unavailable"
+    b = compute_bounds(prefix(g, after["poses"] - 1))
+    tol = res.checks["L_tau"]["tolerance"] + res.checks["L_w"]["tolerance"] + res.checks["ub"]["tolerance"]
+    assert after["lb"] == pytest.approx(b.lb, abs=tol) and after["ub"] == pytest.approx(b.ub, abs=tol)
+
+
+# ------------------------------------------------------------------ command line
+@pytest.fixture
+def g2o_file(tmp_path):
+    from posecrb.io import write_g2o
+
+    g = graphs(2)[3]
+    path = tmp_path / "g.g2o"
+    write_g2o(g, path)
+    return path
+
+
+def test_cli_json_equals_to_dict(g2o_file, capsys):
+    code, out, _ = run_cli(["timeline", str(g2o_file), "--estimate", "vertices", "--format", "json"], capsys)
+    assert code == 0
+    got = json.loads(out)
+    want = timeline(load(str(g2o_file)), estimate="vertices").to_dict()
+    got.pop("times")
+    want.pop("times")
+    assert got == json.loads(json.dumps(want))
+
+
+def test_cli_formats_and_plot(g2o_file, tmp_path, capsys):
+    code, out, _ = run_cli(["timeline", str(g2o_file), "--estimate", "none"], capsys)
+    assert code == 0 and "lb" in out and "Top" in out
+    code, out, _ = run_cli(["timeline", str(g2o_file), "--estimate", "none", "--format", "csv", "--every", "5"],
+                           capsys)
+    lines = out.strip().splitlines()
+    assert code == 0 and lines[0].startswith("poses,pose,edges") and len(lines) == 1 + 3
+    code, out, _ = run_cli(["timeline", str(g2o_file), "--estimate", "none", "--format", "markdown", "--from", "3",
+                            "--to", "4"], capsys)
+    assert code == 0 and out.count("\n") == 2 + 2
+    fig = tmp_path / "out" / "t.png"
+    fig.parent.mkdir()
+    code, _, _ = run_cli(["timeline", str(g2o_file), "--estimate", "none", "--plot", str(fig)], capsys)
+    assert code == 0 and fig.stat().st_size > 0
+
+
+@pytest.mark.parametrize("args,code", [
+    (["--every", "0"], 2), (["--from", "1"], 2), (["--from", "6", "--to", "5"], 2), (["--to", "13"], 2),
+    (["--format", "latex"], 2), (["--plot", "x.txt"], 2),
+])
+def test_cli_bad_options(g2o_file, capsys, args, code):
+    got, _, err = run_cli(["timeline", str(g2o_file), "--estimate", "none", *args], capsys)
+    assert got == code, err
+
+
+def test_cli_plot_onto_the_input_is_refused(g2o_file, tmp_path, capsys):
+    png = tmp_path / "g.png"
+    png.write_bytes(b"not a figure, an input")
+    code, _, err = run_cli(["timeline", str(g2o_file), "--estimate", str(png), "--plot", str(png)], capsys)
+    assert code == 2 and "--plot" in err
+    code, _, err = run_cli(["timeline", str(g2o_file), "--estimate", "none", "--plot", str(g2o_file)], capsys)
+    assert code == 2 and "--plot" in err
+    assert png.read_bytes() == b"not a figure, an input"
+
+
+def test_cli_bad_input_files(tmp_path, capsys):
+    code, _, err = run_cli(["timeline", str(tmp_path / "missing.g2o")], capsys)
+    assert code == 1 and "missing.g2o" in err
+    bad = tmp_path / "bad.g2o"
+    bad.write_text("VERTEX_SE2 0 0 0 0\nVERTEX_SE2 1 1 0 0\nEDGE_SE2 0 1 1 0 0 1 0 0 1 0 x\n")
+    code, _, err = run_cli(["timeline", str(bad), "--estimate", "none"], capsys)
+    assert code == 1 and "bad.g2o:3" in err
+    one = tmp_path / "one.g2o"
+    one.write_text("VERTEX_SE2 0 0 0 0\n")
+    code, _, err = run_cli(["timeline", str(one), "--estimate", "none"], capsys)
+    assert code != 0
+
