@@ -94,6 +94,23 @@ def to_json(rows: Sequence[dict[str, Any]] | dict[str, Any], single: bool = Fals
     return json.dumps(data, indent=2, allow_nan=False)
 
 
+def to_json_long(obj: dict[str, Any], long_keys: Sequence[str]) -> str:
+    """``obj`` (plain JSON values) as ``to_json`` prints it, except that the lists under
+    ``long_keys`` hold one element per line, each written compactly: the same JSON value, and
+    json's C encoder for the bulk (an indented dump of 10^4 rows runs json's pure-Python encoder,
+    about half a second)."""
+    encode = json.JSONEncoder(allow_nan=False).encode      # one encoder for every element
+    parts = []
+    for key, value in obj.items():
+        head = f"  {json.dumps(key)}: "
+        if key in long_keys and isinstance(value, list) and value:
+            items = ",\n".join("    " + encode(item) for item in value)
+            parts.append(f"{head}[\n{items}\n  ]")
+        else:
+            parts.append(head + json.dumps(value, indent=2, allow_nan=False).replace("\n", "\n  "))
+    return "{\n" + ",\n".join(parts) + "\n}"
+
+
 def to_csv(rows: Sequence[dict[str, Any]], columns: Sequence[str] | None = None) -> str:
     flat = [flatten(_plain(r)) for r in rows]
     cols = _columns(flat, columns)

@@ -1,7 +1,6 @@
 """`posecrb timeline FILE`: D- and T-optimality of every prefix as the graph grows (posecrb.incremental)."""
 from __future__ import annotations
 
-import json
 import logging
 from typing import TYPE_CHECKING
 
@@ -10,7 +9,7 @@ import click
 from ...api.functions import timeline
 from ...core.errors import PosecrbError
 from ...core.status import log_statuses
-from ...report.render import print_rows, to_rich_table
+from ...report.render import print_rows, to_json_long, to_rich_table
 from ..options import (
     PlainInt,
     data_dir_option,
@@ -90,9 +89,9 @@ def command(file, estimate, every, start, stop, rotation_model, fim_variant, plo
     log_statuses(log, res.dataset, res.statuses())
     uncertified = res.estimate is not None and res.estimate.get("certified") is False
     if fmt == "json":
-        # to_dict() is plain JSON already (no NaN, no numpy scalars): dumped as print_rows would,
-        # without its recursive conversion pass over every row and loop closure
-        click.echo(json.dumps(res.to_dict(), indent=2, allow_nan=False))
+        # to_dict() is plain JSON already (no NaN, no numpy scalars): no conversion pass; one line
+        # per row and per loop closure
+        click.echo(to_json_long(res.to_dict(), ("rows", "loop_closures")))
     elif fmt == "table":
         _show_summary(res)
     else:
