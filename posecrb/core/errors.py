@@ -121,6 +121,10 @@ class UsageError(PosecrbError, ValueError):
     """
 
 
+# Keywords that cannot be spelled as their option: ``from`` is a Python keyword (``timeline``).
+_CLI_SPELLING = {"start": "--from", "stop": "--to"}
+
+
 class ArgumentError(UsageError):
     """One argument of a library call is wrong; the message names it in Python terms.
 
@@ -159,10 +163,10 @@ class ArgumentError(UsageError):
 
     def cli_message(self) -> str:
         """The message with the command-line spelling: ``--max-iter 0 ...`` for ``max_iter=0``;
-        ``source`` (the file argument) as ``FILE``."""
+        ``source`` (the file argument) as ``FILE``; ``start``/``stop`` as ``--from``/``--to``."""
         if self.parameter == "source":
             return f"FILE {self.value}{self.sep}{self.reason}"
-        flag = "--" + self.parameter.replace("_", "-")
+        flag = _CLI_SPELLING.get(self.parameter) or "--" + self.parameter.replace("_", "-")
         if isinstance(self.value, bool):   # a flag: given or not
             return f"{flag}{self.sep}{self.reason}"
         shown = " ".join(map(str, self.value)) if isinstance(self.value, (list, tuple)) else str(self.value)

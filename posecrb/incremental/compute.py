@@ -38,7 +38,7 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
-from ..core.errors import UsageError
+from ..core.errors import ArgumentError, UsageError
 from ..core.graph import PoseGraph
 from ..core.noise import rotation_weight
 from ..core.status import OK, worst
@@ -170,14 +170,14 @@ def _step_range(n: int, start: int | None, stop: int | None, every: int) -> tupl
     if n < 2:
         raise UsageError(f"a timeline needs at least 2 poses (the graph has {n})")
     if isinstance(every, bool) or not isinstance(every, (int, np.integer)) or every < 1:
-        raise UsageError(f"every must be a positive integer, got {every!r}")
+        raise ArgumentError("every", every, "is not a positive integer")
     k0 = 2 if start is None else start
     k1 = n if stop is None else stop
     for name, k in (("start", k0), ("stop", k1)):
         if isinstance(k, bool) or not isinstance(k, (int, np.integer)) or not 2 <= k <= n:
-            raise UsageError(f"{name} must be a number of poses from 2 to {n}, got {k!r}")
+            raise ArgumentError(name, k, f"is not a number of poses from 2 to {n}")
     if k0 > k1:
-        raise UsageError(f"start ({k0} poses) is after stop ({k1} poses)")
+        raise ArgumentError("start", k0, f"is after the last step asked for ({k1} poses)")
     return int(k0) - 1, int(k1) - 1
 
 
