@@ -395,6 +395,17 @@ def test_cli_formats_and_plot(g2o_file, tmp_path, capsys):
 def test_cli_bad_options(g2o_file, capsys, args, code):
     got, _, err = run_cli(["timeline", str(g2o_file), "--estimate", "none", *args], capsys)
     assert got == code, err
+    assert f"'{args[0]}'" in err or f"{args[0]} " in err      # the option is named, as the user wrote it
+
+
+def test_library_range_errors_name_the_keyword(g2o_file):
+    """The library says start=/stop=; the command line says --from/--to (tested above)."""
+    import posecrb
+
+    with pytest.raises(posecrb.ArgumentError, match=r"^start=6 is after the last step asked for \(5 poses\)"):
+        posecrb.timeline(g2o_file, estimate="none", start=6, stop=5)
+    with pytest.raises(posecrb.ArgumentError, match=r"^every=0 "):
+        posecrb.timeline(g2o_file, estimate="none", every=0)
 
 
 def test_cli_plot_onto_the_input_is_refused(g2o_file, tmp_path, capsys):
