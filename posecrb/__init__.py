@@ -38,8 +38,9 @@ from .core.errors import (
 )
 
 if TYPE_CHECKING:
-    from .api.functions import bounds, crlb, fim, load, parse, select, solve, timeline
+    from .api.functions import bounds, crlb, fim, load, parse, select, solve
     from .api.results import BoundsResult, SelectResult
+    from .api.timeline import timeline
     from .core.graph import PoseGraph
     from .core.status import Status
     from .incremental.result import TimelineResult
@@ -54,7 +55,7 @@ __version__ = "0.2.0"
 # only when a function or a result class is used: the command line's start-up needs none).
 _LAZY = {
     "load": "api.functions", "parse": "api.functions", "solve": "api.functions", "bounds": "api.functions",
-    "fim": "api.functions", "crlb": "api.functions", "select": "api.functions", "timeline": "api.functions",
+    "fim": "api.functions", "crlb": "api.functions", "select": "api.functions", "timeline": "api.timeline",
     "PoseGraph": "core.graph", "Status": "core.status", "Estimate": "solver.estimate",
     "SolveResult": "solver.solve", "BoundsResult": "api.results", "FimResult": "models.results",
     "CrlbResult": "models.results", "InverseAccuracy": "models.paper.crlb", "SelectResult": "api.results",

@@ -6,7 +6,7 @@ from typing import TYPE_CHECKING
 
 import click
 
-from ...api.functions import timeline
+from ...api.timeline import timeline
 from ...core.errors import PosecrbError
 from ...core.status import log_statuses
 from ...report.render import print_rows, to_json_long, to_rich_table
