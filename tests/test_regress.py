@@ -24,6 +24,19 @@ def test_ci_subset_has_no_drift(shared_datasets, capfd):
     assert main(["regress", *(a for name in CI_SUBSET for a in ("--datasets", name))]) == 0
 
 
+@pytest.mark.parametrize("fmt", ["json", "csv", "markdown"])
+def test_no_drift_still_prints_machine_readable_output(shared_datasets, capfd, fmt):
+    """With nothing drifted, a pipe still gets a parseable result: [] or the header, never nothing."""
+    assert main(["regress", "--datasets", "tinyGrid3D", "--format", fmt]) == 0
+    out, err = capfd.readouterr()
+    if fmt == "json":
+        assert json.loads(out) == []
+    else:
+        header = out.splitlines()[0].replace("\\", "")
+        assert all(col in header for col in ("dataset", "quantity", "expected", "got", "rel_diff", "ok"))
+    assert "values within tolerance" in err
+
+
 @pytest.mark.parametrize("quantity,factor", [("lb", 1 + 1e-8), ("objective", 1 + 1e-5)])
 def test_perturbed_expected_value_is_caught(shared_datasets, capfd, tmp_path, quantity, factor):
     data = load_expected()

@@ -4,7 +4,7 @@ from __future__ import annotations
 import logging
 import os
 import shlex
-from dataclasses import asdict
+from dataclasses import asdict, fields
 
 import click
 
@@ -84,8 +84,10 @@ def command(names, update, expected_path, allow_missing, all_rows, data_dir, fmt
     else:
         bad = [d for d in diffs if not d.ok]
         rows = [asdict(d) for d in (diffs if all_rows else bad)]
-        if rows:
-            print_rows(rows, fmt, title="regression: recomputed vs expected", single_json=False)
+        if rows or fmt != "table":
+            # machine-readable output even when nothing drifted: [] in JSON, the header in CSV/Markdown
+            print_rows(rows, fmt, columns=None if fmt in ("json", "table") else [f.name for f in fields(Diff)],
+                       title="regression: recomputed vs expected", single_json=False)
         click.echo(f"{len(diffs) - len(bad)} of {len(diffs)} values within tolerance "
                    f"({len({d.dataset for d in diffs})} dataset(s))", err=True)
         if bad:
