@@ -740,3 +740,26 @@ def test_status_json_round_trip(status):
 
     st = Status(*status)
     assert Status.from_json(st.as_json()) == st
+
+
+def test_a_singular_starting_point_names_the_fixed_edges(monkeypatch):
+    """Where the FIM of the fixed edges alone fails to factor (information scaled to 1e-12 made a
+    3D grid's odometry FIM singular to working precision), the error names the fixed edges, not the
+    whole graph, and keeps the factorization's reason."""
+    from posecrb.core.errors import NotPositiveDefinite
+    from posecrb.selection.objectives import LogDetObjective
+
+    g = chain_graph(np.random.default_rng(5), n=9, extra=10)
+    base_weights = []
+
+    def singular(self, x):
+        base_weights.append(np.array(x))
+        raise NotPositiveDefinite("anchored FIM", "matrix not positive definite (code 1)")
+
+    monkeypatch.setattr(LogDetObjective, "evaluate", singular)
+    with pytest.raises(NotPositiveDefinite) as exc:
+        select_edges(g, 3, objective="fim", reference=from_vertices(g))
+    assert base_weights[0].sum() == 8  # the odometry chain of 9 poses, the only thing evaluated
+    msg = str(exc.value)
+    assert "anchored FIM of the 8 fixed edges" in msg and "(code 1)" in msg
+    assert "fixed edges alone must determine every pose" in msg

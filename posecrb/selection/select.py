@@ -18,7 +18,7 @@ from typing import Any
 import numpy as np
 from threadpoolctl import threadpool_limits
 
-from ..core.errors import UsageError
+from ..core.errors import NotPositiveDefinite, UsageError
 from ..core.graph import PoseGraph
 from ..solver.estimate import Estimate, get_estimate
 from .budget import EdgeSplit, parse_budget, split_edges
@@ -128,7 +128,14 @@ def _prepare(graph: PoseGraph, budget: str | int, objective: str, fixed: str, an
                        max_iter=max_iter if max_iter is not None else (20 if obj.kind == "fiedler" else 100),
                        estimate=est_info, times=times)
     t0 = time.perf_counter()
-    problem.base_state = obj.evaluate(base)
+    try:
+        problem.base_state = obj.evaluate(base)
+    except NotPositiveDefinite as exc:
+        # Every selection starts from the fixed edges alone; name them rather than the whole graph.
+        raise NotPositiveDefinite(
+            f"{graph.name}: {exc.matrix} of the {split.fixed.size} fixed edges (the selection's starting point)",
+            f"{exc.reason}; the fixed edges alone must determine every pose to working precision",
+            exc.column) from None
     problem.full_value = obj.value(problem.weights(split.candidates))
     times["base"] = time.perf_counter() - t0
     return problem

@@ -309,6 +309,17 @@ def _solve(graph: PoseGraph, options: SolverOptions) -> SolveResult:
     times["round"] = time.perf_counter() - t0
     times["total"] = time.perf_counter() - t_start
     certified = bool(cert is not None and cert.certified)
+    # A successful Cholesky of Q - Lambda + s I proves lambda_min > -s, hence F* >= f(Y) - n d s
+    # (module docstring of staircase.py). Where that bound reaches the objective, "certified"
+    # proves nothing about optimality (possible only with a tolerance far above the default).
+    if certified and cert is not None and cert.proven_shift is not None:
+        suboptimality_bound = n * d * cert.proven_shift + max(objective - state.f, 0.0)
+        if suboptimality_bound >= abs(objective):
+            log.warning("%s: certified at tolerance %g, but the suboptimality bound it proves, "
+                        "n d s + gap = %.3g (s = %.3g, the shift of the certifying factorization), is "
+                        "not below the objective %.6g: the estimate is not shown to be optimal (a smaller "
+                        "tolerance: posecrb solve --certificate-tol, default 1e-3)", graph.name, certificate_tol,
+                        suboptimality_bound, cert.proven_shift, objective)
     return SolveResult(
         dataset=graph.name, dim=d, poses=n, edges=graph.m, anchor=int(graph.ids[anchor]),
         objective=float(objective), relaxation_value=float(state.f), duality_gap=float(objective - state.f),

@@ -16,8 +16,11 @@ What "certified" means (the tolerance eta, ``certificate_tol``, default 1e-3): p
 ``lambda_min(Q - Lambda) >= -eta`` on the translation-ELIMINATED certificate. For any feasible
 point Z of the SDP (diagonal blocks I_d), ``tr(Q Z) >= f(Y) + n d lambda_min(Q - Lambda)``, so a
 certified solve proves ``F* >= f(Y) - n d eta``: an absolute suboptimality bound of at most
-``n d eta`` plus the rounding gap (``SolveResult.duality_gap``). SE-Sync's C++ test is looser:
-it factors ``M - Lambda + eta I`` with eta added to the translation rows as well. Its Schur
+``n d eta`` plus the rounding gap (``SolveResult.duality_gap``). The bound is ``n d s`` for the shift
+``s <= eta`` of the Cholesky that certified (``Certificate.proven_shift``); ``solve`` warns where it
+does not fall below the objective, i.e. where a large tolerance leaves "certified" without content.
+SE-Sync's C++ test is looser: it factors ``M - Lambda + eta I`` with eta added to the translation
+rows as well. Its Schur
 complement is ``C - Lambda + eta I - V^T (L(W^tau) + eta I)^{-1} V``, which exceeds
 ``Q - Lambda + eta I`` by ``V^T [L^{-1} - (L + eta I)^{-1}] V`` -- large where L(W^tau) has small
 eigenvalues (big, weakly connected graphs) -- and the dual bound it implies is only
@@ -187,6 +190,9 @@ class Certificate:
     vector: np.ndarray | None      # (n, d) unit eigenvector for lambda_min < -tol
     factorizations: int
     lanczos_solves: int
+    # When certified: the shift s <= tol of the successful Cholesky of Q - Lambda + s I, which
+    # proves lambda_min > -s (lambda_min itself is a Lanczos estimate).
+    proven_shift: float | None = None
 
 
 def _largest_inverse_eig(problem: Problem, factor: Factor, dn: int, rng: np.random.Generator, maxiter: int,
@@ -234,7 +240,7 @@ def verify(problem: Problem, state: State, tol: float, rng: np.random.Generator,
             mu, _, solves = _largest_inverse_eig(problem, fac, dn, rng, maxiter=50, tol=1e-10)
             lm = 1.0 / mu - shift if mu > 0 else -shift
             lm = max(lm, -shift)   # the factorization proved lambda_min > -shift >= -tol
-        return Certificate(True, lm, None, facs, solves)
+        return Certificate(True, lm, None, facs, solves, proven_shift=float(shift))
     # Not PSD within tol: find a positive-definite shift, then shift-invert at it.
     scale = problem.gershgorin_max() + float(np.max(np.abs(lam)))
     if not math.isfinite(scale):

@@ -31,7 +31,9 @@ HEADERS = {"hessian_vector_products": "HVPs", "times.total": "time s", "duality_
 @click.option("--anchor", type=POSE_ID, default=None,
               help="Pose id (as in the file) put at the identity in the output; default: the smallest id.")
 @click.option("--certificate-tol", type=FiniteFloat(min=0, min_open=True), default=1e-3, show_default=True,
-              help="Accept lambda_min(Q - Lambda) >= -TOL as a certificate of global optimality.")
+              help="Accept lambda_min(Q - Lambda) >= -TOL as a certificate of global optimality. It bounds "
+                   "the suboptimality by n d TOL (absolute, the objective's units); a warning says when "
+                   "that bound is not below the objective.")
 @click.option("--sesync-compat", is_flag=True,
               help="Read 3D quaternions as SE-Sync does (unnormalised) to reproduce its objective values.")
 @data_dir_option
