@@ -205,3 +205,22 @@ def test_option_choices_are_the_librarys():
     assert options.MODELS == MODELS
     assert options.FIM_VARIANTS == FIM_VARIANTS
     assert options.ROTATION_WEIGHT_MODELS == ROTATION_WEIGHT_MODELS
+
+
+def test_solve_of_weak_rotations_imports_no_bessel_functions(tmp_path):
+    """The reader checks eq. (59)'s rotation weight of every 3D edge with kappa < 1e-3 (as in
+    parking-garage.g2o); it comes from a power series there, so solve still does not pay for
+    scipy.special's import."""
+    from dataclasses import replace
+
+    g = make_random_graph(np.random.default_rng(12), n=12, extra=8, dim=3, sparse_ids=False)
+    info = g.info.copy()
+    info[0, 3:, 3:] *= 1e-5   # kappa of edge 0 from [5, 50] to below 1e-3
+    path = tmp_path / "weak.g2o"
+    write_g2o(replace(g, info=info), path)
+    out, modules = _run(["solve", str(path), "--format", "json"], listing=True)
+    assert out.returncode == 0, out.stderr
+    assert json.loads(out.stdout)["certified"] is True
+    kappa = 3 / (2 * np.trace(np.linalg.inv(info[0, 3:, 3:])))
+    assert kappa < 1e-3
+    assert "scipy.sparse" in modules and _loaded(modules, "scipy.special") == []

@@ -34,7 +34,8 @@ def _omega_mp(k):
 
 
 def test_omega_matches_eq59_in_high_precision():
-    ks = np.geomspace(1e-3, 1e8, 120)
+    # every branch: the power series (kappa < 0.05, both sides of the switch), ive, the asymptotic series
+    ks = np.concatenate([np.geomspace(1e-8, 1e8, 160), 0.05 * (1 + np.array([-1e-15, 0.0, 1e-15]))])
     got = omega(ks)
     ref = np.array([float(_omega_mp(mp.mpf(float(k)))) for k in ks])
     assert np.all(np.isfinite(got))
