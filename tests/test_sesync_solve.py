@@ -332,3 +332,41 @@ def test_the_default_tolerance_proves_optimality_on_intel(shared_datasets):
     assert r.exit_code == 0 and json.loads(r.stdout)["certified"]
     # n d eta = 1728 * 2 * 1e-3 = 3.456, far below intel's objective (about 52.3): nothing to report.
     assert "not shown to be optimal" not in r.stderr
+
+
+def _solve_warnings(caplog, graph):
+    import logging
+
+    from posecrb.solver import solve
+
+    caplog.clear()
+    with caplog.at_level(logging.WARNING, logger="posecrb"):
+        res = solve(graph)
+    return res, [r.getMessage() for r in caplog.records if "not shown to be optimal" in r.getMessage()]
+
+
+@pytest.mark.parametrize("dim", [2, 3])
+def test_exact_measurements_are_optimal_without_a_warning(caplog, dim):
+    """Noise-free data: the objective is rounding error (about 1e-28), below any n d s, yet F* >= 0
+    proves the estimate optimal, so nothing is reported."""
+    from posecrb.sim.generators import grid
+
+    res, warned = _solve_warnings(caplog, grid(dim, 4, tau=100.0, kappa=200.0))
+    assert res.certified and res.objective < 1e-20 and warned == []
+
+
+def test_information_scaled_far_down_makes_the_default_certificate_vacuous(caplog):
+    """The tolerance is absolute: with every information matrix times 1e-9 the objective falls to
+    about 1e-7 while n d eta stays 0.032 at the default; the solve still certifies, and says that the
+    certificate does not show optimality. The same graph at its own scale is silent."""
+    from dataclasses import replace
+
+    from posecrb.sim.generators import grid
+
+    g = grid(2, 4, tau=100.0, kappa=200.0, noise=True, rng=np.random.default_rng(3))
+    res, warned = _solve_warnings(caplog, g)
+    assert res.certified and warned == []
+    res_small, warned = _solve_warnings(caplog, replace(g, info=g.info * 1e-9))
+    assert res_small.certified and len(warned) == 1
+    assert res_small.objective == pytest.approx(1e-9 * res.objective, rel=1e-6)
+    assert 16 * 2 * 1e-3 >= res_small.objective
