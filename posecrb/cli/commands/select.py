@@ -72,8 +72,9 @@ def _summary(d: dict) -> list[dict]:
 @click.option("--tol", type=FiniteFloat(min=0, min_open=True, max=1), default=1e-3, show_default=True,
               help="Stop the relaxation when its duality gap is below TOL x (bound - base value).")
 @click.option("--lazy", is_flag=True,
-              help="Lazy greedy with a priority queue instead of the incremental greedy (same choice, "
-                   "different cost profile).")
+              help="Lazy greedy with a priority queue instead of the incremental greedy: the same choice "
+                   "except between exactly equal gains (regular grids with equal information have many, "
+                   "and rounding breaks them differently), a different cost profile.")
 @click.option("--jl", is_flag=True,
               help="Seed the lazy greedy's queue with random-projection estimates of the gains (implies --lazy; "
                    "the lazy greedy's default above 50000 candidates).")
