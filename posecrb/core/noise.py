@@ -104,21 +104,20 @@ def omega(kappa: np.ndarray | float) -> np.ndarray:
     x = 2.0 * k
     out = np.empty_like(x)
     series = k < _SERIES_BELOW
+    bessel = ~series & (x < _ASYMPTOTIC_FROM)
+    asymptotic = ~(series | bessel)     # also NaN, which stays NaN
     if series.any():
         ks = k[series]
         out[series] = ks * np.polynomial.polynomial.polyval(ks, _S12) / np.polynomial.polynomial.polyval(ks, _S01)
-    small = ~series & (x < _ASYMPTOTIC_FROM)
-    if small.any():
+    if bessel.any():
         from scipy.special import ive  # noqa: PLC0415 -- lazy: start-up time (only 3D rotation weights use it)
 
-        xs = x[small]
+        xs = x[bessel]
         i0, i1, i2 = ive(0, xs), ive(1, xs), ive(2, xs)
-        out[small] = k[small] * (i1 - i2) / (i0 - i1)
-    small = series | small
-    xl = x[~small]
-    if xl.size:
-        powers = xl[:, None] ** -np.arange(_TERMS)[None, :]
-        out[~small] = k[~small] * (powers @ _D12) / (powers @ _D01)
+        out[bessel] = k[bessel] * (i1 - i2) / (i0 - i1)
+    if asymptotic.any():
+        powers = x[asymptotic][:, None] ** -np.arange(_TERMS)[None, :]
+        out[asymptotic] = k[asymptotic] * (powers @ _D12) / (powers @ _D01)
     return out if out.ndim else out[()]
 
 

@@ -20,8 +20,7 @@ certified solve proves ``F* >= f(Y) - n d eta``: an absolute suboptimality bound
 ``s <= eta`` of the Cholesky that certified (``Certificate.proven_shift``); ``solve`` warns where it
 does not fall below the objective, i.e. where a large tolerance leaves "certified" without content.
 SE-Sync's C++ test is looser: it factors ``M - Lambda + eta I`` with eta added to the translation
-rows as well. Its Schur
-complement is ``C - Lambda + eta I - V^T (L(W^tau) + eta I)^{-1} V``, which exceeds
+rows as well. Its Schur complement is ``C - Lambda + eta I - V^T (L(W^tau) + eta I)^{-1} V``, which exceeds
 ``Q - Lambda + eta I`` by ``V^T [L^{-1} - (L + eta I)^{-1}] V`` -- large where L(W^tau) has small
 eigenvalues (big, weakly connected graphs) -- and the dual bound it implies is only
 ``F* >= f(Y) - eta (n d + sum_i |t_i - t_0|^2)``, with the translations' spread in it. On the
