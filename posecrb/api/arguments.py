@@ -229,7 +229,8 @@ def resolve_estimate(graph: PoseGraph, estimate: Any, *, allow_none: bool = Fals
             raise ArgumentError("estimate", f"SolveResult of {estimate.dataset}",
                                 f"is the estimate of another graph (its pose ids are not those of {graph.name})",
                                 sep=": ")
-        return _checked(graph, Estimate(estimate.rot, estimate.trans, "solve", estimate.certified, estimate.objective))
+        return _checked(graph, Estimate(estimate.rot, estimate.trans, "solve", estimate.certified, estimate.objective,
+                                        objective_status=estimate.duality_gap_status))
     if isinstance(estimate, Estimate):
         if not estimate.has_poses:
             raise ArgumentError("estimate", f"Estimate from {estimate.source}", "carries no poses", sep=": ")
@@ -244,15 +245,16 @@ def resolve_estimate(graph: PoseGraph, estimate: Any, *, allow_none: bool = Fals
 
 
 def _checked(graph: PoseGraph, estimate: Estimate) -> Estimate:
-    from ..solver.estimate import Estimate  # noqa: PLC0415 -- lazy: start-up time (scipy)
-
     """``estimate`` with its poses as float arrays of the graph's shapes (``check_estimate``),
     without a solve time (this call did not run the solver)."""
+    from ..solver.estimate import Estimate  # noqa: PLC0415 -- lazy: start-up time (scipy)
+
     try:
         rot, trans = graph.check_estimate(estimate.rot, estimate.trans)
     except UsageError as exc:
         raise ArgumentError("estimate", f"Estimate from {estimate.source}", str(exc), sep=": ") from None
-    return Estimate(rot, trans, estimate.source, estimate.certified, estimate.objective)
+    return Estimate(rot, trans, estimate.source, estimate.certified, estimate.objective,
+                    objective_status=estimate.objective_status)
 
 
 def estimate_times(estimate: Estimate | None) -> dict[str, float]:

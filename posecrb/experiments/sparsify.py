@@ -264,7 +264,8 @@ def sparsify_experiment(graph: PoseGraph, budgets: Sequence[str] = DEFAULT_BUDGE
     if not full.certified:
         raise SolverError(f"{graph.name}: the full graph's optimum is not certified ({full.reason}); "
                           "it cannot serve as the reference")
-    ref = Estimate(full.rot, full.trans, "solve", True, float(full.objective), float(full.times["total"]))
+    ref = Estimate(full.rot, full.trans, "solve", True, float(full.objective), float(full.times["total"]),
+                   objective_status=full.duality_gap_status)
     context: dict[str, Any] = {"graph": graph, "split": split, "reference": ref, "anchor": anchor, "seed": seed,
                "certify": certify, "max_iter": max_iter,
                "jobs": [(b, label, obj, meth) for b in budgets for (label, obj, meth) in triples]}

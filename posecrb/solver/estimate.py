@@ -15,7 +15,7 @@ import numpy as np
 
 from ..core.errors import ArgumentError, ParseError, PosecrbError
 from ..core.graph import PoseGraph
-from ..core.result import Result, array_field, internal_field
+from ..core.result import Result, array_field, internal_field, status_field
 from ..core.status import OK, Status
 from ..io import load
 from . import solve
@@ -45,6 +45,10 @@ class Estimate(Result):
         Whether the solver certified them globally optimal (None: not from the solver).
     objective : float or None
         SE-Sync's objective at the poses (solver only).
+    objective_status : Status
+        The solver's ``duality_gap_status``: a warning when the certified relaxation is not exact
+        on this graph, so the poses are within the duality gap of the optimum, not proven optimal
+        (in the JSON only then).
     solve_time : float or None
         Seconds spent in the solver (not in the JSON).
 
@@ -63,6 +67,7 @@ class Estimate(Result):
     certified: bool | None = None
     objective: float | None = None
     solve_time: float | None = internal_field()
+    objective_status: Status = status_field("estimate duality gap")
 
     @property
     def has_poses(self) -> bool:
@@ -70,10 +75,13 @@ class Estimate(Result):
         return bool(np.size(self.rot) and np.size(self.trans))
 
     def statuses(self) -> dict[str, Status]:
-        """``{"estimate": ...}``: a warning when the solver did not certify the poses."""
+        """``{"estimate": ..., "estimate duality gap": ...}``: a warning when the solver did not
+        certify the poses, and the solver's duality-gap status."""
         if self.certified is False:
-            return {"estimate": Status.warning("the solver's estimate is NOT certified globally optimal")}
-        return {"estimate": OK}
+            cert = Status.warning("the solver's estimate is NOT certified globally optimal")
+        else:
+            cert = OK
+        return {"estimate": cert, "estimate duality gap": self.objective_status}
 
 
 def from_vertices(graph: PoseGraph) -> Estimate:
@@ -103,7 +111,8 @@ def from_solver(graph: PoseGraph, **options: Any) -> Estimate:
     t0 = time.perf_counter()
     res = solve(graph, **options)
     elapsed = time.perf_counter() - t0
-    return Estimate(res.rot, res.trans, "solve", bool(res.certified), float(res.objective), elapsed)
+    return Estimate(res.rot, res.trans, "solve", bool(res.certified), float(res.objective), elapsed,
+                    objective_status=res.duality_gap_status)
 
 
 def get_estimate(graph: PoseGraph, source: str = "solve", **solver_options: Any) -> Estimate:

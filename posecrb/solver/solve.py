@@ -9,7 +9,6 @@ to SO(d)^n and translation recovery (rounding.py).
 from __future__ import annotations
 
 import logging
-import math
 import time
 from collections.abc import Mapping
 from dataclasses import dataclass, field, fields, replace
@@ -19,7 +18,7 @@ import numpy as np
 
 from ..core.errors import ArgumentError, NotPositiveDefinite, PosecrbError, UsageError
 from ..core.graph import PoseGraph
-from ..core.result import Result, array_field, optional_field
+from ..core.result import Result, array_field, optional_field, status_field
 from ..core.status import OK, Status
 from ..io.rotations import rot_to_quat
 from ..linalg.ordering import AUTO_ND_MIN_POSES
@@ -55,15 +54,23 @@ class SolveResult(Result):
         The pose id put at the identity (rotation I, translation 0).
     objective : float
         SE-Sync's objective ``F = sum kappa ||R_j - R_i R~||_F^2 + tau ||t_j - t_i - R_i t~||^2``
-        at the rounded estimate (no factor 1/2).
+        at the estimate (no factor 1/2): the lowest of the roundings of every staircase level's
+        point, so never above the first level's local optimum.
     relaxation_value : float
         The rank-r relaxation's value, a lower bound on the optimum when certified.
     duality_gap : float
-        ``objective - relaxation_value``.
+        ``objective - relaxation_value``: when certified, the estimate is at most this above the
+        global optimum (plus the certificate's ``n d s``, see ``--certificate-tol``).
+    duality_gap_status : Status
+        A warning when the certified gap is above its rounding level (relative 1e-8): the
+        relaxation is not exact on this graph, so the estimate is the best one found, within
+        ``duality_gap`` of the optimum, not proven optimal.
     lambda_min : float or None
         lambda_min(Q - Lambda) at the final relaxed point (None when the verification failed).
     certified : bool
-        Whether ``lambda_min >= -certificate_tol``: the estimate is then a global optimum.
+        Whether ``lambda_min >= -certificate_tol``: the relaxation is then solved globally, and the
+        estimate is a global optimum up to ``duality_gap`` (``duality_gap_status`` says when that
+        gap is more than rounding).
     reason : str
         Why it is (or is not) certified.
     rank, iterations, hessian_vector_products : int
@@ -99,6 +106,7 @@ class SolveResult(Result):
     objective: float
     relaxation_value: float
     duality_gap: float
+    duality_gap_status: Status = status_field("duality gap")
     lambda_min: float | None
     certified: bool
     reason: str
@@ -113,10 +121,11 @@ class SolveResult(Result):
     ids: np.ndarray = array_field()
 
     def statuses(self) -> dict[str, Status]:
-        """``{"certificate": ...}``: a warning when the estimate is not certified."""
-        if self.certified:
-            return {"certificate": OK}
-        return {"certificate": Status.warning(f"the estimate is NOT certified globally optimal ({self.reason})")}
+        """``{"certificate": ..., "duality gap": ...}``: a warning when the estimate is not certified,
+        and ``duality_gap_status`` (a warning when certified with a gap above rounding)."""
+        cert = OK if self.certified else Status.warning(
+            f"the estimate is NOT certified globally optimal ({self.reason})")
+        return {"certificate": cert, "duality gap": self.duality_gap_status}
 
     def to_frame(self) -> Any:
         """One row per pose: ``id``, the translation (``x, y[, z]``) and the rotation (2D
@@ -256,7 +265,8 @@ def _solve(graph: PoseGraph, options: SolverOptions) -> SolveResult:
                          refactor_hvps=options.refactor_hvps)
     model.certificate_tol = certificate_tol
     Z = lift(np.ascontiguousarray(np.swapaxes(rot0, 1, 2)), r0)
-    times = {"init": time.perf_counter() - t0, "optimize": 0.0, "verify": 0.0}
+    times = {"init": time.perf_counter() - t0, "optimize": 0.0, "verify": 0.0, "round": 0.0}
+    rounded: list[tuple[int, float, np.ndarray, np.ndarray]] = []    # (rank, F, rot, trans) per level
 
     # ---- Riemannian staircase ---------------------------------------------
     iterations = 0
@@ -291,6 +301,12 @@ def _solve(graph: PoseGraph, options: SolverOptions) -> SolveResult:
             reason = (f"not certified: lambda_min(Q - Lambda) = {cert.lambda_min:.3e} < -{certificate_tol:g} "
                       f"at the maximum rank rmax = {rmax}")
             break
+        # Round this level's point before leaving it: where the relaxation is not exact, the next
+        # levels' roundings can be worse than this one (the first level, started from rotations,
+        # never leaves SO(d)^n: its point is a local optimum of F itself).
+        t0 = time.perf_counter()
+        rounded.append((r, *_rounded_estimate(problem, state.Z)))
+        times["round"] += time.perf_counter() - t0
         # The next level starts near a saddle: rebuild the preconditioner there at once, shifted
         # past the negative curvature just found (RelaxedModel.prepare).
         model.lambda_hint = min(cert.lambda_min, 0.0)
@@ -301,24 +317,70 @@ def _solve(graph: PoseGraph, options: SolverOptions) -> SolveResult:
         Z = state.Z
         r += 1
 
-    # ---- rounding -----------------------------------------------------------
+    # ---- rounding: the final level's, or an earlier level's when that one is lower ----------
     t0 = time.perf_counter()
-    rot = round_rotations(state.Z)
-    trans = recover_translations(problem, rot)
-    objective = se_objective(problem, rot, trans)
+    rounded.append((r, *_rounded_estimate(problem, state.Z)))
+    final = rounded[-1]
+    best = min(rounded, key=lambda level: level[1])
+    if best[1] < final[1]:
+        log.info("estimate: the rounding of rank %d's point, F = %.12g, is below the final rank %d's, "
+                 "F = %.12g; kept", best[0], best[1], r, final[1])
+    else:
+        best = final
+    _, objective, rot, trans = best
     rot, trans = anchor_estimate(rot, trans, anchor)
-    times["round"] = time.perf_counter() - t0
+    times["round"] += time.perf_counter() - t0
     times["total"] = time.perf_counter() - t_start
     certified = bool(cert is not None and cert.certified)
-    if certified and cert is not None and cert.proven_shift is not None:
-        _warn_if_certificate_is_vacuous(graph, n * d * cert.proven_shift + max(objective - state.f, 0.0),
-                                        objective, trans, certificate_tol, cert.proven_shift)
+    gap = objective - state.f
+    gap_status = OK
+    if certified and cert is not None:
+        if cert.proven_shift is not None:
+            _warn_if_certificate_is_vacuous(graph, n * d * cert.proven_shift + max(gap, 0.0),
+                                            objective, trans, certificate_tol, cert.proven_shift)
+        gap_status = _duality_gap_status(graph, gap, objective, trans)
     return SolveResult(
         dataset=graph.name, dim=d, poses=n, edges=graph.m, anchor=int(graph.ids[anchor]),
-        objective=float(objective), relaxation_value=float(state.f), duality_gap=float(objective - state.f),
+        objective=float(objective), relaxation_value=float(state.f), duality_gap=float(gap),
+        duality_gap_status=gap_status,
         lambda_min=float(cert.lambda_min) if cert is not None else None, certified=certified, reason=reason,
         rank=int(state.Z.shape[2]), iterations=iterations, hessian_vector_products=model.hvps,
         quaternions=graph.quaternions, times=times, rot=rot, trans=trans, ids=graph.ids.copy())
+
+
+def _rounded_estimate(problem: Problem, Z: np.ndarray) -> tuple[float, np.ndarray, np.ndarray]:
+    """(F, rotations, translations) of the rounding of a relaxed point (rounding.py)."""
+    rot = round_rotations(Z)
+    trans = recover_translations(problem, rot)
+    return se_objective(problem, rot, trans), rot, trans
+
+
+# A certified duality gap above this fraction of the objective is more than the solver's own
+# accuracy: the trust region stops once a step lowers f by at most 1e-9 relatively (certified) or
+# at a Newton decrement of 1e-11 (TROptions), past its quadratic phase, and the objective, a sum of
+# m positive terms, carries a relative rounding error below m eps (2e-9 at 10^7 edges). Where the
+# relaxation is exact the gap stays at that level (1e-15 relative on every shared dataset).
+EXACT_GAP_RTOL = 1e-8
+
+
+def _rounding_level(graph: PoseGraph, trans: np.ndarray) -> float:
+    """The objective of residuals that are rounding errors: 64 ulps of the largest coordinate
+    per unit of information (tau, kappa) on every edge."""
+    weight = float(np.sum(graph.tau) + np.sum(graph.kappa))
+    ulps = 64.0 * np.finfo(float).eps * (1.0 + float(np.max(np.abs(trans), initial=0.0)))
+    return weight * ulps * ulps
+
+
+def _duality_gap_status(graph: PoseGraph, gap: float, objective: float, trans: np.ndarray) -> Status:
+    """A warning when a certified gap exceeds ``EXACT_GAP_RTOL`` of the objective plus its rounding level."""
+    if gap <= EXACT_GAP_RTOL * abs(objective) + _rounding_level(graph, trans):
+        return OK
+    return Status.warning(
+        f"the relaxation is not exact on this graph: the estimate's objective is {gap:.3g} "
+        f"({gap / abs(objective):.1e} relative) above the certified lower bound, so it is the best estimate "
+        "found, within that of the global optimum, not proven optimal",
+        hint="SE-Sync's relaxation is exact only below a graph-dependent noise level; the estimate is "
+             "the lowest rounding of the staircase's levels")
 
 
 def _warn_if_certificate_is_vacuous(graph: PoseGraph, bound: float, objective: float, trans: np.ndarray,
@@ -332,13 +394,7 @@ def _warn_if_certificate_is_vacuous(graph: PoseGraph, bound: float, objective: f
     down) brings about. Exception: an objective at its own rounding level (exact measurements, whose
     residuals are rounding errors of the positions) is optimal by ``F* >= 0`` itself.
     """
-    if bound < abs(objective):
-        return
-    # root-mean-square residual per unit of information; a residual of a few ulps of the largest
-    # coordinate is a rounding error, not a misfit.
-    weight = float(np.sum(graph.tau) + np.sum(graph.kappa))
-    rms = math.sqrt(max(objective, 0.0) / weight) if weight > 0 else math.inf
-    if rms <= 64.0 * np.finfo(float).eps * (1.0 + float(np.max(np.abs(trans), initial=0.0))):
+    if bound < abs(objective) or objective <= _rounding_level(graph, trans):
         return
     log.warning("%s: certified at tolerance %g, but the suboptimality bound it proves, n d s + gap = %.3g "
                 "(s = %.3g, the shift of the certifying factorization), is not below the objective %.6g: "

@@ -1,13 +1,18 @@
 """``posecrb solve``: certified maximum-likelihood estimate (SE-Sync style), docs/design.md#solver."""
 from __future__ import annotations
 
+import logging
+
 import click
 
 from ...api.functions import solve
 from ...core.errors import SolverError
+from ...core.status import log_status
 from ...report.render import print_rows
 from ..options import POSE_ID, FiniteFloat, PlainInt, data_dir_option, format_option
 from ..paths import GRAPH_EXTENSIONS, Command, DatasetArg, OutputFile
+
+log = logging.getLogger("posecrb")
 
 # Compact column set for the human-readable formats; json/csv carry every key.
 TABLE_COLUMNS = ["dataset", "dim", "poses", "edges", "objective", "duality_gap", "lambda_min", "certified", "rank",
@@ -41,8 +46,11 @@ def command(file, out, fmt, r0, rmax, init, anchor, certificate_tol, sesync_comp
     """Certifiably correct pose-graph optimisation of FILE (SE-Sync's Riemannian staircase).
 
     Prints the objective F = sum kappa||R_j - R_i R~||_F^2 + tau||t_j - t_i - R_i t~||^2 at the
-    rounded estimate, the relaxation value, lambda_min of the certificate matrix and phase
-    times. Exit code 1 when the result is not certified (the estimate is still written).
+    estimate, the relaxation value, the duality gap between them, lambda_min of the certificate
+    matrix and phase times. The estimate is the lowest rounding of the staircase's levels; a
+    warning says when a certified gap is more than rounding (the relaxation is not exact on
+    this graph: the estimate is then within the gap of the optimum, not proven optimal).
+    Exit code 1 when the result is not certified (the estimate is still written).
     With --sesync-compat the rotation term is SE-Sync's kappa(2d - 2 tr(R_j^T R_i R~)) with
     R~ from the unnormalised quaternions (posecrb.io.load(..., quaternions="raw")).
     """
@@ -53,5 +61,6 @@ def command(file, out, fmt, r0, rmax, init, anchor, certificate_tol, sesync_comp
     if human:   # the table formatter keeps 5 digits; the objective deserves all of SE-Sync's
         row = {**row, "objective": f"{res.objective:.11g}"}
     print_rows([row], fmt, columns=TABLE_COLUMNS if human else None, headers=HEADERS if human else None)
+    log_status(log, f"{res.dataset}: duality gap", res.duality_gap_status)
     if not res.certified:
         raise SolverError(f"{res.dataset}: uncertified: {res.reason}")
