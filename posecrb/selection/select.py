@@ -108,7 +108,7 @@ def _prepare(graph: PoseGraph, budget: str | int, objective: str, fixed: str, an
         raise UsageError(f"{graph.name}: no candidate edges (every edge is fixed)")
     k = parse_budget(budget, split.candidates.size)
     anchor = graph.anchor_index(None) if anchor is None else int(anchor)
-    est_info = None
+    est_info: dict[str, Any] | None = None
     est = reference
     if objective == "fim":
         if est is None:
@@ -119,6 +119,8 @@ def _prepare(graph: PoseGraph, budget: str | int, objective: str, fixed: str, an
             log.warning("%s: the estimate of the full graph is NOT certified; the fim objective is evaluated "
                         "at an uncertified point", graph.name)
         est_info = {"source": est.source, "certified": est.certified, "objective": est.objective}
+        if not est.objective_status.ok:   # certified, but the relaxation is not exact on this graph
+            est_info["objective_status"] = est.objective_status.as_json()
     obj = make_objective(graph, objective, anchor, est, fiedler_weight)
     base = np.zeros(graph.m)
     base[split.fixed] = 1.0
