@@ -267,8 +267,12 @@ class TimelineResult:
 
     # ------------------------------------------------------------------ protocol
     def statuses(self) -> dict[str, Status]:
-        """The status of each metric (``lb``, ``ub``, ``fim_logdet``), as the command logs them."""
-        return {"lb": self.lb_status, "ub": self.ub_status, "fim_logdet": self.fim_status}
+        """The status of each metric (``lb``, ``ub``, ``fim_logdet``), as the command logs them, and
+        the estimate's duality-gap status when the solver's relaxation was not exact."""
+        out = {"lb": self.lb_status, "ub": self.ub_status, "fim_logdet": self.fim_status}
+        if self.estimate is not None and self.estimate.get("objective_status") is not None:
+            out["estimate duality gap"] = Status.from_json(self.estimate["objective_status"])
+        return out
 
     @property
     def status(self) -> Status:
