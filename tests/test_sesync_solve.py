@@ -401,8 +401,9 @@ def test_the_estimate_is_never_worse_than_the_first_levels_local_optimum():
 
 def test_a_gap_above_rounding_is_reported_as_an_inexact_relaxation(shared_datasets, tmp_path):
     """Certified with a gap of about 1e-2 relative (the grid above): duality_gap_status is a warning,
-    in the JSON, on stderr and on the estimate of the FIM commands, select and timeline; on intel (a gap of 1e-15
-    relative) none of them appears. Exit code 0 either way: the certificate itself holds."""
+    in the JSON, on stderr and on the estimate of the FIM commands, select, timeline and tables; on
+    intel (a gap of 1e-15 relative) none of them appears. Exit code 0 either way: the certificate
+    itself holds."""
     from posecrb.cli import cli
     from posecrb.io.g2o import write_g2o
 
@@ -430,6 +431,12 @@ def test_a_gap_above_rounding_is_reported_as_an_inexact_relaxation(shared_datase
     r = CliRunner().invoke(cli, ["timeline", str(path), "--format", "json"])
     assert r.exit_code == 0, r.output
     assert json.loads(r.stdout)["estimate"]["objective_status"]["status"] == "warning"
+    assert r.stderr.count("estimate duality gap") == 1
+    r = CliRunner().invoke(cli, ["tables", "--datasets", str(path), "--table", "1", "--repeat", "1",
+                                 "--format", "json"])
+    assert r.exit_code == 0, r.output
+    row = json.loads(r.stdout)["rows"][0]
+    assert row["status"] == "ok" and row["objective_status"]["status"] == "warning"
     assert r.stderr.count("estimate duality gap") == 1
     r = CliRunner().invoke(cli, ["solve", str(shared_datasets / "intel.g2o"), "--format", "json"])
     assert r.exit_code == 0 and "duality_gap_status" not in json.loads(r.stdout)
