@@ -28,7 +28,7 @@ import numpy as np
 
 from ..core import provenance
 from ..core.errors import DatasetNotFound, InternalError, PosecrbError, UsageError, status_of
-from ..core.status import put
+from ..core.status import log_status, put
 from ..core.timing import Repeat, timed
 from ..datasets import search as datasets
 from ..datasets.manifest import load_manifest
@@ -116,8 +116,7 @@ def dataset_row(name: str, settings: TableSettings,
         if est is not None:
             # a certified estimate of an inexact relaxation: the objective's status says so
             put(row, "objective", est.objective, est.objective_status)
-            if not est.objective_status.ok:
-                log.warning("%s: %s", name, est.objective_status.message("estimate duality gap"))
+            log_status(log, f"{name}: estimate duality gap", est.objective_status)
             row.update(certified=est.certified, solve_time=est.solve_time)
             runs["solve_time"] = 1
         row["runs"] = runs

@@ -34,7 +34,7 @@ the sum over its loop closures: the increase of lb beyond what the new pose's ow
 from __future__ import annotations
 
 import time
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING
 
 import numpy as np
 
@@ -314,11 +314,7 @@ def timeline(graph: PoseGraph, *, estimate: str | Estimate | None = "solve", eve
     checks = {_CHECK_NAMES[name]: {"checkpoints": len(t.checkpoints) - 1, "max_drift": t.max_drift,
                                    "tolerance": t.tolerance}
               for name, t in tracked.items() if not (proportional and name == "w")}
-    est_info: dict[str, Any] | None = None
-    if est is not None:
-        est_info = {"source": est.source, "certified": est.certified, "objective": est.objective}
-        if not est.objective_status.ok:   # certified, but the relaxation is not exact on this graph
-            est_info["objective_status"] = est.objective_status.as_json()
+    est_info = None if est is None else est.to_dict()
     return TimelineResult(
         dataset=graph.name, path=graph.path, sha256=graph.sha256, dim=d, n_poses=n, n_edges=graph.m,
         anchor=int(graph.ids[0]), rotation_weight=rotation_model,

@@ -118,9 +118,7 @@ def _prepare(graph: PoseGraph, budget: str | int, objective: str, fixed: str, an
         if est.certified is False:
             log.warning("%s: the estimate of the full graph is NOT certified; the fim objective is evaluated "
                         "at an uncertified point", graph.name)
-        est_info = {"source": est.source, "certified": est.certified, "objective": est.objective}
-        if not est.objective_status.ok:   # certified, but the relaxation is not exact on this graph
-            est_info["objective_status"] = est.objective_status.as_json()
+        est_info = est.to_dict()
     obj = make_objective(graph, objective, anchor, est, fiedler_weight)
     base = np.zeros(graph.m)
     base[split.fixed] = 1.0
