@@ -359,7 +359,7 @@ def _rounded_estimate(problem: Problem, Z: np.ndarray) -> tuple[float, np.ndarra
 # accuracy: the trust region stops once a step lowers f by at most 1e-9 relatively (certified) or
 # at a Newton decrement of 1e-11 (TROptions), past its quadratic phase, and the objective, a sum of
 # m positive terms, carries a relative rounding error below m eps (2e-9 at 10^7 edges). Where the
-# relaxation is exact the gap stays at that level (1e-15 relative on every shared dataset).
+# relaxation is exact the gap stays at that level (at most 2e-15 relative on the shared datasets).
 EXACT_GAP_RTOL = 1e-8
 
 
