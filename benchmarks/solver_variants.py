@@ -45,6 +45,7 @@ VARIANTS = {
     "base": {},
     "fixed-precond": {"adaptive_precond": None},
     "every-iterate": {"refactor_hvps": None},
+    "refactor>5": {"refactor_hvps": 5},
     "refactor>10": {"refactor_hvps": 10},
     "refactor>60": {"refactor_hvps": 60},
     "r0=5": {"r0": 5},

@@ -268,6 +268,31 @@ def test_non_orthogonal_measurements_use_sesync_objective(dim):
     assert res.relaxation_value == pytest.approx(res.objective, rel=1e-9)
 
 
+@pytest.mark.parametrize("dim", [2, 3])
+def test_zero_padding_stays_zero_so_the_first_level_runs_at_width_d(dim):
+    """The staircase starts from rotations padded with zero columns and computes the first level
+    at width d. That is exact only if every step keeps the padding zero: the trust region from the
+    padded point (base and adaptive preconditioners, as solve builds them) must leave the extra
+    columns exactly 0 and take the same steps as the width-d run (the same iterations and products,
+    f to rounding)."""
+    rng = np.random.default_rng(40 + dim)
+    g, _, _ = random_pose_graph(40, dim, rng, loop_closures=30, rot_noise=0.3, trans_noise=0.3,
+                                kappa=5.0, tau=2.0)
+    p = Problem.from_graph(g)
+    R0 = np.ascontiguousarray(np.swapaxes(uniform_rotations(g.n, dim, rng), 1, 2))
+    runs = []
+    for width in (dim, dim + 1, dim + 2):
+        base = p.factor_full(None, p.gershgorin_max() / 1e6, name="base")
+        model = RelaxedModel(p, base, adaptive_shift=1e-10 * p.gershgorin_max(), refactor_hvps=2)
+        res = trust_region(model, lift(R0, width), TROptions(max_iterations=100))
+        assert not np.any(res.state.Z[:, :, dim:])
+        runs.append(res)
+    for res in runs[1:]:
+        assert (res.iterations, res.hvps) == (runs[0].iterations, runs[0].hvps)
+        assert res.state.f == pytest.approx(runs[0].state.f, rel=MARGIN * g.m * EPS)
+        assert model.factorizations > 1       # the adaptive factor was rebuilt on the way
+
+
 def test_preconditioner_after_escape_is_shifted_not_lambda_free():
     """At a saddle (Q - Lambda + s I indefinite) the rebuilt preconditioner is the inverse of
     Q - Lambda + (s + 2|lambda_min|) I, checked against a dense inverse, not (Q + delta I)^{-1}."""
@@ -374,7 +399,7 @@ def test_information_scaled_far_down_makes_the_default_certificate_vacuous(caplo
 
 def _inexact_grid():
     """A noisy 16 x 16 2D grid (rotation noise kappa = 4, about 0.35 rad) on which SE-Sync's
-    relaxation is not exact: the staircase escapes twice and certifies at rank 5 with a duality gap
+    relaxation is not exact: the staircase escapes twice and certifies at rank 4 with a duality gap
     of about 1% of the objective."""
     from posecrb.sim.generators import grid
 
@@ -383,12 +408,12 @@ def _inexact_grid():
 
 def test_the_estimate_is_never_worse_than_the_first_levels_local_optimum():
     """The first staircase level starts from rotations and never leaves SO(d)^n, so its point is a
-    local optimum of F itself; with rmax = d + 1 the solver returns it (uncertified). A certified run
+    local optimum of F itself; with r0 = rmax = d the solver returns it (uncertified). A certified run
     on a graph whose relaxation is not exact must not return a worse estimate, and its relaxation
     value must lie below both (it bounds every feasible estimate)."""
     g = _inexact_grid()
     res = solve(g)
-    first = solve(g, rmax=3)
+    first = solve(g, r0=2, rmax=2)
     assert res.certified and res.rank >= 4 and not first.certified
     assert res.objective <= first.objective
     # the returned objective is the estimate's own, summed independently

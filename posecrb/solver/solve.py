@@ -27,7 +27,6 @@ from .chordal import chordal_rotations
 from .problem import Problem
 from .rounding import anchor_estimate, recover_translations, round_rotations, se_objective
 from .staircase import RelaxedModel, escape, verify
-from .stiefel import lift
 from .trust_region import TROptions, trust_region
 
 log = logging.getLogger("posecrb")
@@ -157,7 +156,8 @@ _TR_TUNING = frozenset(f.name for f in fields(TROptions)) - {"max_iterations"}
 class SolverOptions:
     """Options of :func:`solve` (docs/design.md#solver); the defaults are SE-Sync's settings.
 
-    ``r0`` / ``rmax``: first (default d + 1) and last rank of the Riemannian staircase; ``init``:
+    ``r0`` / ``rmax``: first (default d + 1) and last rank of the Riemannian staircase (the
+    start's zero padding is filled by escapes before the rank grows past r0); ``init``:
     "chordal", "vertices" (the file's own estimate) or an (n, d, d) array of rotations;
     ``anchor``: internal index of the pose put at the identity (default 0); ``max_iterations``:
     trust-region iterations per staircase level; ``certificate_tol``: accept
@@ -264,9 +264,14 @@ def _solve(graph: PoseGraph, options: SolverOptions) -> SolveResult:
                          else options.adaptive_precond * problem.gershgorin_max(),
                          refactor_hvps=options.refactor_hvps)
     model.certificate_tol = certificate_tol
-    Z = lift(np.ascontiguousarray(np.swapaxes(rot0, 1, 2)), r0)
+    # The rank-r0 starting point is the rotations padded with r0 - d zero columns. Every step of the
+    # trust region acts on the columns linearly or through d x d block products with Z_i, so the
+    # padding stays exactly zero: the level is the rank-d problem, computed here at width d (a
+    # third fewer right-hand sides in 2D, a quarter in 3D). An escape fills one zero column at a time
+    # and raises the rank only once none is left (``_escape_rank``).
+    Z = np.ascontiguousarray(np.swapaxes(rot0, 1, 2))
     times = {"init": time.perf_counter() - t0, "optimize": 0.0, "verify": 0.0, "round": 0.0}
-    rounded: list[tuple[int, float, np.ndarray, np.ndarray]] = []    # (rank, F, rot, trans) per level
+    rounded: list[tuple[int, int, float, np.ndarray, np.ndarray]] = []   # (level, r, F, rot, trans)
 
     # ---- Riemannian staircase ---------------------------------------------
     iterations = 0
@@ -274,14 +279,15 @@ def _solve(graph: PoseGraph, options: SolverOptions) -> SolveResult:
     cert = None
     reason = ""
     r = r0
+    level = 1
     while True:
         t0 = time.perf_counter()
         res = trust_region(model, Z, opts, state=state)
         times["optimize"] += time.perf_counter() - t0
         state = res.state
         iterations += res.iterations
-        log.info("staircase r=%d: f=%.12g after %d TR iterations (%s), %d HVPs", r, state.f,
-                 res.iterations, res.status, model.hvps)
+        log.info("staircase level %d, r=%d%s: f=%.12g after %d TR iterations (%s), %d HVPs", level, r,
+                 _width_note(state.Z, r), state.f, res.iterations, res.status, model.hvps)
         t0 = time.perf_counter()
         try:
             # A preconditioner factored at this point with a shift <= eta already decides the test.
@@ -292,12 +298,12 @@ def _solve(graph: PoseGraph, options: SolverOptions) -> SolveResult:
             reason = f"verification failed: {exc}"
             break
         times["verify"] += time.perf_counter() - t0
-        log.info("staircase r=%d: lambda_min(Q - Lambda) = %.3e (%s)", r, cert.lambda_min,
+        log.info("staircase level %d, r=%d: lambda_min(Q - Lambda) = %.3e (%s)", level, r, cert.lambda_min,
                  "certified" if cert.certified else "saddle")
         if cert.certified:
             reason = f"lambda_min(Q - Lambda) = {cert.lambda_min:.3e} >= -{certificate_tol:g} at rank {r}"
             break
-        if r >= rmax:
+        if state.Z.shape[2] >= rmax:
             reason = (f"not certified: lambda_min(Q - Lambda) = {cert.lambda_min:.3e} < -{certificate_tol:g} "
                       f"at the maximum rank rmax = {rmax}")
             break
@@ -305,7 +311,7 @@ def _solve(graph: PoseGraph, options: SolverOptions) -> SolveResult:
         # levels' roundings can be worse than this one (the first level, started from rotations,
         # never leaves SO(d)^n: its point is a local optimum of F itself).
         t0 = time.perf_counter()
-        rounded.append((r, *_rounded_estimate(problem, state.Z)))
+        rounded.append((level, r, *_rounded_estimate(problem, state.Z)))
         times["round"] += time.perf_counter() - t0
         # The next level starts near a saddle: rebuild the preconditioner there at once, shifted
         # past the negative curvature just found (RelaxedModel.prepare).
@@ -315,19 +321,20 @@ def _solve(graph: PoseGraph, options: SolverOptions) -> SolveResult:
         state = escape(model, state, cert)
         times["optimize"] += time.perf_counter() - t0
         Z = state.Z
-        r += 1
+        r = _escape_rank(r0, Z)
+        level += 1
 
     # ---- rounding: the final level's, or an earlier level's when that one is lower ----------
     t0 = time.perf_counter()
-    rounded.append((r, *_rounded_estimate(problem, state.Z)))
+    rounded.append((level, r, *_rounded_estimate(problem, state.Z)))
     final = rounded[-1]
-    best = min(rounded, key=lambda level: level[1])
-    if best[1] < final[1]:
-        log.info("estimate: the rounding of rank %d's point, F = %.12g, is below the final rank %d's, "
-                 "F = %.12g; kept", best[0], best[1], r, final[1])
+    best = min(rounded, key=lambda point: point[2])
+    if best[2] < final[2]:
+        log.info("estimate: the rounding of level %d's point (r=%d), F = %.12g, is below the final level's "
+                 "(r=%d), F = %.12g; kept", best[0], best[1], best[2], r, final[2])
     else:
         best = final
-    _, objective, rot, trans = best
+    _, _, objective, rot, trans = best
     rot, trans = anchor_estimate(rot, trans, anchor)
     times["round"] += time.perf_counter() - t0
     times["total"] = time.perf_counter() - t_start
@@ -344,8 +351,20 @@ def _solve(graph: PoseGraph, options: SolverOptions) -> SolveResult:
         objective=float(objective), relaxation_value=float(state.f), duality_gap=float(gap),
         duality_gap_status=gap_status,
         lambda_min=float(cert.lambda_min) if cert is not None else None, certified=certified, reason=reason,
-        rank=int(state.Z.shape[2]), iterations=iterations, hessian_vector_products=model.hvps,
+        rank=r, iterations=iterations, hessian_vector_products=model.hvps,
         quaternions=graph.quaternions, times=times, rot=rot, trans=trans, ids=graph.ids.copy())
+
+
+def _escape_rank(r0: int, Z: np.ndarray) -> int:
+    """The staircase rank of a point of width ``Z.shape[2]`` (its nonzero columns) after an escape:
+    r0 while the escapes fill the zero columns of the rank-r0 start, then the width (SE-Sync's
+    r + 1 per escape)."""
+    return max(r0, int(Z.shape[2]))
+
+
+def _width_note(Z: np.ndarray, r: int) -> str:
+    width = int(Z.shape[2])
+    return "" if width == r else f" (a rank-{width} point: its other columns stay zero)"
 
 
 def _rounded_estimate(problem: Problem, Z: np.ndarray) -> tuple[float, np.ndarray, np.ndarray]:

@@ -4,7 +4,9 @@ SE-Sync (Rosen et al., IJRR 2019), Algorithm 1 and section 4.2-4.3:
 at a first-order critical point Y of the rank-r relaxation, ``Lambda = SymBlockDiag(Q Y^T Y)``
 and ``S = Q - Lambda``. If ``S >= 0`` (within tolerance) Y solves the SDP relaxation
 globally; otherwise an eigenvector v of S with ``v^T S v < 0`` gives a second-order
-descent direction ``[0 | v]`` at rank r + 1.
+descent direction ``[0 | v]`` in a new column. ``solve`` starts from rotations padded with zero
+columns, which stay zero, and computes on the nonzero columns only (its "width"): an escape from
+width w goes to width w + 1, which is the staircase's rank r + 1 once the padding is used up.
 
 Verification uses the sparse identity ``(Q - Lambda + s I)^{-1} = [M_red(s)^{-1}]_{RR}``
 (see problem.py): one sparse Cholesky of ``M_red(eta)`` decides ``lambda_min(S) > -eta``
@@ -27,7 +29,8 @@ eigenvalues (big, weakly connected graphs) -- and the dual bound it implies is o
 noisy 2D grid of 100,489 poses, SE-Sync's test passes at a rank-3 point where
 ``lambda_min(Q - Lambda) = -3.7e-3``; there ``n d eta = 201`` but
 ``eta sum |t_i - t_0|^2 = 6.7e6`` against F ~ 3.0e5, i.e. no bound at all. posecrb keeps the
-strict test, escapes to rank 4 there and certifies ``lambda_min = -1e-8`` (F lower by 0.015).
+strict test, escapes into the rank-3 start's zero column there and certifies
+``lambda_min = -4e-9`` at rank 3 (the relaxation value lower by 0.015).
 """
 from __future__ import annotations
 
@@ -268,7 +271,7 @@ def verify(problem: Problem, state: State, tol: float, rng: np.random.Generator,
 
 
 def escape(model: RelaxedModel, state: State, cert: Certificate) -> State:
-    """Second-order descent from a saddle at rank r along [0 | v] at rank r + 1 (backtracking)."""
+    """Second-order descent from a saddle of width r along [0 | v] at width r + 1 (backtracking)."""
     Z = state.Z
     n, d, r = Z.shape
     Zp = lift(Z, r + 1)

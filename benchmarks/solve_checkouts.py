@@ -1,0 +1,103 @@
+"""In-process ``solve`` of two posecrb checkouts side by side: what a solver change gains, file by file.
+
+Each checkout (a directory holding a ``posecrb`` package, e.g. one made by
+``git worktree add /tmp/before COMMIT``) runs in its own interpreter with that directory first
+on ``sys.path``: ``load(FILE, quaternions="raw")`` once, then ``solve(graph)`` --repeat times,
+timed around the call (the in-process column of benchmarks/peers_solve.py). The two checkouts
+alternate round by round (--rounds), and the table shows the median over every timed call of each
+side, the median ``optimize`` phase, Hessian-vector products, the staircase rank and the
+objectives' relative difference. Every BLAS pool runs at one thread (--threads), as in the solver.
+
+Usage: python benchmarks/solve_checkouts.py --before DIR [--after DIR (default: this checkout)]
+           [--rounds R] [--repeat K] [--threads T] [--data-dir DIR] [NAME|FILE ...]
+"""
+from __future__ import annotations
+
+import argparse
+import json
+import statistics
+import subprocess
+import sys
+from pathlib import Path
+
+from _common import REPO, child_env, data_dir, print_header, suite_files
+
+CHILD = """
+import json, sys, time
+sys.path.insert(0, sys.argv[1])
+from posecrb.io import load
+from posecrb.solver import solve
+repeat = int(sys.argv[2])
+out = {}
+for path in sys.argv[3:]:
+    graph = load(path, quaternions="raw")
+    runs = []
+    for _ in range(repeat):
+        t0 = time.perf_counter()
+        res = solve(graph)
+        runs.append((time.perf_counter() - t0, res.times["optimize"]))
+    out[path] = {"wall": [w for w, _ in runs], "optimize": [o for _, o in runs], "objective": res.objective,
+                 "hvps": res.hessian_vector_products, "rank": res.rank, "certified": res.certified}
+print(json.dumps(out))
+"""
+
+
+def run_side(checkout: Path, files: list[Path], repeat: int, threads: int) -> dict:
+    env = child_env(threads)
+    env.pop("PYTHONPATH", None)     # the child puts its own checkout first
+    proc = subprocess.run([sys.executable, "-c", CHILD, str(checkout), str(repeat), *map(str, files)],
+                          env=env, capture_output=True, text=True, check=False)
+    if proc.returncode != 0:
+        raise SystemExit(f"{checkout}: solve failed:\n{proc.stderr}")
+    return json.loads(proc.stdout)
+
+
+def main(argv: list[str] | None = None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("names", nargs="*", help="dataset names or g2o files [default: the SE-Sync files]")
+    ap.add_argument("--before", required=True, type=Path, help="checkout directory of the baseline")
+    ap.add_argument("--after", type=Path, default=REPO, help="checkout directory [default: this one]")
+    ap.add_argument("--rounds", type=int, default=3)
+    ap.add_argument("--repeat", type=int, default=3, help="timed solves per file and round")
+    ap.add_argument("--threads", type=int, default=1)
+    ap.add_argument("--data-dir", default=None)
+    args = ap.parse_args(argv)
+    for side in (args.before, args.after):
+        if not (side / "posecrb" / "__init__.py").is_file():
+            ap.error(f"{side} is not a posecrb checkout (no posecrb/__init__.py)")
+    named = [n for n in args.names if not n.endswith(".g2o")]
+    files = [Path(n) for n in args.names if n.endswith(".g2o")]
+    files += suite_files(data_dir(args.data_dir), named) if named or not files else []
+    if not files:
+        ap.error("no dataset files: name them, or set $POSECRB_DATA / --data-dir")
+    print_header("in-process solve, two checkouts alternating", threads=args.threads,
+                 extra=[f"before = {args.before.resolve()}", f"after = {args.after.resolve()}",
+                        f"{args.rounds} alternating rounds x {args.repeat} timed solves per file; median of all"])
+    runs: dict[str, list[dict]] = {"before": [], "after": []}
+    for _ in range(args.rounds):
+        for side in ("before", "after"):
+            runs[side].append(run_side(getattr(args, side), files, args.repeat, args.threads))
+
+    def pooled(side: str, key: str, path: str) -> float:
+        return statistics.median(v for r in runs[side] for v in r[path][key])
+
+    print(f"{'dataset':24s} {'before s':>9s} {'after s':>8s} {'ratio':>6s} {'optimize before -> after':>26s} "
+          f"{'HVPs':>10s} {'rank':>7s} {'F rel diff':>10s}")
+    total = {"before": 0.0, "after": 0.0}
+    for f in files:
+        p = str(f)
+        b, a = runs["before"][0][p], runs["after"][0][p]
+        wb, wa = pooled("before", "wall", p), pooled("after", "wall", p)
+        total["before"] += wb
+        total["after"] += wa
+        rel = abs(a["objective"] - b["objective"]) / max(abs(b["objective"]), 1e-300)
+        print(f"{f.stem:24s} {wb:9.3f} {wa:8.3f} {wa / wb:6.2f} "
+              f"{pooled('before', 'optimize', p):12.3f} -> {pooled('after', 'optimize', p):9.3f} "
+              f"{b['hvps']:>4d} -> {a['hvps']:<4d} {b['rank']:>2d} -> {a['rank']:<2d} {rel:10.1e}"
+              + ("" if a["certified"] and b["certified"] else "  (not certified)"))
+    print(f"{'sum':24s} {total['before']:9.3f} {total['after']:8.3f} {total['after'] / total['before']:6.2f}")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
