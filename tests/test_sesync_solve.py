@@ -415,6 +415,10 @@ def test_the_estimate_is_never_worse_than_the_first_levels_local_optimum():
     res = solve(g)
     first = solve(g, r0=2, rmax=2)
     assert res.certified and res.rank >= 4 and not first.certified
+    # rmax = 3 still allows the first escape: it fills the rank-3 start's zero column
+    within = solve(g, rmax=3)
+    assert within.rank == 3 and not within.certified
+    assert within.relaxation_value < first.relaxation_value - 1e-3 * first.objective
     assert res.objective <= first.objective
     # the returned objective is the estimate's own, summed independently
     assert res.objective == pytest.approx(objective_loop(g, res.rot, res.trans), rel=MARGIN * g.m * EPS)
