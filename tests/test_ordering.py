@@ -270,3 +270,40 @@ def test_solver_with_large_graph_ordering_same_optimum(monkeypatch, dim):
     res = solve(g)
     assert ref.certified and res.certified
     assert res.objective == pytest.approx(ref.objective, rel=1e-6)
+
+
+@pytest.mark.parametrize("dim", [2, 3])
+def test_solver_on_a_graph_taken_as_large_shares_one_pose_ordering(monkeypatch, dim):
+    """Above auto's size threshold the chordal initialisation's connection Laplacian and M_red are
+    analysed with one nested dissection of the pose graph, computed once (the very ordering that
+    M_red's own pose adjacency gives); the certified optimum is the one of the small-graph path."""
+    from posecrb.linalg.ordering import pose_adjacency_of, pose_permutation
+    from posecrb.solver import solve
+    from posecrb.solver.problem import Problem
+
+    g = _graph(dim, 60)
+    small = solve(g)
+    monkeypatch.setattr(ordmod, "AUTO_ND_MIN_POSES", 10)
+    monkeypatch.setattr(ordmod, "AUTO_ND_MIN_POSES_2D", 10)
+    import posecrb.solver.chordal as chordal_module
+    import posecrb.solver.problem as problem_module
+
+    calls, chordal_orders = [], []
+    real_order, real_symbolic = ordmod.pose_permutation, chordal_module.solver_symbolic
+    monkeypatch.setattr(ordmod, "pose_permutation", lambda *a: calls.append(a) or real_order(*a))
+    monkeypatch.setattr(problem_module, "pose_permutation", lambda *a: calls.append(a) or real_order(*a))
+    monkeypatch.setattr(chordal_module, "solver_symbolic",
+                        lambda *a, **k: chordal_orders.append(k["pose_order"]) or real_symbolic(*a, **k))
+    large = solve(g)
+    assert len(calls) == 1                       # one ordering of the pose graph ...
+    assert len(chordal_orders) == 1 and chordal_orders[0] is not None    # ... used by the chordal Laplacian too
+    assert small.certified and large.certified
+    # two certified runs of the trust region (stopping at a relative decrease of 1e-9 or a Newton
+    # decrement of 1e-11) from initialisations that differ by rounding
+    assert large.objective == pytest.approx(small.objective, rel=1e-8)
+    p = Problem.from_graph(g)
+    p._full_parts()
+    n, d = p.n, p.d
+    own = pose_permutation(pose_adjacency_of(p._full_pattern, np.concatenate([np.arange(1, n),
+                                                                              np.repeat(np.arange(n), d)]), n), "metis")
+    np.testing.assert_array_equal(p.pose_order(), own)

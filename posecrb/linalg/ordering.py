@@ -159,14 +159,16 @@ def pose_adjacency_of(a: sp.spmatrix, pose_of_row: np.ndarray, n_poses: int) -> 
 
 def ordered_symbolic(a: sp.spmatrix, ordering: str, *, dim: int, poses: int, matrix: str,
                      pose_of_row: np.ndarray | None = None, n_poses: int | None = None,
-                     pose_adjacency: sp.spmatrix | None = None,
+                     pose_adjacency: sp.spmatrix | None = None, pose_order: np.ndarray | None = None,
                      mode: str = "auto") -> tuple[SymbolicCholesky, OrderingChoice]:
     """A ``SymbolicCholesky`` of ``a`` with ``ordering`` (``ORDERINGS``) and the choice made.
 
     ``pose_of_row`` (default: one row per pose) maps rows to poses 0..n_poses-1; the pose graph is
     ``pose_adjacency`` when given (e.g. the reduced Laplacian lb already built), otherwise it is
     read from ``a``'s own pattern. ``auto`` decides from ``dim``, the graph's pose count ``poses``
-    and ``matrix``."""
+    and ``matrix``. ``pose_order``: the pose graph's ordering when the caller already has it (from
+    ``pose_permutation`` with the method ``ordering`` resolves to), so that matrices of one graph
+    share it instead of ordering the pose graph again."""
 
     rows = a.shape[0]
     if pose_of_row is None:
@@ -181,8 +183,10 @@ def ordered_symbolic(a: sp.spmatrix, ordering: str, *, dim: int, poses: int, mat
         return SymbolicCholesky(a, mode=mode, permutation=colamd_permutation(a), threaded=threaded), choice
     if n_poses == rows and pose_adjacency is None:
         return SymbolicCholesky(a, mode=mode, ordering_method=choice.method, threaded=threaded), choice
-    adj = pose_adjacency if pose_adjacency is not None else pose_adjacency_of(a, pose_of_row, n_poses)
-    perm = expand_permutation(pose_permutation(adj, choice.method), pose_of_row)
+    if pose_order is None:
+        adj = pose_adjacency if pose_adjacency is not None else pose_adjacency_of(a, pose_of_row, n_poses)
+        pose_order = pose_permutation(adj, choice.method)
+    perm = expand_permutation(pose_order, pose_of_row)
     return SymbolicCholesky(a, mode=mode, permutation=perm, threaded=threaded), choice
 
 
@@ -222,10 +226,15 @@ def anchored_logdet_accuracy(matrix: sp.spmatrix, q: int, anchors: list[int], na
     return ld, (logdet_accuracy(a, factor, ld, name) if accuracy else None)
 
 
-def solver_symbolic(pattern: sp.spmatrix, dim: int, n: int, mode: str = "auto") -> SymbolicCholesky:
-    """The symbolic analysis of the solver's M_red = [[L_red, V_red], [V_red^T, C + ...]]
+def solver_symbolic(pattern: sp.spmatrix, dim: int, n: int, mode: str = "auto",
+                    pose_of_row: np.ndarray | None = None,
+                    pose_order: np.ndarray | None = None) -> SymbolicCholesky:
+    """The symbolic analysis of a solver matrix: by default M_red = [[L_red, V_red], [V_red^T, C + ...]]
     (posecrb.solver.problem: n - 1 translation rows for poses 1..n-1, then d rotation rows per pose
-    0..n-1). Under ``auto``'s rule for large graphs (``auto_ordering``): nested dissection of the
+    0..n-1), or any matrix whose rows belong to poses as ``pose_of_row`` says (the chordal
+    initialisation's connection Laplacian); ``pose_order``: the pose graph's ordering, when the
+    caller computed it once for several matrices (``ordered_symbolic``).
+    Under ``auto``'s rule for large graphs (``auto_ordering``): nested dissection of the
     pose graph expanded to each pose's rows (benchmarks/orderings.py: M_red's factorization about
     0.75x of CHOLMOD's default choice on a 3D grid of 21,952 poses; 10.5 instead of 15.9 Gflop
     and 23.8M instead of 29.8M nonzeros on a 2D grid of 100,489 poses); otherwise CHOLMOD's
@@ -235,6 +244,7 @@ def solver_symbolic(pattern: sp.spmatrix, dim: int, n: int, mode: str = "auto") 
     method = auto_ordering(dim, n, "solver")
     if method == "amd" or n < 2:
         return SymbolicCholesky(pattern, mode=mode)
-    pose_of_row = np.concatenate([np.arange(1, n), np.repeat(np.arange(n), dim)])
+    if pose_of_row is None:
+        pose_of_row = np.concatenate([np.arange(1, n), np.repeat(np.arange(n), dim)])
     return ordered_symbolic(pattern, method, dim=dim, poses=n, matrix="solver", pose_of_row=pose_of_row,
-                            n_poses=n, mode=mode)[0]
+                            n_poses=n, pose_order=pose_order, mode=mode)[0]

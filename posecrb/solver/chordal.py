@@ -8,7 +8,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..linalg.cholesky import SymbolicCholesky
+from ..linalg.ordering import solver_symbolic
+from ..linalg.threads import factorization_threads
 from .problem import Problem
 from .stiefel import nearest_rotations
 
@@ -21,8 +22,12 @@ def chordal_rotations(problem: Problem, anchor: int = 0) -> np.ndarray:
     keep[anchor * d:(anchor + 1) * d] = False
     Lrr = L[keep][:, keep]
     rhs = -(L[keep][:, ~keep] @ np.eye(d))   # Z_anchor = I_d
-    symbolic = SymbolicCholesky(Lrr, mode=problem.factor_mode(d))   # d rows per pose
-    factor = symbolic.factor(Lrr, name="reduced connection Laplacian L(G^rho)")
+    # d rows per pose; on large graphs the pose graph's nested dissection that M_red uses too, and
+    # on large 3D graphs CHOLMOD's BLAS threads, as for M_red (posecrb.linalg.threads)
+    symbolic = solver_symbolic(Lrr, d, n, mode=problem.factor_mode(d), pose_of_row=np.repeat(np.arange(n), d)[keep],
+                               pose_order=problem.pose_order())
+    with factorization_threads():
+        factor = symbolic.factor(Lrr, name="reduced connection Laplacian L(G^rho)")
     Z = np.empty((n * d, d))
     Z[keep] = factor(np.asarray(rhs))
     Z[~keep] = np.eye(d)

@@ -48,7 +48,7 @@ from ..core.errors import InternalError
 from ..core.graph import PoseGraph
 from ..linalg.cholesky import SymbolicCholesky, cholesky
 from ..linalg.laplacian import reduced_laplacian
-from ..linalg.ordering import solver_symbolic
+from ..linalg.ordering import auto_ordering, pose_permutation, solver_symbolic
 from ..linalg.threads import factorization_threads
 
 # CHOLMOD's simplicial factorization for the solver's block matrices (M_red, the chordal
@@ -127,6 +127,7 @@ class Problem:
     _full_diag_pos: np.ndarray | None = field(default=None, repr=False)
     _full_lam_pos: np.ndarray | None = field(default=None, repr=False)
     _fill: float | None = field(default=None, repr=False)
+    _pose_order: np.ndarray | None = field(default=None, repr=False)
     _defect_const: float | None = field(default=None, repr=False)
     # C and V_red^T in CSC for the products Q Z (every Hessian-vector product): scipy's CSC
     # kernel multiplies these by an (nd, r) block 0.6-0.9x the CSR kernel's time on the SE-Sync
@@ -186,6 +187,19 @@ class Problem:
         (``SIMPLICIAL_MAX_FLOPS_PER_ENTRY``): "simplicial" or "supernodal"."""
         sparse_enough = rows_per_pose * self.pose_fill() < SIMPLICIAL_MAX_FLOPS_PER_ENTRY
         return "simplicial" if sparse_enough else "supernodal"
+
+    def pose_order(self) -> np.ndarray | None:
+        """The pose graph's fill-reducing ordering for the solver's matrices under ``auto``'s rule
+        (nested dissection on large graphs, posecrb.linalg.ordering.auto_ordering), computed once
+        and shared by the analyses of the chordal initialisation's connection Laplacian and of
+        M_red; None where ``auto`` keeps CHOLMOD's own ordering."""
+        method = auto_ordering(self.d, self.n, "solver")
+        if method == "amd" or self.n < 2:
+            return None
+        if self._pose_order is None:
+            edges = sp.csc_matrix((np.ones(self.src.size), (self.src, self.dst)), shape=(self.n, self.n))
+            self._pose_order = pose_permutation(edges + edges.T, method)
+        return self._pose_order
 
     # ---- the objective -----------------------------------------------------
     def translations(self, Z: np.ndarray) -> np.ndarray:
@@ -286,7 +300,8 @@ class Problem:
         self._full_lam_pos = positions(rr, cc)
         self._full_pattern = pattern
         # pose-level nested dissection on large 3D; simplicial or supernodal by the fill (factor_mode)
-        self._full_symbolic = solver_symbolic(pattern, d, n, mode=self.factor_mode(d + 1))
+        self._full_symbolic = solver_symbolic(pattern, d, n, mode=self.factor_mode(d + 1),
+                                              pose_order=self.pose_order())
 
     def full_matrix(self, lam_blocks: np.ndarray | None, shift: float) -> sp.csc_matrix:
         """M_red(s) = [[L_red, V_red], [V_red^T, C - Lambda + s I]] (sparse, (n-1+dn) square)."""
