@@ -214,7 +214,7 @@ def resolve_estimate(graph: PoseGraph, estimate: Any, *, allow_none: bool = Fals
     ``"vertices"`` (the file's VERTEX lines), a path (another file's vertices with the same
     ids), a ``SolveResult`` or an ``Estimate`` of this graph; ``None`` / ``"none"`` when
     ``allow_none`` (graph-only results)."""
-    from ..solver.estimate import Estimate, get_estimate  # noqa: PLC0415 -- lazy: start-up time (scipy)
+    from ..solver.estimate import Estimate, from_solve_result, get_estimate  # noqa: PLC0415 -- lazy: start-up
     from ..solver.solve import SolveResult  # noqa: PLC0415 -- lazy: start-up time (scipy)
 
     if estimate is None or (isinstance(estimate, str) and estimate == "none"):
@@ -229,8 +229,7 @@ def resolve_estimate(graph: PoseGraph, estimate: Any, *, allow_none: bool = Fals
             raise ArgumentError("estimate", f"SolveResult of {estimate.dataset}",
                                 f"is the estimate of another graph (its pose ids are not those of {graph.name})",
                                 sep=": ")
-        return _checked(graph, Estimate(estimate.rot, estimate.trans, "solve", estimate.certified, estimate.objective,
-                                        objective_status=estimate.duality_gap_status))
+        return _checked(graph, from_solve_result(estimate))
     if isinstance(estimate, Estimate):
         if not estimate.has_poses:
             raise ArgumentError("estimate", f"Estimate from {estimate.source}", "carries no poses", sep=": ")

@@ -49,7 +49,7 @@ from ..selection import (
 )
 from ..sim.montecarlo import Task, make_tasks, run_tasks, seed_record
 from ..solver import SolverOptions, solve
-from ..solver.estimate import Estimate
+from ..solver.estimate import from_solve_result
 
 DEFAULT_BUDGETS = tuple(f"{p}%" for p in range(10, 101, 10))
 QUICK_BUDGETS = ("20%", "50%")
@@ -264,8 +264,7 @@ def sparsify_experiment(graph: PoseGraph, budgets: Sequence[str] = DEFAULT_BUDGE
     if not full.certified:
         raise SolverError(f"{graph.name}: the full graph's optimum is not certified ({full.reason}); "
                           "it cannot serve as the reference")
-    ref = Estimate(full.rot, full.trans, "solve", True, float(full.objective), float(full.times["total"]),
-                   objective_status=full.duality_gap_status)
+    ref = from_solve_result(full, float(full.times["total"]))
     context: dict[str, Any] = {"graph": graph, "split": split, "reference": ref, "anchor": anchor, "seed": seed,
                "certify": certify, "max_iter": max_iter,
                "jobs": [(b, label, obj, meth) for b in budgets for (label, obj, meth) in triples]}

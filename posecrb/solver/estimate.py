@@ -9,7 +9,7 @@ from __future__ import annotations
 
 import time
 from dataclasses import dataclass
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
@@ -19,6 +19,9 @@ from ..core.result import Result, array_field, internal_field, status_field
 from ..core.status import OK, Status
 from ..io import load
 from . import solve
+
+if TYPE_CHECKING:
+    from .solve import SolveResult
 
 
 @dataclass(frozen=True)
@@ -106,13 +109,18 @@ def from_file(graph: PoseGraph, path: str) -> Estimate:
     return Estimate(other.vertex_rot[pos], other.vertex_trans[pos], str(path))
 
 
+def from_solve_result(res: SolveResult, solve_time: float | None = None) -> Estimate:
+    """The poses of a solver result with its certificate, objective and duality-gap status."""
+    return Estimate(res.rot, res.trans, "solve", bool(res.certified), float(res.objective), solve_time,
+                    objective_status=res.duality_gap_status)
+
+
 def from_solver(graph: PoseGraph, **options: Any) -> Estimate:
 
     t0 = time.perf_counter()
     res = solve(graph, **options)
     elapsed = time.perf_counter() - t0
-    return Estimate(res.rot, res.trans, "solve", bool(res.certified), float(res.objective), elapsed,
-                    objective_status=res.duality_gap_status)
+    return from_solve_result(res, elapsed)
 
 
 def get_estimate(graph: PoseGraph, source: str = "solve", **solver_options: Any) -> Estimate:
