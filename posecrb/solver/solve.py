@@ -268,7 +268,7 @@ def _solve(graph: PoseGraph, options: SolverOptions) -> SolveResult:
     # trust region acts on the columns linearly or through d x d block products with Z_i, so the
     # padding stays exactly zero: the level is the rank-d problem, computed here at width d (a
     # third fewer right-hand sides in 2D, a quarter in 3D). An escape fills one zero column at a time
-    # and raises the rank only once none is left (``_escape_rank``).
+    # and raises the rank only once none is left: the rank is max(r0, width).
     Z = np.ascontiguousarray(np.swapaxes(rot0, 1, 2))
     times = {"init": time.perf_counter() - t0, "optimize": 0.0, "verify": 0.0, "round": 0.0}
     rounded: list[tuple[int, int, float, np.ndarray, np.ndarray]] = []   # (level, r, F, rot, trans)
@@ -321,7 +321,7 @@ def _solve(graph: PoseGraph, options: SolverOptions) -> SolveResult:
         state = escape(model, state, cert)
         times["optimize"] += time.perf_counter() - t0
         Z = state.Z
-        r = _escape_rank(r0, Z)
+        r = max(r0, Z.shape[2])
         level += 1
 
     # ---- rounding: the final level's, or an earlier level's when that one is lower ----------
@@ -353,13 +353,6 @@ def _solve(graph: PoseGraph, options: SolverOptions) -> SolveResult:
         lambda_min=float(cert.lambda_min) if cert is not None else None, certified=certified, reason=reason,
         rank=r, iterations=iterations, hessian_vector_products=model.hvps,
         quaternions=graph.quaternions, times=times, rot=rot, trans=trans, ids=graph.ids.copy())
-
-
-def _escape_rank(r0: int, Z: np.ndarray) -> int:
-    """The staircase rank of a point of width ``Z.shape[2]`` (its nonzero columns) after an escape:
-    r0 while the escapes fill the zero columns of the rank-r0 start, then the width (SE-Sync's
-    r + 1 per escape)."""
-    return max(r0, int(Z.shape[2]))
 
 
 def _width_note(Z: np.ndarray, r: int) -> str:
