@@ -14,7 +14,14 @@ settings run by run, each in a fresh process:
            BLAS at 1 thread or at every core (SymbolicCholesky's ``threaded``, which the library
            sets only for the block matrices of 3D graphs >= 10,000 poses)
 
-Usage: python benchmarks/threads.py [--dim 2] [--poses 30000] [--rounds 2] [--what solve,selinv,logdet]
+  load     the solver's M_red factorization (median of 3 per process), next to ``--hogs K``
+           processes that never sleep (started for the whole run): "1" thread, "all" threads,
+           and "library", the library's choice (posecrb.linalg.threads.load_aware_threads: the
+           threads of CHOLMOD's BLAS, fewer when other processes keep cores busy); e.g.
+           ``--what load --dim 3 --poses 20000 --hogs 1`` and the same with ``--hogs 0``
+
+Usage: python benchmarks/threads.py [--dim 2] [--poses 30000] [--rounds 2] [--what solve,selinv,logdet,load]
+       [--hogs K]
 """
 from __future__ import annotations
 
@@ -51,6 +58,24 @@ if what == "solve":
     r = solve(g)
     out = {"wall": time.perf_counter() - t, "cpu": time.process_time() - c, "objective": r.objective,
            "hvp": r.hessian_vector_products, "certified": r.certified}
+elif what == "load":
+    import contextlib, statistics
+    from posecrb.linalg import cholesky, threads as th
+    from posecrb.solver.problem import Problem
+    p = Problem.from_graph(g)
+    p._full_parts()
+    sym = p._full_symbolic
+    sym.threaded = threads != "1"
+    if threads == "all":
+        cholesky.load_aware_threads = contextlib.nullcontext
+    M = p.full_matrix(None, 1e-3)
+    walls = []
+    c = time.process_time()
+    for _ in range(3):
+        t = time.perf_counter()
+        sym.factor(M)
+        walls.append(time.perf_counter() - t)
+    out = {"wall": statistics.median(walls), "cpu": (time.process_time() - c) / 3}
 else:
     from posecrb.models.paper.fim import paper_fim, fim_symbolic
     fim = paper_fim(g, g.vertex_rot, g.vertex_trans, 0, "eq59", variant="consistent")
@@ -87,14 +112,27 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--poses", type=int, default=30000)
     ap.add_argument("--rounds", type=int, default=2)
     ap.add_argument("--what", default="solve,selinv,logdet")
+    ap.add_argument("--hogs", type=int, default=0, help="busy processes next to the measured ones (--what load)")
     ap.add_argument("--cache-dir", default=None)
     args = ap.parse_args(argv)
     path = grid_file(args.dim, args.poses, directory=args.cache_dir)
-    print_header(f"one BLAS thread against all (benchmarks/threads.py), {path.name}")
+    print_header(f"one BLAS thread against all (benchmarks/threads.py), {path.name}, {args.hogs} busy processes")
+    hogs = [subprocess.Popen([sys.executable, "-c", "while True: pass"]) for _ in range(args.hogs)]
+    try:
+        _measure(args, path)
+    finally:
+        for hog in hogs:
+            hog.kill()
+            hog.wait()
+    return 0
+
+
+def _measure(args: argparse.Namespace, path: Path) -> None:
     for what in args.what.split(","):
-        runs: dict[str, list[dict]] = {"1": [], "all": []}
+        settings = ("1", "all", "library") if what == "load" else ("1", "all")
+        runs: dict[str, list[dict]] = {s: [] for s in settings}
         for k in range(args.rounds):
-            for threads in (("1", "all") if k % 2 == 0 else ("all", "1")):
+            for threads in (settings if k % 2 == 0 else settings[::-1]):
                 env = child_env(threads=None)
                 load = os.getloadavg()[0]
                 r = subprocess.run([sys.executable, "-c", CHILD, what, str(path), threads], env=env,
@@ -106,9 +144,8 @@ def main(argv: list[str] | None = None) -> int:
                 d["load"] = load
                 runs[threads].append(d)
                 extra = (f", {d['hvp']} HVPs, objective {d['objective']:.10g}" if what == "solve" else "")
-                print(f"{what:7s} threads {threads:>3s}: wall {d['wall']:7.2f} s, CPU {d['cpu']:7.2f} s{extra} "
+                print(f"{what:7s} threads {threads:>7s}: wall {d['wall']:7.2f} s, CPU {d['cpu']:7.2f} s{extra} "
                       f"(load average {load:.1f} at the start, {time.strftime('%H:%M:%S')})", flush=True)
-    return 0
 
 
 if __name__ == "__main__":

@@ -328,6 +328,45 @@ def test_preconditioner_after_escape_is_shifted_not_lambda_free():
                                atol=MARGIN * cond * EPS * np.abs(want).max() * 2 * n)
 
 
+def test_after_an_escape_the_unshifted_factorization_waits_for_a_converging_step(monkeypatch):
+    """After an escape, prepare() tries Q - Lambda + s I (s alone) only once the trust region's step
+    is converging; before that it starts at s + 2|lambda_hint|. The shifts asked of factor_full are
+    recorded: the old rule asked for s first at every refactor of the level, and failed there."""
+    n = 16
+    src = np.arange(n)
+    dst = (np.arange(n) + 1) % n
+    src, dst = np.minimum(src, dst), np.maximum(src, dst)
+    info = np.tile(np.diag([1.0, 1.0, 10.0]), (n, 1, 1))
+    g = PoseGraph(dim=2, ids=np.arange(n), src=src, dst=dst, rot=np.tile(np.eye(2), (n, 1, 1)),
+                  trans=np.zeros((n, 2)), info=info, format="synthetic")
+    p = Problem.from_graph(g)
+    s = 1e-10 * p.gershgorin_max()
+    base = p.factor_full(None, p.gershgorin_max() / 1e6, name="base")
+    model = RelaxedModel(p, base, adaptive_shift=s, refactor_hvps=5)
+    winding = np.ascontiguousarray(np.swapaxes(so2_exp(2 * np.pi * np.arange(n) / n), 1, 2))
+    state = trust_region(model, lift(winding, 2), TROptions()).state
+    cert = verify(p, state, 1e-6, np.random.default_rng(0))
+    assert not cert.certified and cert.lambda_min < 0
+    asked: list[float] = []
+    real = Problem.factor_full
+
+    def recording(self, lam, shift, name):
+        asked.append(shift)
+        return real(self, lam, shift, name)
+
+    monkeypatch.setattr(Problem, "factor_full", recording)
+    hint = abs(cert.lambda_min)
+    model.lambda_hint = cert.lambda_min
+    after = model.evaluate(state.Z.copy())       # a new point: prepare() acts once per point
+    model.prepare(after, last_hvps=50, converging=False)
+    assert asked == [s + 2 * hint]               # indefinite at s here, and not converging: skipped
+    asked.clear()
+    later = model.evaluate(state.Z.copy())
+    model.prepare(later, last_hvps=50, converging=True)
+    assert asked[0] == s                         # converging: s first, which may certify the point
+    assert asked[1:] == [s + 2 * hint][:len(asked) - 1]
+
+
 @pytest.mark.parametrize("tol", [1.0, 1e3, 1e300])
 def test_a_tolerance_too_large_to_prove_optimality_is_reported(shared_datasets, tol):
     """A certificate proves F* >= f - n d s (s: the shift of the certifying Cholesky, <= tol); a

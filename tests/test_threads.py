@@ -101,3 +101,54 @@ def test_factorizations_threaded_only_for_large_3d_block_matrices():
 
     tol = 10 * a.shape[0] * np.finfo(float).eps * np.linalg.cond(a.toarray())
     assert abs(ld1 - ld2) <= tol
+
+
+def test_running_tasks_and_own_threads_parse_the_kernel_texts():
+    assert threads._running_tasks("0.95 0.97 1.02 3/84 10297\n") == 3
+    assert threads._running_tasks("0.95 0.97 1.02") is None
+    assert threads._running_tasks("0.95 0.97 1.02 x/84 1") is None
+    # a command name may hold blanks and parentheses: the state follows the LAST ')'
+    stats = ["10 (python) R 1 10", "11 (a) b) S 1 10", "12 (x y) R 1", "13 (idle) D 0"]
+    assert threads._own_running_threads(stats) == 2
+
+
+def test_usable_threads_leave_the_busy_cores():
+    assert threads.usable_threads(2, cores=2, busy=0) == 2
+    assert threads.usable_threads(2, cores=2, busy=1) == 1
+    assert threads.usable_threads(2, cores=2, busy=5) == 1
+    assert threads.usable_threads(4, cores=16, busy=3) == 4
+    assert threads.usable_threads(8, cores=8, busy=3) == 5
+
+
+def test_load_aware_threads_limit_cholmod_only_when_cores_are_busy(monkeypatch):
+    before = _blas_threads()
+    cholmod = {c.filepath for c in threads.cholmod_blas().lib_controllers}
+    with threads.cholmod_blas().limit(limits=2):
+        monkeypatch.setattr(threads, "busy_cores", lambda: 10 ** 6)
+        with threads.load_aware_threads():
+            assert all(n == 1 for p, n in _blas_threads().items() if p in cholmod)
+        monkeypatch.setattr(threads, "busy_cores", lambda: 0)
+        with threads.load_aware_threads():
+            inside = _blas_threads()
+        assert all(inside[p] == 2 for p in cholmod)
+    assert _blas_threads() == before
+
+
+def test_busy_cores_sees_a_busy_process():
+    """A process that never sleeps keeps a core busy at every read; the count is of OTHER
+    processes, so this test's own thread never counts."""
+    import subprocess
+    import time
+
+    if not sys.platform.startswith("linux"):
+        assert threads.busy_cores() == 0
+        return
+    quiet = threads.busy_cores()
+    assert quiet >= 0
+    hog = subprocess.Popen([sys.executable, "-c", "while True: pass"])
+    try:
+        time.sleep(0.5)
+        assert threads.busy_cores() >= 1
+    finally:
+        hog.kill()
+        hog.wait()

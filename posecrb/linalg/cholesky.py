@@ -17,7 +17,7 @@ from sksparse.cholmod import CholmodNotPositiveDefiniteError, Factor, analyze
 
 from ..core.errors import NotPositiveDefinite, NumericalError, UsageError
 from .lanczos import largest_eigenpair
-from .threads import cholmod_single_threaded
+from .threads import cholmod_single_threaded, load_aware_threads
 
 log = logging.getLogger("posecrb")
 
@@ -142,7 +142,8 @@ class SymbolicCholesky:
             a = self._permuted(a)
         try:
             if self.threaded:
-                f = self._symbolic.cholesky(a, beta=beta)
+                with load_aware_threads():
+                    f = self._symbolic.cholesky(a, beta=beta)
             else:
                 with cholmod_single_threaded():
                     f = self._symbolic.cholesky(a, beta=beta)

@@ -9,6 +9,9 @@ directory), which does posecrb's own small dense products.
   matrices (FIM, ub, CRLB, the solver's M_red) of 3D graphs with at least 10,000 poses, whose
   nested-dissection separators are dense blocks of thousands of rows: there two threads pay
   (``SymbolicCholesky(threaded=True)``, set by ``posecrb.linalg.ordering.ordered_symbolic``).
+  Only on the cores no other process keeps busy, counted at each such factorization
+  (``load_aware_threads``): OpenBLAS's threads spin-wait for each other, so one sharing its core
+  stalls the others, and two threads next to one busy process were slower than one.
 * Every other factorization runs CHOLMOD's BLAS at one thread: small supernodes, where threads
   only add synchronisation and collapse when another process holds a core (FIM of the 2D grid of
   30,276 poses at load average 7: 0.64-1.01 s with one thread, 2.5-3.8 s with two;
@@ -85,6 +88,75 @@ def cholmod_blas() -> Any:
 def cholmod_threads() -> int:
     """How many threads CHOLMOD's BLAS has now (1 when it cannot be told apart)."""
     return max([c.num_threads for c in cholmod_blas().lib_controllers], default=1)
+
+
+def _running_tasks(loadavg: str) -> int | None:
+    """Runnable tasks of the whole system: the first half of the 4th field of /proc/loadavg
+    ("R/T"), which counts the reading thread itself; None when the text is not that."""
+    fields = loadavg.split()
+    if len(fields) < 4 or "/" not in fields[3]:
+        return None
+    running = fields[3].split("/", 1)[0]
+    return int(running) if running.isdigit() else None
+
+
+def _own_running_threads(states: list[str]) -> int:
+    """Threads of this process in the running state, from the texts of /proc/self/task/*/stat
+    (the state is the first field after the parenthesised command name)."""
+    return sum(1 for st in states if st[st.rfind(")") + 2: st.rfind(")") + 3] == "R")
+
+
+def busy_cores(samples: int = 3, interval: float = 0.002) -> int:
+    """How many cores other processes keep busy now: the system's runnable tasks minus this
+    process's own running threads, the least of ``samples`` reads ``interval`` seconds apart (a task
+    that ran only at one read is not a busy core). 0 where /proc cannot tell (not Linux)."""
+    import time  # noqa: PLC0415 -- only where a threaded factorization asks
+
+    least: int | None = None
+    for k in range(samples):
+        if k:
+            time.sleep(interval)
+        try:
+            with open("/proc/loadavg") as f:
+                running = _running_tasks(f.read())
+            states = []
+            for task in os.listdir("/proc/self/task"):
+                try:
+                    with open(f"/proc/self/task/{task}/stat") as f:
+                        states.append(f.read())
+                except OSError:
+                    continue    # the thread ended between the listing and the read
+        except OSError:
+            return 0
+        if running is None:
+            return 0
+        others = max(0, running - max(_own_running_threads(states), 1))
+        least = others if least is None else min(least, others)
+    return least or 0
+
+
+def usable_threads(threads: int, cores: int, busy: int) -> int:
+    """Threads for a factorization that ``threads`` would run: at most the cores not kept busy by
+    other processes, at least 1. OpenBLAS's threads wait for each other by spinning, so one that
+    shares its core with another process stalls every other thread: on the 2-core machine of
+    docs/performance.md, the 3D 21,952-pose grid's M_red factorization takes 2.3 s with two
+    threads and 3.6 s with one when quiet, but 5.9 s with two against 3.5 s with one next to one
+    busy process (benchmarks/threads.py --what load)."""
+    return max(1, min(threads, cores - busy))
+
+
+def load_aware_threads() -> Any:
+    """CHOLMOD's BLAS at ``usable_threads`` inside (a context manager): its threads as they are
+    when no other process keeps a core busy, fewer when one does. The count comes from the
+    whole system's runnable tasks (a container sees its host's), so it errs towards fewer
+    threads, the side that costs at most the threads' gain."""
+    ctl = cholmod_blas()
+    threads = max([c.num_threads for c in ctl.lib_controllers], default=1)
+    if threads <= 1:
+        return contextlib.nullcontext()
+    cores = len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else (os.cpu_count() or 1)
+    usable = usable_threads(threads, cores, busy_cores())
+    return contextlib.nullcontext() if usable == threads else ctl.limit(limits=usable)
 
 
 def cholmod_single_threaded() -> Any:

@@ -90,7 +90,7 @@ class RelaxedModel:
         """Tangent projection at ``state``'s point (stiefel.project with the cached layout)."""
         return project(state.Z, W, self._components(state)[0])
 
-    def prepare(self, state: State, last_hvps: int | None = None) -> None:
+    def prepare(self, state: State, last_hvps: int | None = None, converging: bool = False) -> None:
         """Refactor the preconditioner as (Q - Lambda(Y) + s I)^{-1} at the iterate, when it pays.
 
         Near a minimiser the Riemannian Hessian is 2 Proj S with S = Q - Lambda, so this
@@ -107,6 +107,13 @@ class RelaxedModel:
         is poor there;
         the Lambda-free factor is the last resort, because it ignores Lambda, the dominant
         diagonal part of the Hessian, and makes truncated CG take hundreds of steps.
+
+        After an escape the shift s alone is tried only at a ``converging`` iterate (the trust
+        region's last step decreased f by at most its ``certified_rel_decrease``): only there can
+        that factorization also certify the point, and before it the point is mostly still
+        indefinite, so the attempt fails at the full cost of a factorization (2D grid of 100,489
+        poses: 1.5-2 s; noisy 2D grids of 144-2,500 poses: 6-102 failed attempts per solve down to
+        6-18, the same optima, benchmarks/solver_variants.py).
         """
         if self.adaptive_shift is None or self.base_factor is None:
             return
@@ -120,8 +127,8 @@ class RelaxedModel:
         if self.lambda_hint < 0:
             # Right after an escape the iterate is still next to the saddle, where S + s I is
             # indefinite: a factorization at s alone would fail (at full cost), so start past it.
-            shifts = ([] if self.refactor_next else [s]) + [s + 2.0 * abs(self.lambda_hint),
-                                                            s + 20.0 * abs(self.lambda_hint)]
+            shifts = ([s] if converging and not self.refactor_next else []) + [s + 2.0 * abs(self.lambda_hint),
+                                                                              s + 20.0 * abs(self.lambda_hint)]
         self.refactor_next = False
         self._factored_at = state.Z
         self.factor_shift = None

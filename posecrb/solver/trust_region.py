@@ -20,6 +20,11 @@ from .stiefel import inner, project, retract
 log = logging.getLogger("posecrb")
 
 
+# The relative decrease of f below which an accepted step is "converging": the default of
+# TROptions.certified_rel_decrease, and what the model's prepare() is told when that option is None.
+CONVERGING_REL_DECREASE = 1e-9
+
+
 class Model(Protocol):
     """What the trust region needs from a problem on St(d, r)^n."""
 
@@ -62,7 +67,7 @@ class TROptions:
     # relatively: past that point further iterations only polish a certified optimum (they
     # changed f by < 1e-10 relatively where measured), and they are the slowest ones at a
     # rank-deficient optimum (after a staircase escape). None: never.
-    certified_rel_decrease: float | None = 1e-9
+    certified_rel_decrease: float | None = CONVERGING_REL_DECREASE
 
 
 @dataclass
@@ -137,6 +142,9 @@ def trust_region(model: Model, Z0: np.ndarray, opt: TROptions, state: State | No
     delta = opt.delta0 if opt.delta0 is not None else max(math.sqrt(2.0 * max(decrement, 1e-300)), 1e-12)
     delta_max = 1e6 * delta
     status = "iteration limit"
+    # a step this small marks a converging iterate (the preconditioner may try to certify there)
+    converged_rel = (opt.certified_rel_decrease if opt.certified_rel_decrease is not None
+                     else CONVERGING_REL_DECREASE)
     it = 0
     for it in range(1, opt.max_iterations + 1):
         gnorm = math.sqrt(inner(x.grad, x.grad))
@@ -166,7 +174,7 @@ def trust_region(model: Model, Z0: np.ndarray, opt: TROptions, state: State | No
             rel = (x.f - cand.f) / max(abs(x.f), 1e-300)
             x = cand
             if prepare is not None:
-                prepare(x, k)
+                prepare(x, k, rel <= converged_rel)
             if (certified is not None and opt.certified_rel_decrease is not None
                     and rel <= opt.certified_rel_decrease and certified(x)):
                 status = "certified"
