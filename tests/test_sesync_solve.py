@@ -293,9 +293,10 @@ def test_zero_padding_stays_zero_so_the_first_level_runs_at_width_d(dim):
         assert model.factorizations > 1       # the adaptive factor was rebuilt on the way
 
 
-def test_preconditioner_after_escape_is_shifted_not_lambda_free():
-    """At a saddle (Q - Lambda + s I indefinite) the rebuilt preconditioner is the inverse of
-    Q - Lambda + (s + 2|lambda_min|) I, checked against a dense inverse, not (Q + delta I)^{-1}."""
+def _winding_saddle(**model_options):
+    """A 16-pose 2D cycle with zero relative motion, started from rotations that wind once around
+    it: the trust region stops at a saddle of the rank-2 problem. Returns (problem, s, base
+    factor, model, the saddle's state, its certificate)."""
     n = 16
     src = np.arange(n)
     dst = (np.arange(n) + 1) % n
@@ -306,12 +307,19 @@ def test_preconditioner_after_escape_is_shifted_not_lambda_free():
     p = Problem.from_graph(g)
     s = 1e-10 * p.gershgorin_max()
     base = p.factor_full(None, p.gershgorin_max() / 1e6, name="base")
-    model = RelaxedModel(p, base, adaptive_shift=s)
+    model = RelaxedModel(p, base, adaptive_shift=s, **model_options)
     winding = np.ascontiguousarray(np.swapaxes(so2_exp(2 * np.pi * np.arange(n) / n), 1, 2))
-    res = trust_region(model, lift(winding, 2), TROptions())
-    state = res.state
+    state = trust_region(model, lift(winding, 2), TROptions()).state
     cert = verify(p, state, 1e-6, np.random.default_rng(0))
     assert not cert.certified and cert.lambda_min < 0
+    return p, s, base, model, state, cert
+
+
+def test_preconditioner_after_escape_is_shifted_not_lambda_free():
+    """At a saddle (Q - Lambda + s I indefinite) the rebuilt preconditioner is the inverse of
+    Q - Lambda + (s + 2|lambda_min|) I, checked against a dense inverse, not (Q + delta I)^{-1}."""
+    p, s, base, model, state, cert = _winding_saddle()
+    n = p.n
     Sd = p.Q_product(np.eye(2 * n))
     for i in range(n):
         Sd[2 * i:2 * i + 2, 2 * i:2 * i + 2] -= state.lam[i]
@@ -332,21 +340,7 @@ def test_after_an_escape_the_unshifted_factorization_waits_for_a_converging_step
     """After an escape, prepare() tries Q - Lambda + s I (s alone) only once the trust region's step
     is converging; before that it starts at s + 2|lambda_hint|. The shifts asked of factor_full are
     recorded: the old rule asked for s first at every refactor of the level, and failed there."""
-    n = 16
-    src = np.arange(n)
-    dst = (np.arange(n) + 1) % n
-    src, dst = np.minimum(src, dst), np.maximum(src, dst)
-    info = np.tile(np.diag([1.0, 1.0, 10.0]), (n, 1, 1))
-    g = PoseGraph(dim=2, ids=np.arange(n), src=src, dst=dst, rot=np.tile(np.eye(2), (n, 1, 1)),
-                  trans=np.zeros((n, 2)), info=info, format="synthetic")
-    p = Problem.from_graph(g)
-    s = 1e-10 * p.gershgorin_max()
-    base = p.factor_full(None, p.gershgorin_max() / 1e6, name="base")
-    model = RelaxedModel(p, base, adaptive_shift=s, refactor_hvps=5)
-    winding = np.ascontiguousarray(np.swapaxes(so2_exp(2 * np.pi * np.arange(n) / n), 1, 2))
-    state = trust_region(model, lift(winding, 2), TROptions()).state
-    cert = verify(p, state, 1e-6, np.random.default_rng(0))
-    assert not cert.certified and cert.lambda_min < 0
+    p, s, _base, model, state, cert = _winding_saddle(refactor_hvps=5)
     asked: list[float] = []
     real = Problem.factor_full
 
