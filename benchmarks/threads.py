@@ -5,14 +5,14 @@ settings run by run, each in a fresh process:
 
   solve    posecrb.solver.solve(load(FILE)) in-process: "1" as the library runs it (every BLAS at
            one thread, except CHOLMOD's in the M_red factorizations of 3D graphs >= 10,000
-           poses), "all" with CHOLMOD's BLAS on every core throughout (numpy's/scipy's still at
+           poses and 2D >= 50,000), "all" with CHOLMOD's BLAS on every core throughout (numpy's/scipy's still at
            one thread): wall and CPU seconds, Hessian-vector products and the objective
   selinv   the selected inversion (posecrb.linalg.selinv.SelectedInverse) of the FIM at the
            file's vertices, with numpy's/scipy's OpenBLAS at 1 thread or at every core (after a
            warm-up call that compiles the kernels)
   logdet   the FIM log-det (posecrb.models.paper.fim: analysis + factorization) with CHOLMOD's
            BLAS at 1 thread or at every core (SymbolicCholesky's ``threaded``, which the library
-           sets only for the block matrices of 3D graphs >= 10,000 poses)
+           sets only for the block matrices of 3D graphs >= 10,000 poses and 2D >= 50,000)
 
   load     the solver's M_red factorization (median of 3 per process), next to ``--hogs K``
            processes that never sleep (started for the whole run): "1" thread, "all" threads,

@@ -339,7 +339,7 @@ def test_preconditioner_after_escape_is_shifted_not_lambda_free():
 def test_after_an_escape_the_unshifted_factorization_waits_for_a_converging_step(monkeypatch):
     """After an escape, prepare() tries Q - Lambda + s I (s alone) only once the trust region's step
     is converging; before that it starts at s + 2|lambda_hint|. The shifts asked of factor_full are
-    recorded: the old rule asked for s first at every refactor of the level, and failed there."""
+    recorded: asking for s first at every refactor of the level would fail here."""
     p, s, _base, model, state, cert = _winding_saddle(refactor_hvps=5)
     asked: list[float] = []
     real = Problem.factor_full

@@ -64,7 +64,7 @@ def test_controller_cached_until_a_loader_is_imported(monkeypatch):
     assert threads.controller() is not a
 
 
-def test_factorizations_threaded_only_for_large_3d_block_matrices():
+def test_factorizations_threaded_only_for_the_block_matrices_of_large_graphs():
     """CHOLMOD's BLAS keeps its threads only in the factorizations ``threaded_matrix`` names; every
     other factorization runs it at one thread, and the value is the same either way."""
     import scipy.sparse as sp
@@ -75,7 +75,9 @@ def test_factorizations_threaded_only_for_large_3d_block_matrices():
     assert ordmod.threaded_matrix(3, ordmod.AUTO_ND_MIN_POSES, "fim")
     assert not ordmod.threaded_matrix(3, ordmod.AUTO_ND_MIN_POSES, "lb")
     assert not ordmod.threaded_matrix(3, ordmod.AUTO_ND_MIN_POSES - 1, "ub")
-    assert not ordmod.threaded_matrix(2, 10 ** 6, "solver")
+    assert ordmod.threaded_matrix(2, ordmod.AUTO_ND_MIN_POSES_2D, "solver")
+    assert not ordmod.threaded_matrix(2, ordmod.AUTO_ND_MIN_POSES_2D - 1, "fim")
+    assert not ordmod.threaded_matrix(2, 10 ** 6, "lb")
     seen = []
     real = threads.cholmod_single_threaded
 

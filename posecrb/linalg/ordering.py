@@ -94,12 +94,15 @@ def auto_ordering(dim: int, poses: int, matrix: str) -> str:
 
 
 def threaded_matrix(dim: int, poses: int, matrix: str) -> bool:
-    """Whether ``matrix`` of a graph is factored with CHOLMOD's BLAS on its threads: the block
-    matrices of 3D graphs with at least ``AUTO_ND_MIN_POSES`` poses, whose nested-dissection
-    separators are dense blocks of thousands of rows (posecrb.linalg.threads)."""
+    """Whether ``matrix`` of a graph is factored with CHOLMOD's BLAS on its threads (those of the
+    cores no other process keeps busy, posecrb.linalg.threads): the block matrices of the graphs
+    ``auto_ordering`` takes as large (3D from ``AUTO_ND_MIN_POSES`` poses, 2D from
+    ``AUTO_ND_MIN_POSES_2D``), whose nested-dissection separators are dense blocks of a thousand
+    rows and more (2D grid of 100,489 poses, M_red: 1.55-1.65 s with one thread, 1.1-1.35 s with
+    two; its solve 35.4-37.5 s against 32.5-33.0 s)."""
     if matrix not in MATRICES:
         raise UsageError(f"matrix must be one of {MATRICES}, got {matrix!r}")
-    return dim == 3 and matrix != "lb" and poses >= AUTO_ND_MIN_POSES
+    return matrix != "lb" and poses >= (AUTO_ND_MIN_POSES if dim == 3 else AUTO_ND_MIN_POSES_2D)
 
 
 def resolve_ordering(ordering: str, *, dim: int, poses: int, matrix: str) -> OrderingChoice:

@@ -6,8 +6,9 @@ dense work, and the private copy numpy and scipy bring in their wheels (a ``<pac
 directory), which does posecrb's own small dense products.
 
 * CHOLMOD's BLAS keeps its threads (every core by default) in the factorizations of the block
-  matrices (FIM, ub, CRLB, the solver's M_red) of 3D graphs with at least 10,000 poses, whose
-  nested-dissection separators are dense blocks of thousands of rows: there two threads pay
+  matrices (FIM, ub, CRLB, the solver's M_red) of 3D graphs with at least 10,000 poses and 2D
+  graphs with at least 50,000 (``posecrb.linalg.ordering.threaded_matrix``), whose
+  nested-dissection separators are dense blocks of a thousand rows and more: there two threads pay
   (``SymbolicCholesky(threaded=True)``, set by ``posecrb.linalg.ordering.ordered_symbolic``).
   Only on the cores no other process keeps busy, counted at each such factorization
   (``load_aware_threads``): OpenBLAS's threads spin-wait for each other, so one sharing its core
@@ -17,7 +18,7 @@ directory), which does posecrb's own small dense products.
   30,276 poses at load average 7: 0.64-1.01 s with one thread, 2.5-3.8 s with two;
   benchmarks/threads.py).
 * The solver runs every BLAS at one thread (many small products and triangular solves), except
-  CHOLMOD's in the M_red factorizations of those large 3D graphs (``solver_threads``,
+  CHOLMOD's in the M_red factorizations of those large graphs (``solver_threads``,
   ``factorization_threads``).
 * numpy's/scipy's OpenBLAS stays at one thread in the solver and the selected inversion: its
   threads collapse under load (posecrb.linalg.selinv).
@@ -139,9 +140,9 @@ def usable_threads(threads: int, cores: int, busy: int) -> int:
     """Threads for a factorization that ``threads`` would run: at most the cores not kept busy by
     other processes, at least 1. OpenBLAS's threads wait for each other by spinning, so one that
     shares its core with another process stalls every other thread: on the 2-core machine of
-    docs/performance.md, the 3D 21,952-pose grid's M_red factorization takes 2.3 s with two
-    threads and 3.6 s with one when quiet, but 5.9 s with two against 3.5 s with one next to one
-    busy process (benchmarks/threads.py --what load)."""
+    docs/performance.md, the 3D 21,952-pose grid's M_red factorization takes 2.2-2.5 s with two
+    threads and 3.7-3.9 s with one when quiet, but 6.2-6.8 s with two against 3.5-3.6 s with one
+    next to one busy process (benchmarks/threads.py --what load)."""
     return max(1, min(threads, cores - busy))
 
 

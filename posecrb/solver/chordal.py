@@ -23,7 +23,7 @@ def chordal_rotations(problem: Problem, anchor: int = 0) -> np.ndarray:
     Lrr = L[keep][:, keep]
     rhs = -(L[keep][:, ~keep] @ np.eye(d))   # Z_anchor = I_d
     # d rows per pose; on large graphs the pose graph's nested dissection that M_red uses too, and
-    # on large 3D graphs CHOLMOD's BLAS threads, as for M_red (posecrb.linalg.threads)
+    # CHOLMOD's BLAS threads, as for M_red (posecrb.linalg.threads)
     symbolic = solver_symbolic(Lrr, d, n, mode=problem.factor_mode(d), pose_of_row=np.repeat(np.arange(n), d)[keep],
                                pose_order=problem.pose_order())
     with factorization_threads():

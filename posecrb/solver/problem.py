@@ -299,7 +299,7 @@ class Problem:
         self._full_diag_pos = positions(diag, diag)
         self._full_lam_pos = positions(rr, cc)
         self._full_pattern = pattern
-        # pose-level nested dissection on large 3D; simplicial or supernodal by the fill (factor_mode)
+        # pose-level nested dissection on large graphs; simplicial or supernodal by the fill (factor_mode)
         self._full_symbolic = solver_symbolic(pattern, d, n, mode=self.factor_mode(d + 1),
                                               pose_order=self.pose_order())
 

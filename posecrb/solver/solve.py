@@ -21,7 +21,7 @@ from ..core.graph import PoseGraph
 from ..core.result import Result, array_field, optional_field, status_field
 from ..core.status import OK, Status
 from ..io.rotations import rot_to_quat
-from ..linalg.ordering import AUTO_ND_MIN_POSES
+from ..linalg.ordering import threaded_matrix
 from ..linalg.threads import cholmod_threads, solver_threads
 from .chordal import chordal_rotations
 from .problem import Problem
@@ -211,12 +211,13 @@ def solve(graph: PoseGraph, options: SolverOptions | None = None, **keywords: An
     is the same call (``SolverOptions.from_keywords``: an unknown name is a UsageError) and may
     refine ``options``. BLAS runs single-threaded inside: the work is many small dense products
     and triangular solves, for which OpenBLAS's threads cost more than they save. The exception
-    is the factorizations of M_red of 3D graphs with at least ``AUTO_ND_MIN_POSES`` poses, whose
-    dense separators take CHOLMOD's BLAS threads as they were at the call (posecrb.linalg.threads).
+    is the factorizations of M_red of large graphs (``posecrb.linalg.ordering.threaded_matrix``),
+    whose dense separators take CHOLMOD's BLAS threads as they were at the call, on the cores no
+    other process keeps busy (posecrb.linalg.threads).
     """
     if keywords or options is None:
         options = SolverOptions.from_keywords(options, **keywords)
-    large = graph.dim == 3 and graph.n >= AUTO_ND_MIN_POSES
+    large = threaded_matrix(graph.dim, graph.n, "solver")
     with solver_threads(cholmod_threads() if large else 1):
         return _solve(graph, options)
 

@@ -112,8 +112,8 @@ class RelaxedModel:
         region's last step decreased f by at most its ``certified_rel_decrease``): only there can
         that factorization also certify the point, and before it the point is mostly still
         indefinite, so the attempt fails at the full cost of a factorization (2D grid of 100,489
-        poses: 1.5-2 s; noisy 2D grids of 144-2,500 poses: 6-102 failed attempts per solve down to
-        6-18, the same optima, benchmarks/solver_variants.py).
+        poses: one failed attempt of 1.5-2 s fewer; of 30,276 poses: 210 -> 181 HVPs; the same optima,
+        benchmarks/solve_checkouts.py, docs/performance.md).
         """
         if self.adaptive_shift is None or self.base_factor is None:
             return
