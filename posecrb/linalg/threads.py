@@ -38,6 +38,7 @@ import contextvars
 import functools
 import os
 import sys
+import time
 from collections.abc import Iterator
 from typing import Any
 
@@ -111,8 +112,6 @@ def busy_cores(samples: int = 3, interval: float = 0.002) -> int:
     """How many cores other processes keep busy now: the system's runnable tasks minus this
     process's own running threads, the least of ``samples`` reads ``interval`` seconds apart (a task
     that ran only at one read is not a busy core). 0 where /proc cannot tell (not Linux)."""
-    import time  # noqa: PLC0415 -- only where a threaded factorization asks
-
     least: int | None = None
     for k in range(samples):
         if k:
@@ -151,13 +150,12 @@ def load_aware_threads() -> Any:
     when no other process keeps a core busy, fewer when one does. The count comes from the
     whole system's runnable tasks (a container sees its host's), so it errs towards fewer
     threads, the side that costs at most the threads' gain."""
-    ctl = cholmod_blas()
-    threads = max([c.num_threads for c in ctl.lib_controllers], default=1)
+    threads = cholmod_threads()
     if threads <= 1:
         return contextlib.nullcontext()
     cores = len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else (os.cpu_count() or 1)
     usable = usable_threads(threads, cores, busy_cores())
-    return contextlib.nullcontext() if usable == threads else ctl.limit(limits=usable)
+    return contextlib.nullcontext() if usable == threads else cholmod_blas().limit(limits=usable)
 
 
 def cholmod_single_threaded() -> Any:
