@@ -145,8 +145,6 @@ def test_busy_cores_sees_a_busy_process():
     if not sys.platform.startswith("linux"):
         assert threads.busy_cores() == 0
         return
-    quiet = threads.busy_cores()
-    assert quiet >= 0
     hog = subprocess.Popen([sys.executable, "-c", "while True: pass"])
     try:
         time.sleep(0.5)
