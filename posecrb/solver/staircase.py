@@ -127,8 +127,8 @@ class RelaxedModel:
         if self.lambda_hint < 0:
             # Right after an escape the iterate is still next to the saddle, where S + s I is
             # indefinite: a factorization at s alone would fail (at full cost), so start past it.
-            shifts = ([s] if converging and not self.refactor_next else []) + [s + 2.0 * abs(self.lambda_hint),
-                                                                              s + 20.0 * abs(self.lambda_hint)]
+            past_saddle = [s + 2.0 * abs(self.lambda_hint), s + 20.0 * abs(self.lambda_hint)]
+            shifts = ([s] if converging and not self.refactor_next else []) + past_saddle
         self.refactor_next = False
         self._factored_at = state.Z
         self.factor_shift = None
