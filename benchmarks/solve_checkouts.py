@@ -8,8 +8,13 @@ alternate round by round (--rounds), and the table shows the median over every t
 side, the median ``optimize`` phase, Hessian-vector products, the staircase rank and the
 objectives' relative difference. Every BLAS pool runs at one thread (--threads), as in the solver.
 
+--before-set / --after-set MODULE.NAME=VALUE (repeatable) set a module constant of that side
+before it solves (VALUE a Python literal), e.g. to time a threshold: ``--before DIR --after DIR
+--after-set posecrb.solver.problem.SIMPLICIAL_MAX_FLOPS_PER_ENTRY=1e9`` with the same DIR twice.
+
 Usage: python benchmarks/solve_checkouts.py --before DIR [--after DIR (default: this checkout)]
-           [--rounds R] [--repeat K] [--threads T] [--data-dir DIR] [NAME|FILE ...]
+           [--before-set M.N=V] [--after-set M.N=V] [--rounds R] [--repeat K] [--threads T]
+           [--data-dir DIR] [NAME|FILE ...]
 """
 from __future__ import annotations
 
@@ -23,13 +28,20 @@ from pathlib import Path
 from _common import REPO, child_env, data_dir, print_header, suite_files
 
 CHILD = """
-import json, sys, time
+import ast, importlib, json, sys, time
 sys.path.insert(0, sys.argv[1])
+for setting in json.loads(sys.argv[3]):
+    target, value = setting.split("=", 1)
+    module, name = target.rsplit(".", 1)
+    mod = importlib.import_module(module)
+    if not hasattr(mod, name):
+        raise SystemExit(f"{module} has no {name}")
+    setattr(mod, name, ast.literal_eval(value))
 from posecrb.io import load
 from posecrb.solver import solve
 repeat = int(sys.argv[2])
 out = {}
-for path in sys.argv[3:]:
+for path in sys.argv[4:]:
     graph = load(path, quaternions="raw")
     runs = []
     for _ in range(repeat):
@@ -42,10 +54,11 @@ print(json.dumps(out))
 """
 
 
-def run_side(checkout: Path, files: list[Path], repeat: int, threads: int) -> dict:
+def run_side(checkout: Path, files: list[Path], repeat: int, threads: int, settings: list[str]) -> dict:
     env = child_env(threads)
     env.pop("PYTHONPATH", None)     # the child puts its own checkout first
-    proc = subprocess.run([sys.executable, "-c", CHILD, str(checkout), str(repeat), *map(str, files)],
+    proc = subprocess.run([sys.executable, "-c", CHILD, str(checkout), str(repeat), json.dumps(settings),
+                           *map(str, files)],
                           env=env, capture_output=True, text=True, check=False)
     if proc.returncode != 0:
         raise SystemExit(f"{checkout}: solve failed:\n{proc.stderr}")
@@ -61,7 +74,13 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--repeat", type=int, default=3, help="timed solves per file and round")
     ap.add_argument("--threads", type=int, default=1)
     ap.add_argument("--data-dir", default=None)
+    for side in ("before", "after"):
+        ap.add_argument(f"--{side}-set", action="append", default=[], metavar="MODULE.NAME=VALUE",
+                        help=f"set a module constant of the {side} side (a Python literal); repeatable")
     args = ap.parse_args(argv)
+    for setting in args.before_set + args.after_set:
+        if "=" not in setting or "." not in setting.split("=", 1)[0]:
+            ap.error(f"{setting!r} is not MODULE.NAME=VALUE")
     for side in (args.before, args.after):
         if not (side / "posecrb" / "__init__.py").is_file():
             ap.error(f"{side} is not a posecrb checkout (no posecrb/__init__.py)")
@@ -71,12 +90,14 @@ def main(argv: list[str] | None = None) -> int:
     if not files:
         ap.error("no dataset files: name them, or set $POSECRB_DATA / --data-dir")
     print_header("in-process solve, two checkouts alternating", threads=args.threads,
-                 extra=[f"before = {args.before.resolve()}", f"after = {args.after.resolve()}",
+                 extra=[f"before = {args.before.resolve()} {' '.join(args.before_set)}".rstrip(),
+                        f"after = {args.after.resolve()} {' '.join(args.after_set)}".rstrip(),
                         f"{args.rounds} alternating rounds x {args.repeat} timed solves per file; median of all"])
     runs: dict[str, list[dict]] = {"before": [], "after": []}
     for _ in range(args.rounds):
         for side in ("before", "after"):
-            runs[side].append(run_side(getattr(args, side), files, args.repeat, args.threads))
+            runs[side].append(run_side(getattr(args, side), files, args.repeat, args.threads,
+                                       getattr(args, f"{side}_set")))
 
     def pooled(side: str, key: str, path: str) -> float:
         return statistics.median(v for r in runs[side] for v in r[path][key])

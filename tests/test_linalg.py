@@ -4,9 +4,9 @@ import pytest
 import scipy.sparse as sp
 
 from posecrb.core.errors import NotPositiveDefinite
-from posecrb.linalg.cholesky import SymbolicCholesky, lambda_min, logdet
+from posecrb.linalg.cholesky import SymbolicCholesky, lambda_min, logdet, solve_tail
 
-from .numerics import EPS, MARGIN, logdet_atol
+from .numerics import EPS, MARGIN, inverse_entry_atol, logdet_atol
 
 
 def _spd(rng, n, density=0.05):
@@ -58,6 +58,32 @@ def test_lambda_min_matches_dense():
         # symmetric eigenvalues are perturbed by at most the backward error ~ n eps ||A||_2
         assert lambda_min(a) == pytest.approx(ev[0], abs=MARGIN * n * EPS * ev[-1])
 
+
+
+@pytest.mark.parametrize("ordered", [False, True])
+@pytest.mark.parametrize("k", [1, 3])
+def test_solve_tail_is_the_last_rows_of_the_full_solve(ordered, k):
+    """Rows first: of A^-1 [0; W]: bit for bit the full solve's, and the dense Schur complement's
+    inverse applied to W within the inverse's rounding (an independent reference), for CHOLMOD's
+    own ordering and for a user permutation (PermutedFactor)."""
+    rng = np.random.default_rng(7 + k)
+    n, first = 150, 40
+    a = _spd(rng, n, density=0.04)
+    perm = rng.permutation(n) if ordered else None
+    f = SymbolicCholesky(a, permutation=perm).factor(a)
+    W = rng.standard_normal((n - first, k))
+    b = np.zeros((n, k))
+    b[first:] = W
+    got = solve_tail(f, first, W)
+    assert got.shape == W.shape and got.flags.c_contiguous
+    assert np.array_equal(got, f(b)[first:])
+    dense = a.toarray()
+    top, side = dense[:first, :first], dense[:first, first:]
+    schur = dense[first:, first:] - side.T @ np.linalg.solve(top, side)
+    ref = np.linalg.solve(schur, W)
+    # (A^-1)[first:, first:] = schur^-1: each entry within the inverse's rounding, times the 1-norm of a column of W
+    atol = inverse_entry_atol(dense) * np.abs(W).sum(axis=0).max()
+    assert np.max(np.abs(got - ref)) <= atol
 
 def test_lambda_min_unconverged_is_an_error_not_an_estimate(monkeypatch):
     import posecrb.linalg.cholesky as chol

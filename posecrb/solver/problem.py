@@ -46,7 +46,7 @@ from sksparse.cholmod import Factor
 
 from ..core.errors import InternalError
 from ..core.graph import PoseGraph
-from ..linalg.cholesky import SymbolicCholesky, cholesky
+from ..linalg.cholesky import SymbolicCholesky, cholesky, solve_tail
 from ..linalg.laplacian import reduced_laplacian
 from ..linalg.ordering import auto_ordering, pose_permutation, solver_symbolic
 from ..linalg.threads import factorization_threads
@@ -56,13 +56,15 @@ from ..linalg.threads import factorization_threads
 # below this, with c_j the column counts of the translation Laplacian's factor (one row per pose)
 # and b the rows per pose of the matrix factored. That quotient estimates the factorization's
 # flops per factor entry, CHOLMOD's own supernodal criterion (its switch, 40, is tuned for the
-# factorization alone). Here one M_red factor serves tens to hundreds of solves with r <= 5
-# right-hand sides. Measured (benchmarks/solver_variants.py --kernels, thread CPU time): at fill 80
-# (city10000) a simplicial solve takes 0.77x the supernodal's time and its factorization 1.4x,
-# a net gain at ~70 solves per factorization; at 152-232 (cubicle, sphere2500, torus3D) the solves
-# cost the same and the factorization 1.7-3.8x, and the 2D 10^5-pose grid (400) is far above.
-# CHOLMOD itself already picks simplicial on the sparse datasets (fill <= 36).
-SIMPLICIAL_MAX_FLOPS_PER_ENTRY = 110.0
+# factorization alone). Here a solve is one process: a handful of
+# factorizations, each serving tens to hundreds of triangular solves with r <= 5 right-hand
+# sides. Timed kernel by kernel after a warm-up (benchmarks/solver_variants.py --kernels) the
+# supernodal factorization is 1.5-3.5x cheaper from fill 150 on and the solves cost the same; but
+# the whole first solve of a fresh process (benchmarks/solve_checkouts.py --repeat 1, see
+# docs/performance.md) is faster simplicial up to fill ~170 (cubicle 152, the 2D grid of
+# 10,000 poses 157, sphere2500 168: 15-25% less) and slower from ~220 on (sphere_bignoise 226,
+# torus3D 232: supernodal kept). The 2D 10^5-pose grid (fill 400) and the 3D grids (>= 271) are above.
+SIMPLICIAL_MAX_FLOPS_PER_ENTRY = 200.0
 
 # An edge's R~ counts as orthogonal when max |I - R~ R~^T| is at the rounding level of a
 # rotation computed in floating point (normalised quaternions measure up to ~10 eps on the
@@ -327,9 +329,7 @@ class Problem:
 
     def schur_solve(self, factor: Factor, W: np.ndarray) -> np.ndarray:
         """(Q - Lambda + s I)^{-1} W, the rotation block of M_red(s)^{-1} [0; W]."""
-        rhs = np.zeros((self.n - 1 + W.shape[0], W.shape[1]))
-        rhs[self.n - 1:] = W
-        return factor(rhs)[self.n - 1:]
+        return solve_tail(factor, self.n - 1, W)
 
     def gershgorin_max(self) -> float:
         """Upper bound on lambda_max(Q) <= lambda_max(C) (Q = C - PSD term)."""
