@@ -31,6 +31,26 @@ def test_pose_fill_of_a_chain_is_its_closed_form():
     assert Problem.from_graph(g).pose_fill() == pytest.approx((4 * (k - 1) + 1) / (2 * (k - 1) + 1), rel=1e-15)
 
 
+
+def test_translation_laplacian_refactored_simplicial_between_the_switches():
+    """A 3D lattice of 512 poses has fill ~49: CHOLMOD factors L(W^tau) supernodal (its switch is
+    40), and reading the fill pads that factor. The solver keeps a simplicial factor of L(W^tau)
+    with exactly the entries of CHOLMOD's own simplicial factorization, and its translations equal
+    the dense solve of L p = -V Z."""
+    from posecrb.linalg.cholesky import SymbolicCholesky
+    from posecrb.sim.generators import grid
+
+    g = grid(3, 8, noise=True, rng=np.random.default_rng(3))
+    p = Problem.from_graph(g)
+    assert problem_module.CHOLMOD_SUPERNODAL_SWITCH <= p.pose_fill() < problem_module.SIMPLICIAL_MAX_FLOPS_PER_ENTRY
+    fresh = SymbolicCholesky(p.Lred, mode="simplicial").factor(p.Lred)
+    assert p.Lfactor.LD().nnz == fresh.LD().nnz
+    Z = random_point(g.n, 3, 4, np.random.default_rng(4)).reshape(g.n * 3, 4)
+    L = p.Lred.toarray()
+    want = np.linalg.solve(L, -(p.Vred @ Z))
+    cond = np.linalg.cond(L)
+    np.testing.assert_allclose(p.translations(Z)[1:], want, rtol=0, atol=MARGIN * cond * EPS * np.abs(want).max())
+
 @pytest.mark.parametrize("dim", [2, 3])
 @pytest.mark.parametrize("threshold", [0.0, np.inf], ids=["supernodal", "simplicial"])
 def test_factor_mode_solves_match_dense(dim, threshold, monkeypatch):

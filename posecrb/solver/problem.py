@@ -66,6 +66,10 @@ from ..linalg.threads import factorization_threads
 # torus3D 232: supernodal kept). The 2D 10^5-pose grid (fill 400) and the 3D grids (>= 271) are above.
 SIMPLICIAL_MAX_FLOPS_PER_ENTRY = 200.0
 
+# CHOLMOD's default supernodal switch (Common->supernodal_switch): with its automatic choice, a
+# factor whose flops per entry reach this is supernodal.
+CHOLMOD_SUPERNODAL_SWITCH = 40.0
+
 # An edge's R~ counts as orthogonal when max |I - R~ R~^T| is at the rounding level of a
 # rotation computed in floating point (normalised quaternions measure up to ~10 eps on the
 # shared datasets); its defect term is then dropped, so orthogonal data give exactly the
@@ -98,6 +102,14 @@ def connection_laplacian(n: int, d: int, src: np.ndarray, dst: np.ndarray, rot: 
     cols = np.concatenate([off_c, off_r, diag_r])
     vals = np.concatenate([off_v, off_v, diag_v])
     return sp.csr_matrix((vals, (rows, cols)), shape=(n * d, n * d))
+
+
+def _column_fill(factor: Factor) -> float:
+    """``sum c_j^2 / sum c_j`` over the column counts c_j of a factor. LD() is the simplicial LDL'
+    factor's own storage; a supernodal factor is converted in place to a simplicial one with the
+    supernodes' pattern, padding included (the measure the thresholds above were set with)."""
+    counts = np.diff(factor.LD().indptr).astype(float)
+    return float(np.dot(counts, counts) / max(counts.sum(), 1.0))
 
 
 @dataclass
@@ -164,24 +176,29 @@ class Problem:
             (np.concatenate([-vv, vv]), (np.concatenate([np.repeat(dst, d), np.repeat(src, d)]),
                                         np.concatenate([cols, cols]))), shape=(n, n * d))
         Lred = reduced_laplacian(n, src, dst, tau, anchor=0)
-        Lfactor = cholesky(Lred, name="reduced translation Laplacian L(W^tau)")
+        name = "reduced translation Laplacian L(W^tau)"
+        Lfactor = cholesky(Lred, name=name)
+        fill = _column_fill(Lfactor) if n > 1 else 1.0
+        if CHOLMOD_SUPERNODAL_SWITCH <= fill < SIMPLICIAL_MAX_FLOPS_PER_ENTRY:
+            # CHOLMOD factored L(W^tau) supernodal, and reading its column counts converted it to a
+            # simplicial factor with the supernodes' padding (up to 1.5x the entries). This factor
+            # serves a solve per Hessian-vector product: a simplicial factorization of its own
+            # solves faster (2D grid of 100,489 poses: 11.5 instead of 20.9 ms per product Q Z,
+            # docs/performance.md), for one more factorization of a one-row-per-pose matrix.
+            Lfactor = SymbolicCholesky(Lred, mode="simplicial").factor(Lred, name=name)
         Vred = V[1:].tocsr()
         defect_edges, defect = orthogonality_defect(rot)
         return cls(graph=graph, n=n, d=d, conlap=conlap, C=(conlap + sigma).tocsr(), V=V,
                    Vred=Vred, VredT=Vred.T.tocsr(), Lred=Lred, Lfactor=Lfactor, tau=tau, kappa=kappa,
                    src=src, dst=dst, rot=rot, rotT=np.ascontiguousarray(np.swapaxes(rot, 1, 2)), trans=tt,
-                   defect_edges=defect_edges, defect=defect)
+                   defect_edges=defect_edges, defect=defect, _fill=fill)
 
     def pose_fill(self) -> float:
-        """``sum c_j^2 / sum c_j`` over the column counts c_j of the L(W^tau) factor (computed once):
-        the flops per factor entry of a one-row-per-pose factorization of the pose graph."""
+        """``sum c_j^2 / sum c_j`` over the column counts c_j of CHOLMOD's first factor of L(W^tau)
+        (computed once, in :meth:`from_graph`): the flops per factor entry of a one-row-per-pose
+        factorization of the pose graph."""
         if self._fill is None:
-            fill = 1.0
-            if self.n > 1:
-                # LD(): the simplicial LDL' factor's own storage (a supernodal one is converted).
-                counts = np.diff(self.Lfactor.LD().indptr).astype(float)
-                fill = float(np.dot(counts, counts) / max(counts.sum(), 1.0))
-            self._fill = fill
+            self._fill = _column_fill(self.Lfactor) if self.n > 1 else 1.0
         return self._fill
 
     def factor_mode(self, rows_per_pose: int) -> str:
