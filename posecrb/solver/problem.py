@@ -56,10 +56,10 @@ from ..linalg.threads import factorization_threads
 # below this, with c_j the column counts of the translation Laplacian's factor (one row per pose)
 # and b the rows per pose of the matrix factored. That quotient estimates the factorization's
 # flops per factor entry, CHOLMOD's own supernodal criterion (its switch, 40, is tuned for the
-# factorization alone). Here a solve is one process: a handful of
-# factorizations, each serving tens to hundreds of triangular solves with r <= 5 right-hand
-# sides. Timed kernel by kernel after a warm-up (benchmarks/solver_variants.py --kernels) the
-# supernodal factorization is 1.5-3.5x cheaper from fill 150 on and the solves cost the same; but
+# factorization alone). Here a solve is one process: a handful of factorizations, each serving
+# tens to hundreds of triangular solves with r <= 5 right-hand sides. Timed kernel by kernel after
+# a warm-up (benchmarks/solver_variants.py --kernels) the supernodal factorization is 1.8-3.4x
+# cheaper from fill 150 on and the solves cost the same; but
 # the whole first solve of a fresh process (benchmarks/solve_checkouts.py --repeat 1, see
 # docs/performance.md) is faster simplicial up to fill ~170 (cubicle 152, the 2D grid of
 # 10,000 poses 157, sphere2500 168: 15-25% less) and slower from ~220 on (sphere_bignoise 226,
@@ -181,7 +181,7 @@ class Problem:
         fill = _column_fill(Lfactor) if n > 1 else 1.0
         if CHOLMOD_SUPERNODAL_SWITCH <= fill < SIMPLICIAL_MAX_FLOPS_PER_ENTRY:
             # CHOLMOD factored L(W^tau) supernodal, and reading its column counts converted it to a
-            # simplicial factor with the supernodes' padding (up to 1.5x the entries). This factor
+            # simplicial factor with the supernodes' padding (1.4-1.7x the entries). This factor
             # serves a solve per Hessian-vector product: a simplicial factorization of its own
             # solves faster (2D grid of 100,489 poses: 11.5 instead of 20.9 ms per product Q Z,
             # docs/performance.md), for one more factorization of a one-row-per-pose matrix.
