@@ -197,7 +197,7 @@ class PermutedFactor:
     def solve_tail(self, first: int, W: np.ndarray) -> np.ndarray:
         """Rows ``first:`` of ``A^{-1} [0; W]`` (:func:`solve_tail`), permuted straight into and out of
         the factor's ordering."""
-        return _tail_solution(self._inner, self._inverse_perm[first:], W)
+        return _tail_solution(self._inner, self._perm.size, self._inverse_perm[first:], W)
 
     def __getattr__(self, name: str) -> Any:
         # L, D, LD, L_D, logdet, slogdet, det, solve_L, solve_Lt, solve_D, ...: ordering-free
@@ -208,9 +208,9 @@ class PermutedFactor:
         return getattr(self._inner, name)
 
 
-def _tail_solution(factor: Factor, rows: np.ndarray | slice, W: np.ndarray) -> np.ndarray:
-    """``x[rows]`` for ``factor``'s ``A x = b``, b zero except ``b[rows] = W`` (W: (m, k))."""
-    n, k = factor.P().size, W.shape[1]
+def _tail_solution(factor: Factor, n: int, rows: np.ndarray | slice, W: np.ndarray) -> np.ndarray:
+    """``x[rows]`` for ``factor``'s ``A x = b`` (n rows), b zero except ``b[rows] = W`` (W: (m, k))."""
+    k = W.shape[1]
     # CHOLMOD solves column-major right-hand sides: build b in that layout, one contiguous column
     # at a time, so that scikit-sparse does not copy it again.
     b = np.zeros((k, n))
@@ -231,7 +231,7 @@ def solve_tail(factor: Factor | PermutedFactor, first: int, W: np.ndarray) -> np
     W = np.asarray(W, dtype=float)
     if isinstance(factor, PermutedFactor):
         return factor.solve_tail(first, W)
-    return _tail_solution(factor, slice(first, None), W)
+    return _tail_solution(factor, first + W.shape[0], slice(first, None), W)
 
 
 def _checked_logdet(f: Factor, name: str) -> float:
