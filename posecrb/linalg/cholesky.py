@@ -164,13 +164,10 @@ class PermutedFactor:
     (``solve_L``, ...) act in the factor's ordering, as CHOLMOD's do, so ``apply_P`` composes them.
     """
 
-    def __init__(self, inner: Factor, perm: np.ndarray, inverse_perm: np.ndarray | None = None):
+    def __init__(self, inner: Factor, perm: np.ndarray, inverse_perm: np.ndarray):
         self._inner = inner
         self._perm = perm
         self._p = perm[inner.P()]
-        if inverse_perm is None:
-            inverse_perm = np.empty_like(perm)
-            inverse_perm[perm] = np.arange(perm.size)
         self._inverse_perm = inverse_perm   # row i of A is row inverse_perm[i] of the factored matrix
 
     def P(self) -> np.ndarray:
