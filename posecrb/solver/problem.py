@@ -104,6 +104,12 @@ def connection_laplacian(n: int, d: int, src: np.ndarray, dst: np.ndarray, rot: 
     return sp.csr_matrix((vals, (rows, cols)), shape=(n * d, n * d))
 
 
+def _factor_kind(rows_per_pose: int, fill: float) -> str:
+    """CHOLMOD's factorization kind for a solver matrix with ``rows_per_pose`` rows per pose of a
+    graph of pose-level fill ``fill`` (``SIMPLICIAL_MAX_FLOPS_PER_ENTRY``)."""
+    return "simplicial" if rows_per_pose * fill < SIMPLICIAL_MAX_FLOPS_PER_ENTRY else "supernodal"
+
+
 def _column_fill(factor: Factor) -> float:
     """``sum c_j^2 / sum c_j`` over the column counts c_j of a factor. LD() is the simplicial LDL'
     factor's own storage; a supernodal factor is converted in place to a simplicial one with the
@@ -179,7 +185,7 @@ class Problem:
         name = "reduced translation Laplacian L(W^tau)"
         Lfactor = cholesky(Lred, name=name)
         fill = _column_fill(Lfactor) if n > 1 else 1.0
-        if CHOLMOD_SUPERNODAL_SWITCH <= fill < SIMPLICIAL_MAX_FLOPS_PER_ENTRY:
+        if fill >= CHOLMOD_SUPERNODAL_SWITCH and _factor_kind(1, fill) == "simplicial":
             # CHOLMOD factored L(W^tau) supernodal, and reading its column counts converted it to a
             # simplicial factor with the supernodes' padding (1.4-1.7x the entries). This factor
             # serves a solve per Hessian-vector product: a simplicial factorization of its own
@@ -197,15 +203,14 @@ class Problem:
         """``sum c_j^2 / sum c_j`` over the column counts c_j of CHOLMOD's first factor of L(W^tau)
         (computed once, in :meth:`from_graph`): the flops per factor entry of a one-row-per-pose
         factorization of the pose graph."""
-        if self._fill is None:
-            self._fill = _column_fill(self.Lfactor) if self.n > 1 else 1.0
+        if self._fill is None:  # set by from_graph
+            raise InternalError("pose fill not measured")
         return self._fill
 
     def factor_mode(self, rows_per_pose: int) -> str:
         """CHOLMOD mode for a solver matrix with ``rows_per_pose`` rows per pose
         (``SIMPLICIAL_MAX_FLOPS_PER_ENTRY``): "simplicial" or "supernodal"."""
-        sparse_enough = rows_per_pose * self.pose_fill() < SIMPLICIAL_MAX_FLOPS_PER_ENTRY
-        return "simplicial" if sparse_enough else "supernodal"
+        return _factor_kind(rows_per_pose, self.pose_fill())
 
     def pose_order(self) -> np.ndarray | None:
         """The pose graph's fill-reducing ordering for the solver's matrices under ``auto``'s rule
