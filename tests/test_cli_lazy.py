@@ -186,6 +186,20 @@ def test_cli_defers_numpy_modules_it_never_uses_and_they_still_work(solvable_g2o
                     "['module', 'module', 'module', 'module'] [1.0, 2.0] True 1.0")
 
 
+def test_weak_3d_rotations_leave_numpy_polynomial_deferred(tmp_path):
+    """A 3D file whose rotation concentrations are below omega's series switch (kappa = 0.01):
+    reading and solving it evaluates that series, which must not execute numpy.polynomial."""
+    path = tmp_path / "weak3d.g2o"
+    write_g2o(random_pose_graph(12, 3, np.random.default_rng(3), kappa=0.01)[0], path)
+    code = ("import sys; from posecrb.cli import main; "
+            f"rc = main(['solve', {str(path)!r}, '--format', 'json']); "
+            "from posecrb.core.noise import omega, _SERIES_BELOW; "
+            "small = float(omega(0.01)) > 0 and 0.01 < _SERIES_BELOW; "
+            "print(rc, small, type(sys.modules['numpy.polynomial']).__name__, file=sys.stderr)")
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True, timeout=300)
+    assert out.stderr.strip().splitlines()[-1] == "0 True _LazyModule"
+
+
 def test_library_import_changes_no_import_machinery():
     """Only the CLI's main() defers modules; importing posecrb as a library leaves sys.meta_path alone."""
     code = ("import sys; before = [type(f).__name__ for f in sys.meta_path]; import posecrb, posecrb.solver, "

@@ -42,6 +42,18 @@ def test_omega_matches_eq59_in_high_precision():
     np.testing.assert_allclose(got, ref, rtol=1e-12)
 
 
+def test_omega_series_branch_is_numpy_polynomials_horner_bit_for_bit():
+    # Below the switch omega is k S12(k) / S01(k) by Horner's scheme; numpy.polynomial's polyval,
+    # an independent implementation of that scheme, gives the same bits at every kappa and sign.
+    from posecrb.core.noise import _S01, _S12, _SERIES_BELOW
+
+    ks = np.concatenate([np.geomspace(1e-300, _SERIES_BELOW, 5000, endpoint=False), [0.0, -0.0]])
+    with np.errstate(invalid="ignore"):     # 0/0 at kappa = 0 in the reference: compared where defined
+        ref = ks * np.polynomial.polynomial.polyval(ks, _S12) / np.polynomial.polynomial.polyval(ks, _S01)
+    got = omega(ks)
+    assert np.array_equal(got.view(np.int64), ref.view(np.int64))
+
+
 def test_omega_limits():
     # Small kappa: omega ~ kappa^2 (leading Bessel terms); large: omega / 3 -> kappa.
     assert omega(1e-6) == pytest.approx(1e-12, rel=1e-5)
