@@ -69,6 +69,19 @@ def _compiled_substitution():
         return s0
 
     @njit(**flags)
+    def load(U, X, indptr, indices, bounds, s, gather):  # pragma: no cover - compiled
+        """Supernode s's work rows from X: its own columns, and below them zeros (forward) or the
+        rows it reads (``gather``, backward). Returns (first column, columns, rows, first entry)."""
+        j0, w = bounds[s], bounds[s + 1] - bounds[s]
+        p0, m = uint64(indptr[j0]), indptr[j0 + 1] - indptr[j0]
+        for a in range(X.shape[0]):
+            for i in range(uint64(w)):
+                U[a, i] = X[a, uint64(j0) + i]
+            for i in range(uint64(w), uint64(m)):
+                U[a, i] = X[a, uint64(indices[p0 + i])] if gather else 0.0
+        return j0, w, m, p0
+
+    @njit(**flags)
     def substitute(indptr, indices, val, bounds, X):  # pragma: no cover - compiled
         """X (k, N) <- L^{-T} L^{-1} X for a lower CSC factor whose supernodes start at ``bounds``;
         val[indptr[j] - c + i] is L[rows[i], j] for column j = j0 + c of a supernode of rows ``rows``."""
@@ -79,13 +92,7 @@ def _compiled_substitution():
             maxm = max(maxm, indptr[bounds[s] + 1] - indptr[bounds[s]])
         U = np.empty((k, maxm))
         for s in range(nsup):                           # forward: L y = b
-            j0, w = bounds[s], bounds[s + 1] - bounds[s]
-            p0, m = uint64(indptr[j0]), indptr[j0 + 1] - indptr[j0]
-            for a in range(k):
-                for i in range(uint64(w)):
-                    U[a, i] = X[a, uint64(j0) + i]
-                for i in range(uint64(w), uint64(m)):
-                    U[a, i] = 0.0
+            j0, w, m, p0 = load(U, X, indptr, indices, bounds, s, False)
             c = 0
             while c + 4 <= w:
                 q0, q1 = indptr[j0 + c] - c, indptr[j0 + c + 1] - c - 1
@@ -118,13 +125,7 @@ def _compiled_substitution():
                 for i in range(uint64(w), uint64(m)):
                     X[a, uint64(indices[p0 + i])] += U[a, i]
         for s in range(nsup - 1, -1, -1):               # backward: L^T x = y
-            j0, w = bounds[s], bounds[s + 1] - bounds[s]
-            p0, m = uint64(indptr[j0]), indptr[j0 + 1] - indptr[j0]
-            for a in range(k):
-                for i in range(uint64(w)):
-                    U[a, i] = X[a, uint64(j0) + i]
-                for i in range(uint64(w), uint64(m)):
-                    U[a, i] = X[a, uint64(indices[p0 + i])]
+            j0, w, m, p0 = load(U, X, indptr, indices, bounds, s, True)
             c = w
             while c >= 4:
                 q0, q1 = indptr[j0 + c - 4] - (c - 4), indptr[j0 + c - 3] - (c - 3)

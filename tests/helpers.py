@@ -315,3 +315,18 @@ def run_cli(argv, capsys):
     code = main(argv)
     out = capsys.readouterr()
     return code, out.out, out.err
+
+
+def record_factor_full(monkeypatch) -> list[tuple[str, float]]:
+    """Record (name, shift) of every ``Problem.factor_full`` call from now on (monkeypatched)."""
+    from posecrb.solver.problem import Problem
+
+    calls: list[tuple[str, float]] = []
+    real = Problem.factor_full
+
+    def recording(self, lam, shift, name):
+        calls.append((name, shift))
+        return real(self, lam, shift, name)
+
+    monkeypatch.setattr(Problem, "factor_full", recording)
+    return calls

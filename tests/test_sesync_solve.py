@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 from click.testing import CliRunner
 
-from posecrb.core.errors import DisconnectedGraph
+from posecrb.core.errors import DisconnectedGraph, NotPositiveDefinite
 from posecrb.core.graph import PoseGraph
 from posecrb.io import load
 from posecrb.lie.so import so2_exp, so_project
@@ -18,7 +18,7 @@ from posecrb.solver.staircase import RelaxedModel, verify
 from posecrb.solver.stiefel import lift, random_point
 from posecrb.solver.trust_region import TROptions, trust_region
 
-from .helpers import SESYNC_STOP, drop_edges, print_rounding, random_pose_graph
+from .helpers import SESYNC_STOP, drop_edges, print_rounding, random_pose_graph, record_factor_full
 from .numerics import EPS, MARGIN, objective_atol, suboptimality_bound
 
 # SE-Sync C++ reference optima.
@@ -341,34 +341,55 @@ def test_after_an_escape_the_unshifted_factorization_waits_for_a_converging_step
     is converging; before that it starts at s + 2|lambda_hint|. The shifts asked of factor_full are
     recorded: asking for s first at every refactor of the level would fail here."""
     p, s, _base, model, state, cert = _winding_saddle(refactor_hvps=5)
-    asked: list[float] = []
-    real = Problem.factor_full
-
-    def recording(self, lam, shift, name):
-        asked.append(shift)
-        return real(self, lam, shift, name)
-
-    monkeypatch.setattr(Problem, "factor_full", recording)
+    calls = record_factor_full(monkeypatch)
     hint = abs(cert.lambda_min)
     model.lambda_hint = cert.lambda_min
     after = model.evaluate(state.Z.copy())       # a new point: prepare() acts once per point
     model.prepare(after, last_hvps=50, converging=False)
+    asked = [shift for _, shift in calls]
     assert asked == [s + 2 * hint]               # indefinite at s here, and not converging: skipped
-    asked.clear()
+    calls.clear()
     later = model.evaluate(state.Z.copy())
     model.prepare(later, last_hvps=50, converging=True)
+    asked = [shift for _, shift in calls]
     assert asked[0] == s                         # converging: s first, which may certify the point
     assert asked[1:] == [s + 2 * hint][:len(asked) - 1]
 
 
+def _small_shift_fails(monkeypatch):
+    """Make the solver's second certificate, the Cholesky at the preconditioner's small shift, fail."""
+    real = Problem.factor_full
+
+    def failing(self, lam, shift, name):
+        if name == "certificate matrix Q - Lambda + s I":
+            raise NotPositiveDefinite(name, "test", 0)
+        return real(self, lam, shift, name)
+
+    monkeypatch.setattr(Problem, "factor_full", failing)
+
+
 @pytest.mark.parametrize("tol", [1.0, 1e3, 1e300])
-def test_a_tolerance_too_large_to_prove_optimality_is_reported(shared_datasets, tol):
-    """A certificate proves F* >= f - n d s (s: the shift of the certifying Cholesky, <= tol); a
-    tolerance where that bound reaches the objective proves nothing, and says so on stderr."""
+def test_a_tolerance_too_large_to_prove_optimality_is_proven_again_at_the_small_shift(shared_datasets, tol):
+    """A certificate proves F* >= f - n d s (s: the shift of the certifying Cholesky, <= tol). Where
+    that bound reaches the objective at s = tol, the solver factors Q - Lambda + s I again at its
+    preconditioner's small shift, which proves optimality: nothing to report."""
+    from posecrb.cli import cli
+
+    r = CliRunner().invoke(cli, ["solve", str(shared_datasets / "intel.g2o"), "--certificate-tol", repr(tol),
+                                 "--format", "json"])
+    assert r.exit_code == 0, r.output
+    assert json.loads(r.stdout)["certified"]
+    assert "not shown to be optimal" not in r.stderr
+
+
+@pytest.mark.parametrize("tol", [1.0, 1e3, 1e300])
+def test_a_tolerance_too_large_to_prove_optimality_is_reported(shared_datasets, tol, monkeypatch):
+    """... and where that second Cholesky fails too, the bound proves nothing, and says so on stderr."""
     import re
 
     from posecrb.cli import cli
 
+    _small_shift_fails(monkeypatch)
     r = CliRunner().invoke(cli, ["solve", str(shared_datasets / "intel.g2o"), "--certificate-tol", repr(tol),
                                  "--format", "json"])
     assert r.exit_code == 0, r.output
@@ -413,10 +434,12 @@ def test_exact_measurements_are_optimal_without_a_warning(caplog, dim):
     assert res.certified and res.objective < 1e-20 and warned == []
 
 
-def test_information_scaled_far_down_makes_the_default_certificate_vacuous(caplog):
+def test_information_scaled_far_down_makes_the_default_certificate_vacuous(caplog, monkeypatch):
     """The tolerance is absolute: with every information matrix times 1e-9 the objective falls to
-    about 1e-7 while n d eta stays 0.032 at the default; the solve still certifies, and says that the
-    certificate does not show optimality. The same graph at its own scale is silent."""
+    about 1e-7 while n d eta stays 0.032 at the default. The solve certifies, and proves optimality
+    with a second Cholesky at its preconditioner's small shift (relative to the information, so
+    scaled down too); where that one fails, it says that the certificate does not show optimality.
+    The same graph at its own scale is silent."""
     from dataclasses import replace
 
     from posecrb.sim.generators import grid
@@ -424,10 +447,14 @@ def test_information_scaled_far_down_makes_the_default_certificate_vacuous(caplo
     g = grid(2, 4, tau=100.0, kappa=200.0, noise=True, rng=np.random.default_rng(3))
     res, warned = _solve_warnings(caplog, g)
     assert res.certified and warned == []
-    res_small, warned = _solve_warnings(caplog, replace(g, info=g.info * 1e-9))
-    assert res_small.certified and len(warned) == 1
+    small = replace(g, info=g.info * 1e-9)
+    res_small, warned = _solve_warnings(caplog, small)
+    assert res_small.certified and warned == []
     assert res_small.objective == pytest.approx(1e-9 * res.objective, rel=1e-6)
     assert 16 * 2 * 1e-3 >= res_small.objective
+    _small_shift_fails(monkeypatch)
+    res_small, warned = _solve_warnings(caplog, small)
+    assert res_small.certified and len(warned) == 1
 
 
 def _inexact_grid():

@@ -27,6 +27,7 @@ from .chordal import chordal_rotations
 from .problem import Problem
 from .rounding import anchor_estimate, recover_translations, round_rotations, se_objective
 from .staircase import RelaxedModel, escape, verify
+from .tangent import TangentSystem
 from .trust_region import TROptions, trust_region
 
 log = logging.getLogger("posecrb")
@@ -147,6 +148,12 @@ class SolveResult(Result):
         return pd.DataFrame(cols)
 
 
+# On 3D graphs (tangent_precond=None) the first level switches to the tangent space's preconditioner
+# after a truncated-CG run of more than this many products: its factorizations cost 2-2.5 times
+# M_red's there, which pays only where products are many (parking-garage's first run: 26; the other
+# SE-Sync files' stay below 15).
+TANGENT_SWITCH_HVPS = 20
+
 # TROptions fields a caller may set through SolverOptions.trust_region (max_iterations is a
 # SolverOptions field of its own).
 _TR_TUNING = frozenset(f.name for f in fields(TROptions)) - {"max_iterations"}
@@ -166,7 +173,13 @@ class SolverOptions:
     (Q + delta I)^{-1} and the cap on its condition number; ``adaptive_precond``: relative shift of
     the (Q - Lambda + s I)^{-1} preconditioner (None: off), refactored when the last truncated-CG
     run needed more than ``refactor_hvps`` Hessian-vector products (None: at every accepted
-    iterate); ``trust_region``: other :class:`TROptions` fields (e.g. ``theta``, ``decrement_tol``).
+    iterate); ``tangent_precond``: precondition the first staircase level with the exact inverse
+    Hessian on the tangent space (``posecrb.solver.tangent``), refactored at accepted iterates
+    (True: from the start; False: never; None, the default: from the start on 2D graphs, where its
+    sparse system has as many rows per pose as M_red, and on 3D graphs, where it has half as many
+    again, only after a truncated-CG run of more than ``TANGENT_SWITCH_HVPS`` products,
+    docs/performance.md); ``trust_region``: other :class:`TROptions` fields (e.g. ``theta``,
+    ``decrement_tol``, ``exact_decrement_tol``).
     """
 
     r0: int | None = None
@@ -181,6 +194,7 @@ class SolverOptions:
     precond_max_cond: float = 1e6
     adaptive_precond: float | None = 1e-10
     refactor_hvps: int | None = 30
+    tangent_precond: bool | None = None
     trust_region: Mapping[str, Any] = field(default_factory=dict)
 
     def __post_init__(self) -> None:
@@ -255,15 +269,29 @@ def _solve(graph: PoseGraph, options: SolverOptions) -> SolveResult:
     else:
         raise ArgumentError("init", init, "is not 'chordal', 'vertices' or an (n, d, d) array of rotations")
     precond = None
+    tangent = None
+    delta = 0.0
     if options.precondition:
         # Regularised Schur-complement preconditioner (Q + delta I)^{-1}; delta caps the
         # condition number near precond_max_cond (SE-Sync's regularised Cholesky, section 4.3).
         delta = problem.gershgorin_max() / options.precond_max_cond
-        precond = problem.factor_full(None, delta, name="preconditioner M_red(delta)")
+        if options.tangent_precond or (options.tangent_precond is None and d == 2):
+            if options.adaptive_precond is not None:
+                tangent = TangentSystem.build(problem)
+        if tangent is None:
+            precond = problem.factor_full(None, delta, name="preconditioner M_red(delta)")
+    # 3D by default: the tangent system only after a truncated-CG run of more than
+    # TANGENT_SWITCH_HVPS products at the first level (docs/performance.md)
+    switch = (options.precondition and options.tangent_precond is None and d != 2
+              and options.adaptive_precond is not None)
     model = RelaxedModel(problem, precond,
                          None if options.adaptive_precond is None
                          else options.adaptive_precond * problem.gershgorin_max(),
-                         refactor_hvps=options.refactor_hvps)
+                         refactor_hvps=options.refactor_hvps, tangent=tangent, tangent_fallback_shift=delta,
+                         base_factory=None if tangent is None else
+                         (lambda: problem.factor_full(None, delta, name="preconditioner M_red(delta)")),
+                         tangent_factory=(lambda: TangentSystem.build(problem)) if switch else None,
+                         tangent_switch_hvps=TANGENT_SWITCH_HVPS if switch else None)
     model.certificate_tol = certificate_tol
     # The rank-r0 starting point is the rotations padded with r0 - d zero columns. Every step of the
     # trust region acts on the columns linearly or through d x d block products with Z_i, so the
@@ -343,6 +371,18 @@ def _solve(graph: PoseGraph, options: SolverOptions) -> SolveResult:
     gap = objective - state.f
     gap_status = OK
     if certified and cert is not None:
+        shift = model.adaptive_shift
+        if (cert.proven_shift is not None and shift is not None and 0.0 <= shift < cert.proven_shift
+                and n * d * cert.proven_shift + max(gap, 0.0) >= abs(objective)):
+            # The certificate's bound n d s is not below the objective at s = eta: a Cholesky of
+            # Q - Lambda + s I at the preconditioner's small shift proves the tighter bound (the
+            # M_red preconditioner's last factorization often does so on its own; the tangent one
+            # never does).
+            try:
+                problem.factor_full(state.lam, shift, name="certificate matrix Q - Lambda + s I")
+                cert.proven_shift = float(shift)
+            except NotPositiveDefinite:
+                pass
         if cert.proven_shift is not None:
             _warn_if_certificate_is_vacuous(graph, n * d * cert.proven_shift + max(gap, 0.0),
                                             objective, trans, certificate_tol, cert.proven_shift)

@@ -36,11 +36,12 @@ from __future__ import annotations
 
 import logging
 import math
+from collections.abc import Callable
 from dataclasses import dataclass
 
 import numpy as np
 
-from ..core.errors import NotPositiveDefinite, SolverError
+from ..core.errors import InternalError, NotPositiveDefinite, SolverError
 from ..linalg.cholesky import Factor
 from ..linalg.lanczos import largest_eigenpair
 from .problem import Problem
@@ -54,17 +55,40 @@ from .stiefel import (
     sym_block_diag_product,
     to_components,
 )
+from .tangent import TangentSystem
 from .trust_region import State
 
 log = logging.getLogger("posecrb")
+
+
+# The tangent preconditioner's factor is kept for the next iterate while truncated CG needs at most
+# this many products with it (benchmarks/solve_checkouts.py, docs/performance.md).
+TANGENT_REFACTOR_HVPS = 3
 
 
 class RelaxedModel:
     """f(Z) = tr(Z^T Q Z) on St(d, r)^n with gradient, Hessian and a Schur-complement preconditioner."""
 
     def __init__(self, problem: Problem, precond_factor: Factor | None = None, adaptive_shift: float | None = None,
-                 refactor_hvps: int | None = 30) -> None:
+                 refactor_hvps: int | None = 30, tangent: TangentSystem | None = None,
+                 tangent_fallback_shift: float = 0.0, base_factory: Callable[[], Factor] | None = None,
+                 tangent_factory: Callable[[], TangentSystem] | None = None,
+                 tangent_switch_hvps: int | None = None) -> None:
         self.problem = problem
+        # Builds ``tangent`` at the first level once a truncated-CG run needed more than
+        # ``tangent_switch_hvps`` products (where the tangent system's factorizations cost more than
+        # the products they save unless there are many).
+        self._tangent_factory = tangent_factory
+        self.tangent_switch_hvps = tangent_switch_hvps
+        # Builds the base factor on first use when ``precond_factor`` is None: with the tangent
+        # preconditioner a graph certified at the first level never needs it.
+        self._base_factory = base_factory
+        # At width d (the first staircase level): the tangent space's exact inverse Hessian
+        # (posecrb.solver.tangent), refactored at every accepted iterate; None: not used.
+        self.tangent = tangent
+        self.tangent_fallback_shift = tangent_fallback_shift
+        self._tangent_factor: tuple[np.ndarray, Factor] | None = None   # (Z it applies at, factor)
+        self._tangent_exact = False     # that factor is K with Lambda (not the Lambda-free fallback)
         self.base_factor = precond_factor
         self.precond_factor = precond_factor
         self.adaptive_shift = adaptive_shift
@@ -115,7 +139,17 @@ class RelaxedModel:
         poses: one failed attempt of 1.5-2 s fewer; of 30,276 poses: 210 -> 181 HVPs; the same optima,
         benchmarks/solve_checkouts.py, docs/performance.md).
         """
-        if self.adaptive_shift is None or self.base_factor is None:
+        if self.adaptive_shift is None or (self.base_factor is None and self._base_factory is None):
+            return
+        at_first_level = state.Z.shape[2] == self.problem.d
+        if (self.tangent is None and self._tangent_factory is not None and at_first_level
+                and last_hvps is not None and self.tangent_switch_hvps is not None
+                and last_hvps > self.tangent_switch_hvps):
+            log.debug("preconditioner: %d products in the last truncated CG, switching to the tangent space's",
+                      last_hvps)
+            self.tangent, self._tangent_factory = self._tangent_factory(), None
+        if self.tangent is not None and at_first_level:
+            self._prepare_tangent(state, last_hvps)
             return
         if self._factored_at is state.Z:
             return
@@ -142,8 +176,51 @@ class RelaxedModel:
             self.factor_shift = shift
             log.debug("preconditioner: (Q - Lambda + %.3e I)^-1", shift)
             return
-        self.precond_factor = self.base_factor
+        self.precond_factor = self._base()
         log.debug("preconditioner: Q - Lambda + s I not PD, using (Q + delta I)^-1")
+
+    def _prepare_tangent(self, state: State, last_hvps: int | None = None) -> None:
+        """Factor K (posecrb.solver.tangent) at ``state``'s point, once per point: at the adaptive
+        shift s, and where S + s I is not positive definite on the tangent space (away from a
+        minimiser) without Lambda at the base preconditioner's shift delta, which is (Q + delta I)
+        restricted to the tangent space; where even that fails the base factor preconditions."""
+        if self._tangent_factor is not None and self._tangent_factor[0] is state.Z:
+            return
+        if (self._tangent_factor is not None and last_hvps is not None
+                and last_hvps <= TANGENT_REFACTOR_HVPS):
+            # The factor of the last point still inverts the Hessian nearly: keep it (E is
+            # rebuilt at the new point, so the preconditioner stays on its tangent space).
+            self._tangent_factor = (state.Z, self._tangent_factor[1])
+            return
+        if self.tangent is None or self.adaptive_shift is None:
+            raise InternalError("tangent preconditioner not set up")
+        attempts = ((state.lam, self.adaptive_shift, "(S + s I)"), (None, self.tangent_fallback_shift, "(Q + delta I)"))
+        for lam, shift, label in attempts:
+            self.factorizations += 1
+            try:
+                factor = self.tangent.factor(state.Z, lam, shift, name="tangent preconditioner K")
+            except NotPositiveDefinite:
+                continue
+            self._tangent_factor = (state.Z, factor)
+            self._tangent_exact = lam is not None
+            log.debug("preconditioner: the tangent space's inverse of %s", label)
+            return
+        self._tangent_factor = None
+        self.precond_factor = self._base()
+        log.debug("preconditioner: K not positive definite, using (Q + delta I)^-1")
+
+    def exact_preconditioner(self, state: State) -> bool:
+        """Whether the preconditioner at ``state`` is the inverse Hessian on the tangent space: K with
+        Lambda, factored at this point or kept from the last one because truncated CG needed at most
+        ``TANGENT_REFACTOR_HVPS`` products with it (trust_region's ``exact_decrement_tol``)."""
+        return self._tangent_factor is not None and self._tangent_factor[0] is state.Z and self._tangent_exact
+
+    def _base(self) -> Factor | None:
+        """The base factor (Q + delta I)^{-1}, built by ``base_factory`` on first use."""
+        if self.base_factor is None and self._base_factory is not None:
+            self.base_factor = self._base_factory()
+            self._base_factory = None
+        return self.base_factor
 
     def certificate_factor(self, state: State, tol: float) -> tuple[Factor, float] | None:
         """(factor, s) when the preconditioner was factored at ``state``'s point as
@@ -180,7 +257,9 @@ class RelaxedModel:
         return hessian_blocks(Zt, lamt, V, QV)
 
     def precondition(self, state: State, R: np.ndarray) -> np.ndarray:
-        if self.precond_factor is None:
+        tangent = (self.tangent is not None and self._tangent_factor is not None
+                   and self._tangent_factor[0] is state.Z)
+        if self.precond_factor is None and not tangent:
             return R
         n, d, r = R.shape
         # tCG preconditions many vectors at one point: decompose its Gram matrix once.
@@ -188,6 +267,11 @@ class RelaxedModel:
             self._gram = (state.Z, gram_eigh(state.Z))
         gram = self._gram[1]
         R = remove_vertical(state.Z, R, gram)
+        if tangent and self.tangent is not None and self._tangent_factor is not None:
+            # E maps into the tangent space: no projection needed, only the gauge removed
+            return remove_vertical(state.Z, self.tangent.apply(self._tangent_factor[1], state.Z, R), gram)
+        if self.precond_factor is None:
+            raise InternalError("preconditioner factor missing")
         W = self.problem.schur_solve(self.precond_factor, R.reshape(n * d, r)).reshape(n, d, r)
         return remove_vertical(state.Z, project(state.Z, W, self._components(state)[0], scale=0.5), gram)
 
