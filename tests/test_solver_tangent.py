@@ -235,3 +235,24 @@ def test_a_vacuous_certificate_at_eta_is_proven_again_at_the_small_shift(caplog)
     assert res.certified
     assert res.objective < graph.n * 2 * 1e-3          # the bound at eta would be vacuous
     assert not [r for r in caplog.records if "not shown to be optimal" in r.getMessage()]
+
+
+def test_the_second_certificate_counts_in_the_verify_phase_and_the_total(monkeypatch):
+    """The re-proof at the small shift is verification work: its time is in ``times["verify"]``
+    and in the total, never outside every phase."""
+    import time
+
+    rng = np.random.default_rng(8)
+    graph = random_pose_graph(60, 2, rng, loop_closures=40, rot_noise=1e-4, trans_noise=1e-4)[0]
+    real = Problem.factor_full
+
+    def slow(self, lam, shift, name):
+        if name == "certificate matrix Q - Lambda + s I":
+            time.sleep(0.3)
+        return real(self, lam, shift, name)
+
+    monkeypatch.setattr(Problem, "factor_full", slow)
+    res = solve(graph)
+    assert res.certified
+    assert res.times["verify"] >= 0.3
+    assert res.times["total"] >= sum(res.times[k] for k in ("init", "optimize", "verify", "round"))

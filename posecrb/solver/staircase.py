@@ -257,9 +257,9 @@ class RelaxedModel:
         return hessian_blocks(Zt, lamt, V, QV)
 
     def precondition(self, state: State, R: np.ndarray) -> np.ndarray:
-        tangent = (self.tangent is not None and self._tangent_factor is not None
-                   and self._tangent_factor[0] is state.Z)
-        if self.precond_factor is None and not tangent:
+        tangent_factor = (self._tangent_factor[1] if self._tangent_factor is not None
+                          and self._tangent_factor[0] is state.Z else None)
+        if self.precond_factor is None and tangent_factor is None:
             return R
         n, d, r = R.shape
         # tCG preconditions many vectors at one point: decompose its Gram matrix once.
@@ -267,9 +267,9 @@ class RelaxedModel:
             self._gram = (state.Z, gram_eigh(state.Z))
         gram = self._gram[1]
         R = remove_vertical(state.Z, R, gram)
-        if tangent and self.tangent is not None and self._tangent_factor is not None:
+        if tangent_factor is not None and self.tangent is not None:
             # E maps into the tangent space: no projection needed, only the gauge removed
-            return remove_vertical(state.Z, self.tangent.apply(self._tangent_factor[1], state.Z, R), gram)
+            return remove_vertical(state.Z, self.tangent.apply(tangent_factor, state.Z, R), gram)
         if self.precond_factor is None:
             raise InternalError("preconditioner factor missing")
         W = self.problem.schur_solve(self.precond_factor, R.reshape(n * d, r)).reshape(n, d, r)

@@ -50,7 +50,6 @@ def so_basis(d: int) -> np.ndarray:
 class TangentSystem:
     """The pattern, symbolic analysis and value map of K (module docstring) for one problem."""
 
-    problem: Problem
     basis: np.ndarray              # (k, d, d)
     symbolic: SymbolicCholesky
     pattern: sp.csc_matrix
@@ -115,7 +114,7 @@ class TangentSystem:
         pose_of_row = np.concatenate([np.repeat(np.arange(1, n), d), np.repeat(np.arange(n), k)])
         symbolic = solver_symbolic(pattern, d, n, mode=problem.factor_mode(d + k), pose_of_row=pose_of_row,
                                    pose_order=problem.pose_order())
-        return cls(problem=problem, basis=G, symbolic=symbolic, pattern=pattern, first=first,
+        return cls(basis=G, symbolic=symbolic, pattern=pattern, first=first,
                    lt_values=lt_values, lt_pos=pos[:nl], b_pos=pos[nl:nl + nbk].reshape(b_r.shape),
                    bt_pos=pos[nl + nbk:nl + 2 * nbk].reshape(b_r.shape), v_blocks=v_blocks, v_pose=v_pose,
                    d_pos=pos[nl + 2 * nbk:].reshape(d_r.shape), c_blocks=cb.data.copy(), c_row=c_row, c_col=c_col,
