@@ -12,6 +12,8 @@ baseline variant. Variants (keyword arguments of posecrb.solver.solve):
                 (the default refactors only after a truncated CG run of more than 30 products)
   refactor>K    refactor_hvps=K
   theta=1       truncated CG stops at ||r|| <= ||r0|| min(kappa, ||r0||^1) (Manopt; default exponent 0.5)
+  no-split      split_precond=False: after an escape from the first level, M_red's preconditioner
+                instead of the split one (K's factor in-plane, M_red's on the new column)
   r0=5          start the staircase at rank 5 (SE-Sync's default) instead of d + 1
   no-precond    precondition=False (the unpreconditioned trust region, for scale)
   no-cert-stop  certified_rel_decrease=None: never stop a level early when the preconditioner's
@@ -51,6 +53,7 @@ VARIANTS = {
     "r0=5": {"r0": 5},
     "theta=1": {"theta": 1.0},
     "no-precond": {"precondition": False},
+    "no-split": {"split_precond": False},
     "no-cert-stop": {"certified_rel_decrease": None},
     "dec=1e-9": {"decrement_tol": 1e-9},
     "dec=1e-10": {"decrement_tol": 1e-10},

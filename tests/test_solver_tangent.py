@@ -8,7 +8,7 @@ from posecrb.core.errors import NotPositiveDefinite
 from posecrb.solver.problem import Problem
 from posecrb.solver.solve import SolverOptions, solve
 from posecrb.solver.staircase import RelaxedModel
-from posecrb.solver.stiefel import gram_eigh, remove_vertical
+from posecrb.solver.stiefel import gram_eigh, lift, remove_vertical
 from posecrb.solver.tangent import TangentSystem, so_basis
 from posecrb.solver.trust_region import TROptions
 
@@ -256,3 +256,176 @@ def test_the_second_certificate_counts_in_the_verify_phase_and_the_total(monkeyp
     assert res.certified
     assert res.times["verify"] >= 0.3
     assert res.times["total"] >= sum(res.times[k] for k in ("init", "optimize", "verify", "round"))
+
+
+# ---- the split preconditioner after the escape from the first level --------------------------
+
+def _escaping_grid():
+    """A noisy 2D grid whose first level ends at a saddle: one escape to width 3, then certified."""
+    from posecrb.sim.generators import grid
+
+    sigma = 0.4
+    return grid(2, 32, tau=1.0 / sigma ** 2, kappa=1.0 / (2.0 * sigma ** 2), noise=True,
+                rng=np.random.default_rng(3))
+
+
+@pytest.mark.parametrize("dim", [2, 3])
+def test_gauge_modes_are_the_rotation_of_every_pose_at_once(dim):
+    rng = np.random.default_rng(20 + dim)
+    graph, rot = random_pose_graph(12, dim, rng)[:2]
+    problem = Problem.from_graph(graph)
+    system = TangentSystem.build(problem)
+    Z = np.ascontiguousarray(np.swapaxes(rot, 1, 2))
+    U = system.gauge_modes(Z)
+    k = so_basis(dim).shape[0]
+    assert U.shape == (problem.n * k, k)
+    assert np.allclose(U.T @ U, np.eye(k), atol=MARGIN * problem.n * EPS)
+    # E u is Z_i H with one H for every pose: vertical, removed whole by remove_vertical
+    E = _dense_E(Z)
+    for u in U.T:
+        v = (E @ u).reshape(Z.shape)
+        assert np.abs(remove_vertical(Z, v)).max() <= MARGIN * problem.n * EPS * np.abs(v).max()
+    if dim == 2:
+        # in 2D every Omega_i is the same generator: the constant vector
+        assert abs(abs(U[:, 0].sum()) - np.sqrt(problem.n)) <= MARGIN * problem.n * EPS
+
+
+def test_apply_with_the_gauge_replaced_is_the_dense_reference():
+    rng = np.random.default_rng(31)
+    graph = random_pose_graph(14, 3, rng, loop_closures=8, rot_noise=0.05, trans_noise=0.05)[0]
+    problem = Problem.from_graph(graph)
+    system = TangentSystem.build(problem)
+    model = RelaxedModel(problem)
+    Z = _optimum(graph)
+    state = model.evaluate(Z)
+    shift = 1e-3 * problem.gershgorin_max()
+    E = _dense_E(Z)
+    M = 2.0 * E.T @ (_dense_S(problem, state.lam, 3) + shift * np.eye(E.shape[0])) @ E
+    U = system.gauge_modes(Z)
+    scale = 7.0
+    Pi = np.eye(M.shape[0]) - U @ U.T
+    R = rng.standard_normal(Z.shape)
+    reference = (E @ ((Pi @ np.linalg.solve(M, Pi @ (E.T @ R.ravel()))) + U @ (U.T @ (E.T @ R.ravel())) / scale))
+    got = system.apply(system.factor(Z, state.lam, shift, name="K"), Z, R, gauge=(U, scale))
+    tol = MARGIN * M.shape[0] * spd_condition(M) * EPS * np.abs(reference).max()
+    assert np.abs(got - reference.reshape(Z.shape)).max() <= tol
+
+
+@pytest.mark.parametrize("dim", [2, 3])
+def test_split_preconditioner_inverts_the_hessian_at_the_padded_point(dim):
+    """At [Z1 | 0], Z1 a certified first-level optimum, the split preconditioner (K's factor at Z1
+    for the in-plane directions, (Q - Lambda + s I)^{-1} for the new column's) undoes the model's
+    own Hessian-vector product on every horizontal tangent vector, up to the shift's effect."""
+    rng = np.random.default_rng(40 + dim)
+    graph = random_pose_graph(16, dim, rng, loop_closures=10, rot_noise=0.05, trans_noise=0.05)[0]
+    problem = Problem.from_graph(graph)
+    shift = 1e-10 * problem.gershgorin_max()
+    model = RelaxedModel(problem, problem.factor_full(None, 1.0, name="base"), shift,
+                         tangent=TangentSystem.build(problem), tangent_fallback_shift=1.0)
+    Z1 = _optimum(graph)
+    model.prepare(model.evaluate(Z1))                    # K with Lambda at the first level's point
+    state = model.evaluate(lift(Z1, dim + 1))
+    model.precond_factor = problem.factor_full(state.lam, shift, name="M_red(Lambda, s)")
+    v = remove_vertical(state.Z, model.project(state, rng.standard_normal(state.Z.shape)))
+    calls = []
+    real = model._split_apply
+    model._split_apply = lambda *a: calls.append(1) or real(*a)
+    back = model.precondition(state, model.hvp(state, v))
+    assert calls
+    # the in-plane block's eigenvalues past the gauge's k zeros, and S's past its d zeros (the
+    # new column's vertical tilts), bound the shift's effect
+    E = _dense_E(Z1)
+    H = 2.0 * E.T @ _dense_S(problem, state.lam, dim) @ E
+    ev_in = np.linalg.eigvalsh((H + H.T) / 2)
+    S = _dense_S(problem, state.lam, 1)
+    ev_out = np.linalg.eigvalsh((S + S.T) / 2)
+    k = so_basis(dim).shape[0]
+    mu = min(ev_in[k], 2.0 * ev_out[dim])
+    assert mu > 0
+    top = max(ev_in[-1], 2.0 * ev_out[-1])
+    tol = 2.0 * shift / mu + MARGIN * max(H.shape[0], S.shape[0]) * (top / mu) * EPS
+    assert np.abs(back - v).max() <= tol * np.abs(v).max() * MARGIN
+
+
+def test_split_preconditioner_after_the_escape_reaches_the_same_certified_optimum(monkeypatch):
+    graph = _escaping_grid()
+    schur = solve(graph, tangent_precond=False)
+    calls = record_factor_full(monkeypatch)
+    applied = []
+    real = RelaxedModel._split_apply
+
+    def spy(self, *args):
+        applied.append(1)
+        return real(self, *args)
+
+    monkeypatch.setattr(RelaxedModel, "_split_apply", spy)
+    split = solve(graph)
+    assert schur.certified and split.certified and split.rank == schur.rank == 3
+    assert applied
+    # the saddle's shifted factor preconditions the new column: no factorization between the
+    # shifted certificate at the saddle and the final certificate
+    names = [name for name, _ in calls]
+    assert "preconditioner M_red(Lambda, s)" not in names
+    assert names[-1].startswith("certificate matrix")
+    # both stop at a Newton decrement of decrement_tol |f| (TROptions), past the quadratic phase
+    tol = 100 * TROptions().decrement_tol
+    assert split.relaxation_value == pytest.approx(schur.relaxation_value, rel=tol)
+    assert split.objective == pytest.approx(schur.objective, rel=tol)
+    # the option turns it off: M_red's preconditioner after the escape, refactored at the escape point
+    applied.clear()
+    calls.clear()
+    off = solve(graph, split_precond=False)
+    assert not applied and off.certified
+    assert "preconditioner M_red(Lambda, s)" in [name for name, _ in calls]
+    assert off.relaxation_value == pytest.approx(split.relaxation_value, rel=tol)
+
+
+def test_split_preconditioner_is_not_used_once_a_block_turns_to_the_new_column():
+    rng = np.random.default_rng(50)
+    graph = random_pose_graph(12, 2, rng, loop_closures=8, rot_noise=0.05, trans_noise=0.05)[0]
+    problem = Problem.from_graph(graph)
+    shift = 1e-10 * problem.gershgorin_max()
+    model = RelaxedModel(problem, problem.factor_full(None, 1.0, name="base"), shift,
+                         tangent=TangentSystem.build(problem), tangent_fallback_shift=1.0)
+    Z1 = _optimum(graph)
+    model.prepare(model.evaluate(Z1))
+    Z = lift(Z1, 3)
+    # pose 0 rotated in the (first, new) column plane by 70 degrees: its rows lean on the new column
+    c, s = np.cos(np.radians(70)), np.sin(np.radians(70))
+    Z[0] = Z[0] @ np.array([[c, 0, -s], [0, 1, 0], [s, 0, c]])
+    state = model.evaluate(Z)
+    model.precond_factor = problem.factor_full(None, 1.0, name="M_red")
+    assert model._split_parts(state, gram_eigh(Z)) is None
+    assert model._split_parts(model.evaluate(lift(Z1, 3)), gram_eigh(lift(Z1, 3))) is not None
+
+
+def test_the_saddle_factor_is_replaced_once_the_split_stops_applying(monkeypatch):
+    """The saddle's factor serves the split preconditioner's new column only: where a block has
+    turned towards the new column and the split no longer applies, prepare() refactors M_red's
+    preconditioner at the point."""
+    rng = np.random.default_rng(60)
+    graph = random_pose_graph(12, 2, rng, loop_closures=8, rot_noise=0.05, trans_noise=0.05)[0]
+    problem = Problem.from_graph(graph)
+    shift = 1e-10 * problem.gershgorin_max()
+    model = RelaxedModel(problem, problem.factor_full(None, 1.0, name="base"), shift,
+                         tangent=TangentSystem.build(problem), tangent_fallback_shift=1.0)
+    Z1 = _optimum(graph)
+    first = model.evaluate(Z1)
+    model.prepare(first)
+    saddle = problem.factor_full(first.lam, 0.5, name="shifted certificate matrix")
+    model.saddle_factor = (saddle, 0.5)
+    model.lambda_hint, model.refactor_next = -0.1, True
+    calls = record_factor_full(monkeypatch)
+    padded = model.evaluate(lift(Z1, 3))
+    model.prepare(padded)
+    assert calls == [] and model.precond_factor is saddle
+    assert model._split_parts(padded, gram_eigh(padded.Z)) is not None
+    # pose 0 rotated by 80 degrees in the plane of its first and the new column
+    Z = lift(Z1, 3)
+    c, s = np.cos(np.radians(80)), np.sin(np.radians(80))
+    Z[0] = Z[0] @ np.array([[c, 0, -s], [0, 1, 0], [s, 0, c]])
+    far = model.evaluate(Z)
+    model.prepare(far, last_hvps=1)
+    assert [name for name, _ in calls] and calls[0][0] == "preconditioner M_red(Lambda, s)"
+    assert model.precond_factor is not saddle
+    assert model._split_parts(far, gram_eigh(far.Z)) is None

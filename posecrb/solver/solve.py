@@ -179,7 +179,10 @@ class SolverOptions:
     (True: from the start; False: never; None, the default: from the start on 2D graphs, where its
     sparse system has as many rows per pose as M_red, and on 3D graphs, where it has half as many
     again, only after a truncated-CG run of more than ``TANGENT_SWITCH_HVPS`` products,
-    docs/performance.md); ``trust_region``: other :class:`TROptions` fields (e.g. ``theta``,
+    docs/performance.md); ``split_precond``: after an escape from the first level, precondition
+    with that level's factor of K on the in-plane directions and (Q - Lambda + sigma I)^{-1} on the
+    new column's (the inverse Hessian at the padded point; False: ``Proj (Q - Lambda + s I)^{-1}
+    Proj`` there too); ``trust_region``: other :class:`TROptions` fields (e.g. ``theta``,
     ``decrement_tol``, ``exact_decrement_tol``).
     """
 
@@ -196,6 +199,7 @@ class SolverOptions:
     adaptive_precond: float | None = 1e-10
     refactor_hvps: int | None = 30
     tangent_precond: bool | None = None
+    split_precond: bool = True
     trust_region: Mapping[str, Any] = field(default_factory=dict)
 
     def __post_init__(self) -> None:
@@ -291,7 +295,8 @@ def _solve(graph: PoseGraph, options: SolverOptions) -> SolveResult:
                          refactor_hvps=options.refactor_hvps, tangent=tangent, tangent_fallback_shift=delta,
                          base_factory=None if tangent is None else (lambda: _base_preconditioner(problem, delta)),
                          tangent_factory=(lambda: TangentSystem.build(problem)) if switch else None,
-                         tangent_switch_hvps=TANGENT_SWITCH_HVPS if switch else None)
+                         tangent_switch_hvps=TANGENT_SWITCH_HVPS if switch else None,
+                         split_escape=options.split_precond)
     model.certificate_tol = certificate_tol
     # The rank-r0 starting point is the rotations padded with r0 - d zero columns. Every step of the
     # trust region acts on the columns linearly or through d x d block products with Z_i, so the
@@ -346,6 +351,7 @@ def _solve(graph: PoseGraph, options: SolverOptions) -> SolveResult:
         # past the negative curvature just found (RelaxedModel.prepare).
         model.lambda_hint = min(cert.lambda_min, 0.0)
         model.refactor_next = True
+        model.saddle_factor = cert.shifted_factor
         t0 = time.perf_counter()
         state = escape(model, state, cert)
         times["optimize"] += time.perf_counter() - t0

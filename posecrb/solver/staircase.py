@@ -76,7 +76,7 @@ class RelaxedModel:
                  refactor_hvps: int | None = 30, tangent: TangentSystem | None = None,
                  tangent_fallback_shift: float = 0.0, base_factory: Callable[[], Factor] | None = None,
                  tangent_factory: Callable[[], TangentSystem] | None = None,
-                 tangent_switch_hvps: int | None = None) -> None:
+                 tangent_switch_hvps: int | None = None, split_escape: bool = True) -> None:
         self.problem = problem
         # Builds ``tangent`` at the first level once a truncated-CG run needed more than
         # ``tangent_switch_hvps`` products (where the tangent system's factorizations cost more than
@@ -97,11 +97,19 @@ class RelaxedModel:
         self.adaptive_shift = adaptive_shift
         self.refactor_hvps = refactor_hvps
         self.lambda_hint = 0.0      # lambda_min(Q - Lambda) at the last saddle (<= 0), set by the staircase
+        # The certificate's factor of Q - Lambda + sigma I at the saddle just left (set by the
+        # staircase), reused after the escape where the split preconditioner applies.
+        self.saddle_factor: tuple[Factor, float] | None = None
+        self._saddle_factor_in_use = False
         self.refactor_next = False  # refactor at the next prepare() whatever the HVP count (after an escape)
         self.hvps = 0
+        # At width d + 1 after an escape from the first level: the split preconditioner
+        # (``_split_parts``), cached per point.
+        self.split_escape = split_escape
+        self._split: tuple[np.ndarray, _SplitParts | None] | None = None
         self.factorizations = 0
         self._factored_at: np.ndarray | None = None     # Z of the iterate the adaptive factor was built at
-        self.factor_shift: float | None = None          # its shift s (None: not PD there, base factor in use)
+        self.factor_shift: float | None = None          # its shift s (None: not a factor at that point's Lambda)
         self.certificate_tol: float | None = None       # eta, when the trust region may stop once certified
         self._gram: tuple[np.ndarray, tuple[np.ndarray, np.ndarray]] | None = None   # (Z, gram_eigh(Z))
         self._comp: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None   # (Z, Z, Lambda) component-major
@@ -154,12 +162,32 @@ class RelaxedModel:
         if self.tangent is not None and at_first_level:
             self._prepare_tangent(state, last_hvps)
             return
+        if self._saddle_factor_in_use and self._split_frame(state, self._gram_of(state)) is None:
+            # The split preconditioner no longer applies, and the saddle's factor is a poor
+            # (Q - Lambda + s I)^{-1} for M_red's preconditioner here: refactor past the saddle.
+            self._saddle_factor_in_use = False
+            self.refactor_next = True
+            self._factored_at = None
         if self._factored_at is state.Z:
             return
         if (self.refactor_hvps is not None and not self.refactor_next
                 and (last_hvps is None or last_hvps <= self.refactor_hvps)):
             return
         s = self.adaptive_shift
+        if self.refactor_next and self.saddle_factor is not None:
+            fac, sigma = self.saddle_factor
+            self.saddle_factor = None
+            if self._split_possible(state) and sigma <= s + 20.0 * abs(self.lambda_hint):
+                # The split preconditioner inverts Q - Lambda only on the new column's directions,
+                # where the saddle's factor (its shift sigma > |lambda_min| past the negative
+                # curvature) serves as well as a new one: one factorization fewer (docs/performance.md).
+                self.refactor_next = False
+                self._factored_at = state.Z
+                self.factor_shift = None    # a factor at the saddle, not at this point: never a certificate
+                self.precond_factor = fac
+                self._saddle_factor_in_use = True
+                log.debug("preconditioner: the saddle's (Q - Lambda + %.3e I)^-1", sigma)
+                return
         shifts = [s]
         if self.lambda_hint < 0:
             # Right after an escape the iterate is still next to the saddle, where S + s I is
@@ -167,6 +195,7 @@ class RelaxedModel:
             past_saddle = [s + 2.0 * abs(self.lambda_hint), s + 20.0 * abs(self.lambda_hint)]
             shifts = ([s] if converging and not self.refactor_next else []) + past_saddle
         self.refactor_next = False
+        self._saddle_factor_in_use = False
         self._factored_at = state.Z
         self.factor_shift = None
         for shift in shifts:
@@ -265,18 +294,85 @@ class RelaxedModel:
         if self.precond_factor is None and tangent_factor is None:
             return R
         n, d, r = R.shape
-        # tCG preconditions many vectors at one point: decompose its Gram matrix once.
-        if self._gram is None or self._gram[0] is not state.Z:
-            self._gram = (state.Z, gram_eigh(state.Z))
-        gram = self._gram[1]
+        gram = self._gram_of(state)
         R = remove_vertical(state.Z, R, gram)
         if tangent_factor is not None and self.tangent is not None:
             # E maps into the tangent space: no projection needed, only the gauge removed
             return remove_vertical(state.Z, self.tangent.apply(tangent_factor, state.Z, R), gram)
         if self.precond_factor is None:
             raise InternalError("preconditioner factor missing")
+        parts = self._split_parts(state, gram)
+        if parts is not None:
+            return remove_vertical(state.Z, self._split_apply(state, R, parts), gram)
         W = self.problem.schur_solve(self.precond_factor, R.reshape(n * d, r)).reshape(n, d, r)
         return remove_vertical(state.Z, project(state.Z, W, self._components(state)[0], scale=0.5), gram)
+
+    def _gram_of(self, state: State) -> tuple[np.ndarray, np.ndarray]:
+        """gram_eigh of ``state``'s point, cached: tCG preconditions many vectors at one point."""
+        if self._gram is None or self._gram[0] is not state.Z:
+            self._gram = (state.Z, gram_eigh(state.Z))
+        return self._gram[1]
+
+    def _split_possible(self, state: State) -> bool:
+        """Whether ``state`` is at width d + 1 with the first level's factor of K with Lambda at hand."""
+        return (self.split_escape and state.Z.shape[2] == self.problem.d + 1 and self.tangent is not None
+                and self._tangent_factor is not None and self._tangent_exact)
+
+    def _split_parts(self, state: State, gram: tuple[np.ndarray, np.ndarray]) -> _SplitParts | None:
+        """The split preconditioner's data at ``state``'s point, or None where it does not apply.
+
+        After the escape from the first level the point is ``[Z1 | 0]`` plus a small new column.
+        At ``[Z1 | 0]`` exactly, every tangent vector is ``Omega_i Z_i + b_i w^T`` (w the new
+        column's unit vector), the two kinds are orthogonal and the Hessian does not couple them:
+        on the first it is the first level's, whose inverse the last factor of K is; on the
+        second it is ``2 (Q - Lambda)`` acting on b. So ``P = E (2 K_schur)^{-1} E^T +
+        N (2 (Q - Lambda + sigma I))^{-1} N^T`` is the inverse Hessian there and stays close to it
+        while the new column is small (docs/design.md#solver). w is the Gram matrix's eigenvector of
+        the smallest eigenvalue, projected off each block's rows (N). Not used (None) where
+        :meth:`_split_frame` says so or where the in-plane scale is not positive.
+        """
+        if self._split is not None and self._split[0] is state.Z:
+            return self._split[1]
+        parts = None
+        frame = self._split_frame(state, gram) if self.precond_factor is not None else None
+        if frame is not None and self.tangent is not None and self._tangent_factor is not None:
+            w, Zw = frame
+            scale = self.tangent.diagonal_mean(state.Z, state.lam)
+            if scale > 0:
+                gauge = self.tangent.gauge_modes(self._tangent_factor[0][:, :, :self.problem.d])
+                parts = _SplitParts(normal=w[None] - np.einsum("ndr,nds->nrs", state.Z, Zw), gauge=gauge,
+                                    gauge_scale=scale)
+        self._split = (state.Z, parts)
+        return parts
+
+    def _split_frame(self, state: State, gram: tuple[np.ndarray, np.ndarray]) -> tuple[np.ndarray, np.ndarray] | None:
+        """(w, Z w) for the split preconditioner at ``state``, or None where it does not apply: not at
+        width d + 1 after the first level, or a block turned more than 60 degrees towards w."""
+        if not self._split_possible(state):
+            return None
+        w = gram[1][:, :1]                          # (r, 1): the new column's direction
+        Zw = state.Z @ w                            # (n, d, 1)
+        if float(np.max(np.einsum("nds,nds->n", Zw, Zw))) > 0.75:
+            return None
+        return w, Zw
+
+    def _split_apply(self, state: State, R: np.ndarray, parts: _SplitParts) -> np.ndarray:
+        """``P R`` of :meth:`_split_parts`: the in-plane part through K's factor, the new column's
+        through M_red's factor with one right-hand side."""
+        assert self.tangent is not None and self._tangent_factor is not None and self.precond_factor is not None
+        Z = state.Z
+        n, d, _ = Z.shape
+        inplane = self.tangent.apply(self._tangent_factor[1], Z, R, gauge=(parts.gauge, parts.gauge_scale))
+        b = np.einsum("ndr,nr->nd", R, parts.normal[:, :, 0])
+        x = self.problem.schur_solve(self.precond_factor, b.reshape(n * d, 1)).reshape(n, d)
+        return inplane + 0.5 * x[:, :, None] * parts.normal[:, None, :, 0]
+
+
+@dataclass(frozen=True)
+class _SplitParts:
+    normal: np.ndarray        # (n, r, 1) the new column's direction w projected off each block's rows
+    gauge: np.ndarray         # (n k, k) K's near-null coordinates (TangentSystem.gauge_modes)
+    gauge_scale: float        # the Hessian's scale put on them (TangentSystem.diagonal_mean)
 
 
 @dataclass
@@ -289,6 +385,7 @@ class Certificate:
     # When certified: the shift s <= tol of the successful Cholesky of Q - Lambda + s I, which
     # proves lambda_min > -s (lambda_min itself is a Lanczos estimate).
     proven_shift: float | None = None
+    shifted_factor: tuple[Factor, float] | None = None
 
 
 def _largest_inverse_eig(problem: Problem, factor: Factor, dn: int, rng: np.random.Generator, maxiter: int,
@@ -361,7 +458,8 @@ def verify(problem: Problem, state: State, tol: float, rng: np.random.Generator,
     rq = float(v @ Sv)
     lm = min(lm, rq) if rq < 0 else lm
     certified = lm >= -tol
-    return Certificate(certified, lm, None if certified else v.reshape(n, d), facs, solves)
+    return Certificate(certified, lm, None if certified else v.reshape(n, d), facs, solves,
+                       shifted_factor=(fac, float(sigma)))
 
 
 def escape(model: RelaxedModel, state: State, cert: Certificate) -> State:

@@ -150,10 +150,39 @@ class TangentSystem:
         with factorization_threads():
             return self.symbolic.factor(self.matrix(Z, lam, shift), name=name)
 
-    def apply(self, factor: Factor, Z: np.ndarray, R: np.ndarray) -> np.ndarray:
-        """``E (2 E^T (S + s I) E)^{-1} E^T R`` for R (n, d, d) through a factor of K."""
+    def apply(self, factor: Factor, Z: np.ndarray, R: np.ndarray,
+              gauge: tuple[np.ndarray, float] | None = None) -> np.ndarray:
+        """``E (2 E^T (S + s I) E)^{-1} E^T R`` for R (n, d, r) through a factor of K, with E at Z (n, d, r).
+
+        ``gauge = (U, c)``: U (n k, k) orthonormal coordinates of the directions the factor's
+        Schur complement holds only through its shift (:meth:`gauge_modes`); on them the inverse is
+        replaced by ``1 / c``, on their complement it is projected (``Pi A^{-1} Pi``).
+        """
         GZ = self.tangent_blocks(Z)
         n, k = Z.shape[0], self.basis.shape[0]
         rhs = np.einsum("naxc,nxc->na", GZ, R).reshape(n * k, 1)
-        theta = solve_tail(factor, self.first, rhs).reshape(n, k)
-        return 0.5 * np.einsum("na,naxc->nxc", theta, GZ)
+        if gauge is None:
+            theta = 0.5 * solve_tail(factor, self.first, rhs)
+        else:
+            U, c = gauge
+            along = U @ (U.T @ rhs)
+            theta = solve_tail(factor, self.first, rhs - along)
+            theta -= U @ (U.T @ theta)
+            theta = 0.5 * theta + along / c
+        return np.einsum("na,naxc->nxc", theta.reshape(n, k), GZ)
+
+    def gauge_modes(self, Z: np.ndarray) -> np.ndarray:
+        """(n k, k) orthonormal coordinates of the directions ``Z_i H`` (H in so(d)), i.e.
+        ``Omega_i = Z_i H Z_i^T``, at a first-level point Z (n, d, d): the rotation of every pose at
+        once, along which ``S Z = 0`` leaves K's Schur complement only its shift 2 s."""
+        n, k = Z.shape[0], self.basis.shape[0]
+        omega = np.einsum("nxy,byz,nwz->bnxw", Z, self.basis, Z)
+        coords = 0.5 * np.einsum("axw,bnxw->nab", self.basis, omega).reshape(n * k, k)
+        return np.linalg.qr(coords)[0]
+
+    def diagonal_mean(self, Z: np.ndarray, lam: np.ndarray) -> float:
+        """Mean diagonal of ``2 E^T (C - Lambda) E`` at Z (n, d, r): the scale of the Hessian on the
+        tangent coordinates before the translations are eliminated."""
+        GZ = self.tangent_blocks(Z)
+        cl = self.c_blocks[self.diag_block] - lam
+        return 2.0 * float(np.mean(np.einsum("naxc,nxy,nayc->na", GZ, cl, GZ)))
