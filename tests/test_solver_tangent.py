@@ -51,6 +51,20 @@ def _optimum(graph) -> np.ndarray:
     return np.ascontiguousarray(np.swapaxes(res.rot, 1, 2))
 
 
+def _model_at_optimum(rng: np.random.Generator, poses: int, dim: int, loop_closures: int):
+    """(problem, model, state, s): a random graph's problem, a model with the tangent preconditioner
+    at shift s = 1e-10 of the Gershgorin bound, and its state at the certified first-level optimum,
+    where the model's K with Lambda is factored."""
+    graph = random_pose_graph(poses, dim, rng, loop_closures=loop_closures, rot_noise=0.05, trans_noise=0.05)[0]
+    problem = Problem.from_graph(graph)
+    shift = 1e-10 * problem.gershgorin_max()
+    model = RelaxedModel(problem, problem.factor_full(None, 1.0, name="base"), shift,
+                         tangent=TangentSystem.build(problem), tangent_fallback_shift=1.0)
+    state = model.evaluate(_optimum(graph))
+    model.prepare(state)
+    return problem, model, state, shift
+
+
 @pytest.mark.parametrize("dim", [2, 3])
 @pytest.mark.parametrize("with_lambda", [False, True])
 def test_apply_is_the_dense_inverse_on_the_tangent_space(dim, with_lambda):
@@ -84,14 +98,8 @@ def test_preconditioner_inverts_the_riemannian_hessian(dim):
     """At the optimum, P(Hess[v]) = v for every horizontal tangent v: the model's own
     Hessian-vector product (an independent code path) undone, up to the shift's effect."""
     rng = np.random.default_rng(3 + dim)
-    graph = random_pose_graph(16, dim, rng, loop_closures=10, rot_noise=0.05, trans_noise=0.05)[0]
-    problem = Problem.from_graph(graph)
-    shift = 1e-10 * problem.gershgorin_max()
-    model = RelaxedModel(problem, problem.factor_full(None, 1.0, name="base"), shift,
-                         tangent=TangentSystem.build(problem), tangent_fallback_shift=1.0)
-    Z = _optimum(graph)
-    state = model.evaluate(Z)
-    model.prepare(state)
+    problem, model, state, shift = _model_at_optimum(rng, 16, dim, loop_closures=10)
+    Z = state.Z
     gram = gram_eigh(Z)
     G = so_basis(dim)
     v = remove_vertical(Z, np.einsum("na,axy,nyc->nxc", rng.standard_normal((problem.n, G.shape[0])), G, Z), gram)
@@ -317,13 +325,8 @@ def test_split_preconditioner_inverts_the_hessian_at_the_padded_point(dim):
     for the in-plane directions, (Q - Lambda + s I)^{-1} for the new column's) undoes the model's
     own Hessian-vector product on every horizontal tangent vector, up to the shift's effect."""
     rng = np.random.default_rng(40 + dim)
-    graph = random_pose_graph(16, dim, rng, loop_closures=10, rot_noise=0.05, trans_noise=0.05)[0]
-    problem = Problem.from_graph(graph)
-    shift = 1e-10 * problem.gershgorin_max()
-    model = RelaxedModel(problem, problem.factor_full(None, 1.0, name="base"), shift,
-                         tangent=TangentSystem.build(problem), tangent_fallback_shift=1.0)
-    Z1 = _optimum(graph)
-    model.prepare(model.evaluate(Z1))                    # K with Lambda at the first level's point
+    problem, model, first, shift = _model_at_optimum(rng, 16, dim, loop_closures=10)
+    Z1 = first.Z
     state = model.evaluate(lift(Z1, dim + 1))
     model.precond_factor = problem.factor_full(state.lam, shift, name="M_red(Lambda, s)")
     v = remove_vertical(state.Z, model.project(state, rng.standard_normal(state.Z.shape)))
@@ -381,14 +384,8 @@ def test_split_preconditioner_after_the_escape_reaches_the_same_certified_optimu
 
 
 def test_split_preconditioner_is_not_used_once_a_block_turns_to_the_new_column():
-    rng = np.random.default_rng(50)
-    graph = random_pose_graph(12, 2, rng, loop_closures=8, rot_noise=0.05, trans_noise=0.05)[0]
-    problem = Problem.from_graph(graph)
-    shift = 1e-10 * problem.gershgorin_max()
-    model = RelaxedModel(problem, problem.factor_full(None, 1.0, name="base"), shift,
-                         tangent=TangentSystem.build(problem), tangent_fallback_shift=1.0)
-    Z1 = _optimum(graph)
-    model.prepare(model.evaluate(Z1))
+    problem, model, first, _ = _model_at_optimum(np.random.default_rng(50), 12, 2, loop_closures=8)
+    Z1 = first.Z
     Z = lift(Z1, 3)
     # pose 0 rotated in the (first, new) column plane by 70 degrees: its rows lean on the new column
     c, s = np.cos(np.radians(70)), np.sin(np.radians(70))
@@ -403,15 +400,8 @@ def test_the_saddle_factor_is_replaced_once_the_split_stops_applying(monkeypatch
     """The saddle's factor serves the split preconditioner's new column only: where a block has
     turned towards the new column and the split no longer applies, prepare() refactors M_red's
     preconditioner at the point."""
-    rng = np.random.default_rng(60)
-    graph = random_pose_graph(12, 2, rng, loop_closures=8, rot_noise=0.05, trans_noise=0.05)[0]
-    problem = Problem.from_graph(graph)
-    shift = 1e-10 * problem.gershgorin_max()
-    model = RelaxedModel(problem, problem.factor_full(None, 1.0, name="base"), shift,
-                         tangent=TangentSystem.build(problem), tangent_fallback_shift=1.0)
-    Z1 = _optimum(graph)
-    first = model.evaluate(Z1)
-    model.prepare(first)
+    problem, model, first, _ = _model_at_optimum(np.random.default_rng(60), 12, 2, loop_closures=8)
+    Z1 = first.Z
     saddle = problem.factor_full(first.lam, 0.5, name="shifted certificate matrix")
     model.saddle_factor = (saddle, 0.5)
     model.lambda_hint, model.refactor_next = -0.1, True
