@@ -165,7 +165,8 @@ def plot(records: list[dict], path: str) -> None:
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    from posecrb.report.plots import _save, check_figure_path
+    from posecrb.core.files import save_figure
+    from posecrb.report.plots import check_figure_path
 
     check_figure_path(path)
     dims = sorted({r["dim"] for r in records})
@@ -189,7 +190,7 @@ def plot(records: list[dict], path: str) -> None:
             ax.set_xlabel("poses")
             ax.grid(True, which="both", alpha=0.3)
             ax.legend(fontsize=8)
-    _save(fig, path)
+    save_figure(fig, path)
 
 
 def markdown(records: list[dict], limit_note: str) -> str:

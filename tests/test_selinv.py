@@ -114,3 +114,41 @@ def test_real_fim_blocks_match_sparse_lu_solves(shared_datasets, name, stride):
 def test_empty_matrix():
     assert inverse_block_diagonal(sp.csc_matrix((0, 0)), 3).shape == (0, 3, 3)
     assert trace_inverse(sp.csc_matrix((0, 0))) == 0.0
+
+
+def _dense_absolute_terms(factor) -> float:
+    """``sum_ij |Z_ij| (|L| |L^T|)_ij`` densely, Z the inverse of L L^T (the factor's ordering)."""
+    lower = factor.L().toarray()
+    z = np.linalg.inv(lower @ lower.T)
+    return float(np.sum(np.abs(z) * (np.abs(lower) @ np.abs(lower).T)))
+
+
+@pytest.mark.parametrize("wide", [1, 32, 10**9])     # every supernode through LAPACK, the default, none
+@pytest.mark.parametrize("case", ["random", "chain", "dense"])
+def test_absolute_terms_match_the_dense_sum(monkeypatch, wide, case):
+    """The log-det's componentwise condition number (posecrb.linalg.accuracy), summed supernode by
+    supernode during the selected inversion, against the dense ``|Z| (|L| |L^T|)``."""
+    from posecrb.linalg import selinv
+
+    monkeypatch.setattr(selinv, "_WIDE", wide)
+    rng = np.random.default_rng(11)
+    if case == "random":
+        a = random_sparse_spd(rng, 90, 0.03)
+    elif case == "chain":
+        n = 120
+        lap = sp.diags([-np.ones(n - 1), 2 * np.ones(n), -np.ones(n - 1)], [-1, 0, 1])
+        a = (sp.kron(lap, np.array([[2.0, 0.5], [0.5, 1.0]])) + sp.identity(2 * n) * 0.01).tocsc()
+    else:
+        b = rng.normal(size=(70, 70))
+        a = sp.csc_matrix(b @ b.T / 70 + np.eye(70))
+    factor = cholesky(a)
+    got = selinv.SelectedInverse(factor, absolute_terms=True).absolute_terms
+    reference = _dense_absolute_terms(factor)
+    # a sum of positive terms whose Z entries each carry the inverse's error (inverse_entry_atol)
+    dense = a.toarray()
+    n = dense.shape[0]
+    lower = np.abs(factor.L().toarray())
+    weight = float(np.sum(lower @ lower.T))
+    tol = inverse_entry_atol(dense) * weight + 10 * n * n * np.finfo(float).eps * reference
+    assert got is not None and abs(got - reference) <= tol
+    assert selinv.SelectedInverse(factor).absolute_terms is None

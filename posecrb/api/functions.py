@@ -288,8 +288,9 @@ def _bounds_result(m: DatasetMetrics, times: dict[str, float], runs: dict[str, i
     if est is not None and m.fim is not None:
         extra = {"fim_logdet": m.fim_logdet, "fim_logdet_status": m.fim_logdet_status,
                  "trace_fim": trace_fim(m.fim), "fim_variant": m.fim.variant, "estimate": est}
-        all_times.update(fim_build=m.times["fim_build"], fim_logdet=m.times["fim_logdet"])
-        all_runs.update(fim_build=m.runs["fim_build"], fim_logdet=m.runs["fim_logdet"])
+        all_times.update(fim_build=m.times["fim_build"], fim_logdet=m.times["fim_logdet"],
+                         logdet_accuracy=m.times["logdet_accuracy"])
+        all_runs.update(fim_build=m.runs["fim_build"], fim_logdet=m.runs["fim_logdet"], logdet_accuracy=1)
         if est.solve_time is not None:
             all_times["solve"] = est.solve_time
             all_runs["solve"] = 1

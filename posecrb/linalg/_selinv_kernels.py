@@ -132,7 +132,22 @@ def _gather_zss(indptr, indices, val, bounds, col2sn, j0, w, s, zss, posbuf, mir
 
 
 @njit(cache=True, nogil=True)
-def _takahashi_range(indptr, indices, val, bounds, col2sn, hi, lo, posbuf):  # pragma: no cover - compiled
+def _abs_quadratic(vj, vs, zjj, zsj, zss):  # pragma: no cover - compiled
+    """``sum_k v_k^T |Z_TT| v_k`` over the columns k of a supernode: ``v_k`` column k of
+    ``V = [|L_JJ|; |L_SJ|]`` (``vj`` lower triangular), ``Z_TT`` the inverse on ``T = J + S``
+    (``zjj`` symmetric, ``zsj``, ``zss`` symmetric and full). Its sum over supernodes is
+    ``sum_ij |Z_ij| (|L| |L^T|)_ij`` (posecrb.linalg.accuracy)."""
+    azjj = np.abs(zjj)
+    total = np.sum(vj * np.dot(azjj, vj))
+    if vs.shape[0] > 0:
+        azsj = np.abs(zsj)
+        total += 2.0 * np.sum(vs * np.dot(azsj, vj))
+        total += np.sum(vs * np.dot(np.abs(zss), vs))
+    return total
+
+
+@njit(cache=True, nogil=True)
+def _takahashi_range(indptr, indices, val, bounds, col2sn, hi, lo, posbuf, terms):  # pragma: no cover - compiled
     """The block Takahashi recurrences on supernodes ``hi - 1`` down to ``lo``, in place: on
     entry ``val`` holds ``L`` on these supernodes and ``Z = (L L^T)^{-1}`` on every later one;
     on return ``Z`` on these as well. For each supernode ``J`` (columns ``J``, rows ``S`` below):
@@ -141,7 +156,8 @@ def _takahashi_range(indptr, indices, val, bounds, col2sn, hi, lo, posbuf):  # p
 
     with ``L_JJ^{-1}`` by forward substitution (meant for narrow supernodes; the wide ones near
     the root go through LAPACK, ``posecrb.linalg.selinv``). Only ``L`` of ``J`` itself and ``Z``
-    of its ancestors are read, so ``Z_J`` may overwrite ``L_J``. Returns 0, or ``1 + a column``
+    of its ancestors are read, so ``Z_J`` may overwrite ``L_J``. Where ``terms`` has an entry,
+    ``terms[0]`` accumulates each supernode's ``_abs_quadratic``. Returns 0, or ``1 + a column``
     whose pattern is not closed."""
     for sn in range(hi - 1, lo - 1, -1):
         j0 = bounds[sn]
@@ -160,14 +176,16 @@ def _takahashi_range(indptr, indices, val, bounds, col2sn, hi, lo, posbuf):  # p
                 linv[r, c] = -acc / ljj[r, r]
         zjj = np.dot(np.ascontiguousarray(linv.T), linv)
         zsj = np.empty((s, w))
+        zss = np.empty((s, s))
         if s > 0:
             y = np.dot(lsj, linv)
-            zss = np.empty((s, s))
             status = _gather_zss(indptr, indices, val, bounds, col2sn, j0, w, s, zss, posbuf, True)
             if status:
                 return status
             zsj = -np.dot(zss, y)
             zjj -= np.dot(np.ascontiguousarray(y.T), zsj)
+        if terms.shape[0] > 0:
+            terms[0] += _abs_quadratic(np.abs(ljj), np.abs(lsj), zjj, zsj, zss)
         _scatter(indptr, val, j0, w, s, zjj, zsj)
     return 0
 

@@ -63,11 +63,13 @@ _WIDE = 32
 
 
 def _wide_supernode(k: ModuleType, indptr: np.ndarray, indices: np.ndarray, val: np.ndarray, bounds: np.ndarray,
-                    col2sn: np.ndarray, sn: int, posbuf: np.ndarray) -> str | None:
+                    col2sn: np.ndarray, sn: int, posbuf: np.ndarray, terms: np.ndarray) -> str | None:
     """The block Takahashi step of supernode ``sn`` through LAPACK/BLAS, in place on ``val``
     (see ``_selinv_kernels._takahashi_range``): ``Y = L_SJ L_JJ^{-1}`` (dtrsm),
     ``(L_JJ L_JJ^T)^{-1}`` (dpotri, a third of the flops of an explicit inverse and product),
-    ``Z_SJ = -Z_SS Y`` (dsymm), ``Z_JJ -= Y^T Z_SJ`` (dgemm). Returns None or why it failed."""
+    ``Z_SJ = -Z_SS Y`` (dsymm), ``Z_JJ -= Y^T Z_SJ`` (dgemm); where ``terms`` has an entry,
+    ``terms[0]`` accumulates the supernode's ``_abs_quadratic`` (one more product of ``|Z_SS|``).
+    Returns None or why it failed."""
     from scipy.linalg.blas import dgemm, dsymm, dtrsm  # noqa: PLC0415 -- lazy, like the kernels
     from scipy.linalg.lapack import dpotri  # noqa: PLC0415
 
@@ -77,6 +79,9 @@ def _wide_supernode(k: ModuleType, indptr: np.ndarray, indices: np.ndarray, val:
     ljj = np.zeros((w, w), order="F")
     lsj = np.empty((s, w), order="F")
     k._gather_l(indptr, val, j0, w, s, ljj, lsj)
+    want = terms.size > 0
+    if want:
+        vj, vs = np.abs(ljj), np.abs(lsj)
     y = dtrsm(1.0, ljj, lsj, side=1, lower=1, overwrite_b=1) if s else lsj
     zjj, info = dpotri(ljj, lower=1, overwrite_c=1)
     if info:
@@ -86,21 +91,34 @@ def _wide_supernode(k: ModuleType, indptr: np.ndarray, indices: np.ndarray, val:
         if k._gather_zss(indptr, indices, val, bounds, col2sn, j0, w, s, zss, posbuf, False):
             return f"Cholesky pattern not closed at column {j0}"
         zsj = dsymm(-1.0, zss, y, side=0, lower=1)
+        if want:
+            np.abs(zss, out=zss)
+            terms[0] += float(np.sum(vs * dsymm(1.0, zss, vs, side=0, lower=1)))
         del zss
         zjj = dgemm(-1.0, y, zsj, beta=1.0, c=zjj, trans_a=1, overwrite_c=1)
     else:
         zsj = y
+    if want:
+        lower = np.tril(zjj)
+        azjj = np.abs(lower + np.tril(lower, -1).T)
+        terms[0] += float(np.sum(vj * (azjj @ vj)))
+        if s:
+            terms[0] += 2.0 * float(np.sum(vs * (np.abs(zsj) @ vj)))
     k._scatter(indptr, val, j0, w, s, zjj, zsj)
     return None
 
 
-def _takahashi_inplace(indptr: np.ndarray, indices: np.ndarray, val: np.ndarray) -> str | None:
+def _takahashi_inplace(indptr: np.ndarray, indices: np.ndarray, val: np.ndarray,
+                       terms: np.ndarray | None = None) -> str | None:
     """Overwrite ``val`` (the values of ``L``, CSC with sorted rows, diagonal first) with
     ``Z = (L L^T)^{-1}`` on the same pattern: supernode by supernode from the root down, the
     wide ones through LAPACK (``_wide_supernode``), runs of narrow ones in one compiled call.
     In place because supernode ``J`` reads only its own ``L`` and its ancestors' ``Z``: no
-    second array of the factor's size. Returns None or why it failed."""
+    second array of the factor's size. ``terms`` (one entry): accumulates
+    ``sum_ij |Z_ij| (|L| |L^T|)_ij`` on the way (``SelectedInverse.absolute_terms``). Returns None
+    or why it failed."""
     k = _kernels()
+    terms = np.zeros(0) if terms is None else terms
     n = indptr.size - 1
     bounds = k._supernodes(indptr, indices)
     col2sn = k._column_supernodes(bounds, n)
@@ -119,11 +137,11 @@ def _takahashi_inplace(indptr: np.ndarray, indices: np.ndarray, val: np.ndarray)
 
     with python_blas().limit(limits=1):
         for sn in [*wide[::-1].tolist(), -1]:
-            status = k._takahashi_range(indptr, indices, val, bounds, col2sn, hi, sn + 1, posbuf)
+            status = k._takahashi_range(indptr, indices, val, bounds, col2sn, hi, sn + 1, posbuf, terms)
             if status:
                 return f"Cholesky pattern not closed at column {status - 1}"
             if sn >= 0:
-                why = _wide_supernode(k, indptr, indices, val, bounds, col2sn, sn, posbuf)
+                why = _wide_supernode(k, indptr, indices, val, bounds, col2sn, sn, posbuf, terms)
                 if why:
                     return why
             hi = sn
@@ -163,7 +181,7 @@ class SelectedInverse:
     (``posecrb.models.paper.crlb.inverse_accuracy``) keep theirs.
 """
 
-    def __init__(self, factor: Factor, name: str = "matrix") -> None:
+    def __init__(self, factor: Factor, name: str = "matrix", absolute_terms: bool = False) -> None:
         lower = factor.L()
         if not sp.isspmatrix_csc(lower):  # pragma: no cover - CHOLMOD returns CSC
             lower = sp.csc_matrix(lower)
@@ -176,7 +194,8 @@ class SelectedInverse:
         zval = np.require(lower.data, dtype=np.float64, requirements=["C", "W"])
         del lower
         a_diag = _kernels()._row_squares(self.indptr, self.indices, zval, self.perm.size)   # diag(L L^T)
-        why = _takahashi_inplace(self.indptr, self.indices, zval)
+        terms = np.zeros(1 if absolute_terms else 0)
+        why = _takahashi_inplace(self.indptr, self.indices, zval, terms)
         if why is None:
             bad = int(_kernels()._count_nonfinite(zval))
             if bad:
@@ -189,6 +208,9 @@ class SelectedInverse:
         if why:
             raise NumericalError(f"{name}: selected inversion (Takahashi recurrences) failed: {why}")
         self.zval = zval
+        # ``sum_ij |Z_ij| (|L| |L^T|)_ij`` (with ``absolute_terms``, else None): the log-det's
+        # componentwise condition number (posecrb.linalg.accuracy), one more product per supernode.
+        self.absolute_terms = float(terms[0]) if absolute_terms else None
         self.n = self.perm.size
         self.condition_lower_bound = float(np.max(a_diag * zval[self.indptr[:-1]], initial=1.0))
         self.status = _condition_status(self.condition_lower_bound, name)
