@@ -290,7 +290,8 @@ def _bounds_result(m: DatasetMetrics, times: dict[str, float], runs: dict[str, i
                  "trace_fim": trace_fim(m.fim), "fim_variant": m.fim.variant, "estimate": est}
         all_times.update(fim_build=m.times["fim_build"], fim_logdet=m.times["fim_logdet"],
                          logdet_accuracy=m.times["logdet_accuracy"])
-        all_runs.update(fim_build=m.runs["fim_build"], fim_logdet=m.runs["fim_logdet"], logdet_accuracy=1)
+        all_runs.update(fim_build=m.runs["fim_build"], fim_logdet=m.runs["fim_logdet"],
+                        logdet_accuracy=m.runs["logdet_accuracy"])
         if est.solve_time is not None:
             all_times["solve"] = est.solve_time
             all_runs["solve"] = 1

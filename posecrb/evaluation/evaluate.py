@@ -106,4 +106,5 @@ def evaluate(graph: PoseGraph, settings: EvaluationSettings, *, step: Callable[[
                           fim_logdet_status=accuracy.status,
                           times={"fim_build": m_build.seconds, "fim_logdet": m_ld.seconds,
                                  "logdet_accuracy": accuracy_seconds},
-                          runs={"fim_build": m_build.runs, "fim_logdet": m_ld.runs}, ordering=used)
+                          runs={"fim_build": m_build.runs, "fim_logdet": m_ld.runs, "logdet_accuracy": 1},
+                          ordering=used)

@@ -92,7 +92,8 @@ def logdet_accuracy(a: sp.spmatrix, factor: Any, logdet: float, name: str = "mat
     except NumericalError as exc:
         return LogdetAccuracy(float("inf"), float("inf"), Status.unavailable(
             f"the {name} is numerically singular: {exc}", "check the information matrices"))
-    total = float(sel.absolute_terms) if sel.absolute_terms is not None else float("inf")
+    total = sel.absolute_terms
+    assert total is not None   # requested with absolute_terms=True
     cmax = int(np.diff(sel.indptr).max())
     bound = (cmax + 2) * eps * total
     scale = max(1.0, abs(logdet))
