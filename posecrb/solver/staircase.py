@@ -107,6 +107,7 @@ class RelaxedModel:
         # (``_split_parts``), cached per point.
         self.split_escape = split_escape
         self._split: tuple[np.ndarray, _SplitParts | None] | None = None
+        self._gauge: tuple[Factor, np.ndarray] | None = None   # (K's factor, its gauge modes)
         self.factorizations = 0
         self._factored_at: np.ndarray | None = None     # Z of the iterate the adaptive factor was built at
         self.factor_shift: float | None = None          # its shift s (None: not a factor at that point's Lambda)
@@ -339,7 +340,11 @@ class RelaxedModel:
             w, Zw = frame
             scale = self.tangent.diagonal_mean(state.Z, state.lam)
             if scale > 0:
-                gauge = self.tangent.gauge_modes(self._tangent_factor[0][:, :, :self.problem.d])
+                # K's gauge modes depend on its factor only, which the level after the escape keeps
+                factor = self._tangent_factor[1]
+                if self._gauge is None or self._gauge[0] is not factor:
+                    self._gauge = (factor, self.tangent.gauge_modes(self._tangent_factor[0][:, :, :self.problem.d]))
+                gauge = self._gauge[1]
                 parts = _SplitParts(normal=w[None] - np.einsum("ndr,nds->nrs", state.Z, Zw), gauge=gauge,
                                     gauge_scale=scale)
         self._split = (state.Z, parts)
