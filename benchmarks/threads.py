@@ -8,8 +8,11 @@ settings run by run, each in a fresh process:
            poses and 2D >= 50,000), "all" with CHOLMOD's BLAS on every core throughout (numpy's/scipy's still at
            one thread): wall and CPU seconds, Hessian-vector products and the objective
   selinv   the selected inversion (posecrb.linalg.selinv.SelectedInverse) of the FIM at the
-           file's vertices, with numpy's/scipy's OpenBLAS at 1 thread or at every core (after a
-           warm-up call that compiles the kernels)
+           file's vertices (after a warm-up call that compiles the kernels; with
+           ``--absolute-terms`` it also sums the log-det's accuracy bound, as ``fim`` does):
+           numpy's/scipy's OpenBLAS at "1" thread throughout, on "all" cores in every wide
+           supernode, or as the "library" runs it (the supernodes of at least 10^9 flops on the
+           cores no other process keeps busy, the rest at one thread)
   logdet   the FIM log-det (posecrb.models.paper.fim: analysis + factorization) with CHOLMOD's
            BLAS at 1 thread or at every core (SymbolicCholesky's ``threaded``, which the library
            sets only for the block matrices of 3D graphs >= 10,000 poses and 2D >= 50,000)
@@ -21,7 +24,7 @@ settings run by run, each in a fresh process:
            ``--what load --dim 3 --poses 20000 --hogs 1`` and the same with ``--hogs 0``
 
 Usage: python benchmarks/threads.py [--dim 2] [--poses 30000] [--rounds 2] [--what solve,selinv,logdet,load]
-       [--hogs K]
+       [--hogs K] [--absolute-terms]
 """
 from __future__ import annotations
 
@@ -88,20 +91,32 @@ else:
     else:
         import scipy.linalg.blas
         from posecrb.linalg import selinv, threads as th
+        terms = os.environ.get("BENCH_ABSOLUTE_TERMS") == "1"
         f = fim_symbolic(fim).factor(fim.matrix)
-        selinv.SelectedInverse(f)
-        # the library limits it to one thread; lift that for the "all" setting
-        if threads == "all":
-            import contextlib
-
-            class NoLimit:
-                def limit(self, limits):
-                    return contextlib.nullcontext()
-
-            th.python_blas = NoLimit
+        selinv.SelectedInverse(f, absolute_terms=terms)
+        # "1": every supernode at one thread; "all": every wide supernode on every core;
+        # "library": the largest ones on the cores no other process keeps busy
+        if threads == "1":
+            th.python_blas_usable_threads = lambda: 1
+        elif threads == "all":
+            selinv._THREADED_FLOPS = 0.0
+            th.python_blas_usable_threads = lambda: os.cpu_count() or 1
         t, c = time.perf_counter(), time.process_time()
-        selinv.SelectedInverse(f)
-        out = {"wall": time.perf_counter() - t, "cpu": time.process_time() - c}
+        sel = selinv.SelectedInverse(f, absolute_terms=terms)
+        out = {"wall": time.perf_counter() - t, "cpu": time.process_time() - c,
+               "terms": sel.absolute_terms}
+        # flops of the wide supernodes (w columns, s rows below): the inversion's dtrsm, dpotri,
+        # dsymm, dgemm; the accuracy bound's dsyrk, dlauum, dtrmm; and those of the threaded ones
+        import numpy as np
+        bounds = selinv._kernels()._supernodes(sel.indptr, sel.indices)
+        w = np.diff(bounds).astype(float)
+        s_ = (sel.indptr[bounds[:-1] + 1] - sel.indptr[bounds[:-1]]).astype(float) - w
+        wide = w >= selinv._WIDE
+        base = selinv._supernode_flops(w, s_)
+        extra = s_**2 * w + s_ * w**2 + w**3 / 3
+        big = wide & (base >= selinv._THREADED_FLOPS)
+        out["gflop"] = {"inversion": float(base[wide].sum()) / 1e9, "bound": float(extra[wide].sum()) / 1e9,
+                        "inversion_threaded": float(base[big].sum()) / 1e9}
 print(json.dumps(out))
 """
 
@@ -113,6 +128,8 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--rounds", type=int, default=2)
     ap.add_argument("--what", default="solve,selinv,logdet")
     ap.add_argument("--hogs", type=int, default=0, help="busy processes next to the measured ones (--what load)")
+    ap.add_argument("--absolute-terms", action="store_true",
+                    help="--what selinv: also sum the log-det's accuracy bound (as fim and bounds do)")
     ap.add_argument("--cache-dir", default=None)
     args = ap.parse_args(argv)
     path = grid_file(args.dim, args.poses, directory=args.cache_dir)
@@ -129,11 +146,12 @@ def main(argv: list[str] | None = None) -> int:
 
 def _measure(args: argparse.Namespace, path: Path) -> None:
     for what in args.what.split(","):
-        settings = ("1", "all", "library") if what == "load" else ("1", "all")
+        settings = ("1", "all", "library") if what in ("load", "selinv") else ("1", "all")
         runs: dict[str, list[dict]] = {s: [] for s in settings}
         for k in range(args.rounds):
             for threads in (settings if k % 2 == 0 else settings[::-1]):
                 env = child_env(threads=None)
+                env["BENCH_ABSOLUTE_TERMS"] = "1" if args.absolute_terms else "0"
                 load = os.getloadavg()[0]
                 r = subprocess.run([sys.executable, "-c", CHILD, what, str(path), threads], env=env,
                                    capture_output=True, text=True, check=False)
@@ -143,7 +161,13 @@ def _measure(args: argparse.Namespace, path: Path) -> None:
                 d = json.loads(r.stdout.strip().splitlines()[-1])
                 d["load"] = load
                 runs[threads].append(d)
-                extra = (f", {d['hvp']} HVPs, objective {d['objective']:.10g}" if what == "solve" else "")
+                extra = (f", {d['hvp']} HVPs, objective {d['objective']:.10g}" if what == "solve" else
+                         f", absolute terms {d['terms']:.10g}" if d.get("terms") is not None else "")
+                if what == "selinv" and k == 0 and threads == settings[0]:
+                    g = d["gflop"]
+                    print(f"  wide supernodes: {g['inversion']:.1f} Gflop of inversion "
+                          f"({g['inversion_threaded']:.1f} in the threaded ones), {g['bound']:.1f} Gflop more "
+                          "for the accuracy bound")
                 print(f"{what:7s} threads {threads:>7s}: wall {d['wall']:7.2f} s, CPU {d['cpu']:7.2f} s{extra} "
                       f"(load average {load:.1f} at the start, {time.strftime('%H:%M:%S')})", flush=True)
 

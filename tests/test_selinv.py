@@ -152,3 +152,55 @@ def test_absolute_terms_match_the_dense_sum(monkeypatch, wide, case):
     tol = inverse_entry_atol(dense) * weight + 10 * n * n * np.finfo(float).eps * reference
     assert got is not None and abs(got - reference) <= tol
     assert selinv.SelectedInverse(factor).absolute_terms is None
+
+
+def test_large_separators_run_threaded_with_the_same_inverse(monkeypatch):
+    """The supernodes above ``_THREADED_FLOPS`` run numpy's BLAS at the usable thread count, the rest
+    at one; the inverse and the log-det's absolute terms match the dense ones either way."""
+    from posecrb.linalg import selinv, threads
+    from posecrb.linalg.selinv import _kernels
+
+    real = threads.python_blas
+    seen: list[int] = []
+
+    class Recording:
+        """numpy's BLAS controller, recording the limits set on it."""
+
+        def __init__(self) -> None:
+            self.ctl = real()
+
+        def limit(self, limits: int):
+            seen.append(limits)
+            return self.ctl.limit(limits=limits)
+
+        def __getattr__(self, name: str):
+            return getattr(self.ctl, name)
+
+    monkeypatch.setattr(threads, "python_blas", Recording)
+    monkeypatch.setattr(threads, "python_blas_usable_threads", lambda: 2)
+    # a 2D grid of 3x3 blocks: separators 9-12 columns wide with 30-42 rows below and a root of 60
+    # columns (24,000-144,000 flops of inversion each), so that some run threaded and some not
+    monkeypatch.setattr(selinv, "_WIDE", 8)
+    monkeypatch.setattr(selinv, "_THREADED_FLOPS", 3e4)
+    side = 14
+    path = sp.diags([-np.ones(side - 1), 2 * np.ones(side), -np.ones(side - 1)], [-1, 0, 1])
+    grid = sp.kronsum(path, path)
+    a = (sp.kron(grid, np.array([[2.0, 0.5, 0.1], [0.5, 1.0, 0.2], [0.1, 0.2, 3.0]]))
+         + sp.identity(3 * side * side) * 0.01).tocsc()
+    factor = cholesky(a)
+    sel = selinv.SelectedInverse(factor, absolute_terms=True)
+    lower = factor.L()
+    indptr = lower.indptr.astype(np.int64)
+    bounds = _kernels()._supernodes(indptr, lower.indices)
+    w = np.diff(bounds)
+    s = indptr[bounds[:-1] + 1] - indptr[bounds[:-1]] - w
+    big = int(((w >= 8) & (2.0 * s**2 * w + 3.0 * s * w**2 + 2.0 * w**3 / 3.0 >= 3e4)).sum())
+    assert 0 < big < int((w >= 8).sum())       # both kinds of wide supernodes are exercised
+    assert seen == [1] + [2] * big              # the big ones on two threads, inside one thread
+    dense = a.toarray()
+    assert_within(sel.diagonal(), np.diag(np.linalg.inv(dense)), inverse_entry_atol(dense), "diagonal")
+    reference = _dense_absolute_terms(factor)
+    lower = np.abs(factor.L().toarray())
+    tol = (inverse_entry_atol(dense) * float(np.sum(lower @ lower.T))
+           + 10 * dense.shape[0] ** 2 * np.finfo(float).eps * reference)
+    assert sel.absolute_terms is not None and abs(sel.absolute_terms - reference) <= tol

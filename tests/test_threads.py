@@ -152,3 +152,16 @@ def test_busy_cores_sees_a_busy_process():
     finally:
         hog.kill()
         hog.wait()
+
+
+def test_python_blas_usable_threads_follow_the_enclosing_limit_and_the_load(monkeypatch):
+    ctl = threads.python_blas()
+    monkeypatch.setattr(threads, "_cores", lambda: 2)
+    with ctl.limit(limits=1):       # a pool worker, OPENBLAS_NUM_THREADS=1, the solver: never more
+        monkeypatch.setattr(threads, "busy_cores", lambda: 0)
+        assert threads.python_blas_usable_threads() == 1
+    with ctl.limit(limits=2):
+        monkeypatch.setattr(threads, "busy_cores", lambda: 0)
+        assert threads.python_blas_usable_threads() == 2
+        monkeypatch.setattr(threads, "busy_cores", lambda: 1)
+        assert threads.python_blas_usable_threads() == 1

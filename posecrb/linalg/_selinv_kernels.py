@@ -147,6 +147,21 @@ def _abs_quadratic(vj, vs, zjj, zsj, zss):  # pragma: no cover - compiled
 
 
 @njit(cache=True, nogil=True)
+def _abs_lower_dot(z, v):  # pragma: no cover - compiled
+    """``sum_ij |z_ij| v_ij`` for symmetric ``z`` and ``v`` given by their lower triangles (nothing
+    above the diagonal is read): twice the strictly lower sum plus the diagonal's. One pass over
+    half of each, column by column (Fortran order), no temporary."""
+    n = z.shape[0]
+    off = 0.0
+    diag = 0.0
+    for j in range(n):
+        diag += abs(z[j, j]) * v[j, j]
+        for i in range(j + 1, n):
+            off += abs(z[i, j]) * v[i, j]
+    return 2.0 * off + diag
+
+
+@njit(cache=True, nogil=True)
 def _takahashi_range(indptr, indices, val, bounds, col2sn, hi, lo, posbuf, terms):  # pragma: no cover - compiled
     """The block Takahashi recurrences on supernodes ``hi - 1`` down to ``lo``, in place: on
     entry ``val`` holds ``L`` on these supernodes and ``Z = (L L^T)^{-1}`` on every later one;

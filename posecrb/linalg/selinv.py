@@ -25,13 +25,16 @@ the flops, go through LAPACK/BLAS (dtrsm, dpotri, dsymm, dgemm: about twice the 
 factorization); the narrow ones run in a loop compiled with numba (``cache=True``; the first call
 in a process imports numba and loads the cached machine code, ~0.3 s; the kernels live in
 ``posecrb.linalg._selinv_kernels``, imported only then). Without numba the same code runs as
-plain Python, correct but slow. BLAS runs with one thread (many small calls).
+plain Python, correct but slow. numpy's BLAS runs with one thread (many small calls), except in the
+supernodes of at least ``_THREADED_FLOPS``, the top separators of large graphs, which take the cores
+no other process keeps busy (``posecrb.linalg.threads.python_blas_usable_threads``).
 Per-pose blocks of the inverse are only guaranteed in the factor's pattern when the
 matrix's own diagonal blocks are structurally full, so ``inverse_block_diagonal`` pads
 them with explicit zeros before the analysis.
 """
 from __future__ import annotations
 
+import contextlib
 import logging
 from types import ModuleType
 
@@ -61,6 +64,17 @@ def _kernels():
 # Z_SS Y products), so the Python loop over them costs milliseconds.
 _WIDE = 32
 
+# Wide supernodes whose inversion takes at least this many flops (``_supernode_flops``) run
+# numpy's BLAS on its threads (``python_blas_usable_threads``); below it threads cost more than
+# they save.
+_THREADED_FLOPS = 1e9
+
+
+def _supernode_flops(w: np.ndarray, s: np.ndarray) -> np.ndarray:
+    """Flops of ``_wide_supernode`` without the accuracy sum for ``w`` columns with ``s`` rows below:
+    dsymm ``2 s^2 w``, dgemm ``2 s w^2``, dtrsm ``s w^2``, dpotri ``2 w^3 / 3``."""
+    return 2.0 * s * s * w + 3.0 * s * w * w + 2.0 * w ** 3 / 3.0
+
 
 def _wide_supernode(k: ModuleType, indptr: np.ndarray, indices: np.ndarray, val: np.ndarray, bounds: np.ndarray,
                     col2sn: np.ndarray, sn: int, posbuf: np.ndarray, terms: np.ndarray) -> str | None:
@@ -68,10 +82,13 @@ def _wide_supernode(k: ModuleType, indptr: np.ndarray, indices: np.ndarray, val:
     (see ``_selinv_kernels._takahashi_range``): ``Y = L_SJ L_JJ^{-1}`` (dtrsm),
     ``(L_JJ L_JJ^T)^{-1}`` (dpotri, a third of the flops of an explicit inverse and product),
     ``Z_SJ = -Z_SS Y`` (dsymm), ``Z_JJ -= Y^T Z_SJ`` (dgemm); where ``terms`` has an entry,
-    ``terms[0]`` accumulates the supernode's ``_abs_quadratic`` (one more product of ``|Z_SS|``).
-    Returns None or why it failed."""
-    from scipy.linalg.blas import dgemm, dsymm, dtrsm  # noqa: PLC0415 -- lazy, like the kernels
-    from scipy.linalg.lapack import dpotri  # noqa: PLC0415
+    ``terms[0]`` accumulates the supernode's ``_abs_quadratic`` in three parts, each with the fewest
+    flops: ``sum(|Z_SS| o |L_SJ| |L_SJ|^T)`` through the symmetric rank-w product (dsyrk: half the
+    flops of a product with ``|Z_SS|``), ``sum(|Z_JJ| o |L_JJ| |L_JJ|^T)`` through the product of two
+    triangles (dlauum: a third of a general product) and twice ``sum(|L_SJ| o |Z_SJ| |L_JJ|)``
+    (dtrmm: half). Returns None or why it failed."""
+    from scipy.linalg.blas import dgemm, dsymm, dsyrk, dtrmm, dtrsm  # noqa: PLC0415 -- lazy, like the kernels
+    from scipy.linalg.lapack import dlauum, dpotri  # noqa: PLC0415
 
     j0 = int(bounds[sn])
     w = int(bounds[sn + 1]) - j0
@@ -87,23 +104,23 @@ def _wide_supernode(k: ModuleType, indptr: np.ndarray, indices: np.ndarray, val:
     if info:
         return f"zero pivot in the diagonal block of columns {j0}..{j0 + w - 1}"
     if s:
-        zss = np.empty((s, s), order="F")   # lower half only: dsymm reads no other
+        zss = np.empty((s, s), order="F")   # lower half only: dsymm and the sum below read no other
         if k._gather_zss(indptr, indices, val, bounds, col2sn, j0, w, s, zss, posbuf, False):
             return f"Cholesky pattern not closed at column {j0}"
         zsj = dsymm(-1.0, zss, y, side=0, lower=1)
         if want:
-            np.abs(zss, out=zss)
-            terms[0] += float(np.sum(vs * dsymm(1.0, zss, vs, side=0, lower=1)))
+            terms[0] += k._abs_lower_dot(zss, dsyrk(1.0, vs, lower=1))
         del zss
-        zjj = dgemm(-1.0, y, zsj, beta=1.0, c=zjj, trans_a=1, overwrite_c=1)
+        zjj = dgemm(-1.0, y, zsj, beta=1.0, c=zjj, trans_a=1, overwrite_c=1)   # valid below the diagonal
     else:
         zsj = y
     if want:
-        lower = np.tril(zjj)
-        azjj = np.abs(lower + np.tril(lower, -1).T)
-        terms[0] += float(np.sum(vj * (azjj @ vj)))
+        # |L_JJ| |L_JJ|^T = R (U U^T) R with U = R |L_JJ| R upper triangular, R the reversal
+        uut, _ = dlauum(np.array(vj[::-1, ::-1], order="F"), lower=0, overwrite_c=1)   # a copy: vj is read below
+        terms[0] += k._abs_lower_dot(zjj, np.asfortranarray(uut[::-1, ::-1]))
         if s:
-            terms[0] += 2.0 * float(np.sum(vs * (np.abs(zsj) @ vj)))
+            azsj = dtrmm(1.0, vj, np.abs(zsj), side=1, lower=1, overwrite_b=1)
+            terms[0] += 2.0 * float(np.einsum("ij,ij->", vs, azsj))
     k._scatter(indptr, val, j0, w, s, zjj, zsj)
     return None
 
@@ -125,23 +142,32 @@ def _takahashi_inplace(indptr: np.ndarray, indices: np.ndarray, val: np.ndarray,
     posbuf = np.empty(n, np.int64)
     wide = np.flatnonzero(np.diff(bounds) >= _WIDE)
     hi = bounds.size - 1
-    # One BLAS thread (numpy's/scipy's own OpenBLAS): the calls are many and mostly small, where
+    # The largest separators run on every core no other process keeps busy (3D grid of 21,952
+    # poses: the supernodes of at least 10^9 flops carry nearly all of the inversion's flops)
+    widths = np.diff(bounds)[wide].astype(float)
+    below = (indptr[bounds[wide] + 1] - indptr[bounds[wide]]) - widths
+    big = wide[_supernode_flops(widths, below) >= _THREADED_FLOPS]
+    import scipy.linalg.blas  # noqa: F401, PLC0415 -- loads scipy's BLAS before its threads are set
+
+    from .threads import python_blas, python_blas_usable_threads  # noqa: PLC0415
+
+    threads = python_blas_usable_threads() if big.size else 1
+    threaded = set(big.tolist()) if threads > 1 else set()
+    # Otherwise one BLAS thread (numpy's/scipy's own OpenBLAS): the calls are many and mostly small, where
     # OpenBLAS threads only add synchronisation, and its threads collapse when another process
     # holds a core (2D grid of 10^4 poses on a loaded 2-core machine: the wide supernodes' calls
     # take 0.66 s with two threads, 0.03 s with one; 2D grid of 30,276 poses, load average 7: the
     # whole inversion 4.0-15.1 s with two threads, 0.87-0.94 s with one). The factorization before
     # it (CHOLMOD's BLAS) keeps every core.
-    import scipy.linalg.blas  # noqa: F401, PLC0415 -- loads scipy's BLAS before its threads are set
-
-    from .threads import python_blas  # noqa: PLC0415
-
-    with python_blas().limit(limits=1):
+    blas = python_blas()
+    with blas.limit(limits=1):
         for sn in [*wide[::-1].tolist(), -1]:
             status = k._takahashi_range(indptr, indices, val, bounds, col2sn, hi, sn + 1, posbuf, terms)
             if status:
                 return f"Cholesky pattern not closed at column {status - 1}"
             if sn >= 0:
-                why = _wide_supernode(k, indptr, indices, val, bounds, col2sn, sn, posbuf, terms)
+                with blas.limit(limits=threads) if sn in threaded else contextlib.nullcontext():
+                    why = _wide_supernode(k, indptr, indices, val, bounds, col2sn, sn, posbuf, terms)
                 if why:
                     return why
             hi = sn

@@ -21,7 +21,9 @@ directory), which does posecrb's own small dense products.
   CHOLMOD's in the M_red factorizations of those large graphs (``solver_threads``,
   ``factorization_threads``).
 * numpy's/scipy's OpenBLAS stays at one thread in the solver and the selected inversion: its
-  threads collapse under load (posecrb.linalg.selinv).
+  threads collapse under load (posecrb.linalg.selinv). The exception: the selected inversion's
+  supernodes of at least 10^9 flops (the top separators of large graphs, nearly all of its flops
+  there) run it on the cores no other process keeps busy (``python_blas_usable_threads``).
 
 Process pools run each worker with every pool at one thread (``single_threaded_worker``), so
 ``--jobs`` workers never oversubscribe the cores.
@@ -145,6 +147,10 @@ def usable_threads(threads: int, cores: int, busy: int) -> int:
     return max(1, min(threads, cores - busy))
 
 
+def _cores() -> int:
+    return len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else (os.cpu_count() or 1)
+
+
 def load_aware_threads() -> Any:
     """CHOLMOD's BLAS at ``usable_threads`` inside (a context manager): its threads as they are
     when no other process keeps a core busy, fewer when one does. The count comes from the
@@ -153,9 +159,17 @@ def load_aware_threads() -> Any:
     threads = cholmod_threads()
     if threads <= 1:
         return contextlib.nullcontext()
-    cores = len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else (os.cpu_count() or 1)
-    usable = usable_threads(threads, cores, busy_cores())
+    usable = usable_threads(threads, _cores(), busy_cores())
     return contextlib.nullcontext() if usable == threads else cholmod_blas().limit(limits=usable)
+
+
+def python_blas_usable_threads() -> int:
+    """``usable_threads`` for numpy's/scipy's BLAS: the threads it has now (an enclosing limit, a
+    pool worker's single thread or ``OPENBLAS_NUM_THREADS`` count), fewer when other processes keep
+    cores busy. For the few large dense products of a computation that otherwise runs that BLAS at
+    one thread (the selected inversion's separators, posecrb.linalg.selinv)."""
+    threads = max([c.num_threads for c in python_blas().lib_controllers], default=1)
+    return 1 if threads <= 1 else usable_threads(threads, _cores(), busy_cores())
 
 
 def cholmod_single_threaded() -> Any:
