@@ -95,9 +95,10 @@ def phases(command: str, stdout: str) -> tuple[str, float]:
         return "", float("nan")
     t = js.get("times", {})
     keys = {"bounds-none": ["parse", "laplacians", "lb", "ub", "ub_lambda"],
-            "bounds-vertices": ["parse", "lb", "ub", "fim_build", "fim_logdet"],
-            "fim": ["parse", "fim_build", "fim_logdet"],
-            "crlb": ["parse", "fim_build", "crlb_blocks", "curvature"],
+            "bounds-vertices": ["parse", "laplacians", "lb", "ub", "ub_lambda", "fim_build", "fim_logdet",
+                                "logdet_accuracy"],
+            "fim": ["parse", "fim_build", "fim_logdet", "logdet_accuracy"],
+            "crlb": ["parse", "fim_build", "crlb_blocks", "accuracy", "curvature"],
             "solve": ["parse", "init", "optimize", "verify", "round"],
             "select": ["setup", "base", "select", "value"]}[command]
     vals = {k: t[k] for k in keys if isinstance(t.get(k), (int, float))}

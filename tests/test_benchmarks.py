@@ -24,3 +24,21 @@ def test_scaling_plot_and_markdown_write_from_records(tmp_path):
     assert out.stat().st_size > 1000
     table = scaling.markdown(records, "")
     assert table.count("\n| 3 | 10,000 |") == 2
+
+
+def test_scaling_phases_count_every_stage_the_command_times():
+    """The in-process sum must cover every stage a command reports: a stage left out (the log-det's
+    accuracy bound, the CRLB's accuracy estimate) hides most of the time on large grids."""
+    import json
+
+    scaling = _module("scaling")
+    reported = {
+        "fim": {"parse": 1.0, "fim_build": 2.0, "fim_logdet": 3.0, "logdet_accuracy": 20.0},
+        "bounds-vertices": {"parse": 1.0, "laplacians": 0.5, "lb": 1.0, "ub": 1.0, "ub_lambda": 0.5,
+                            "fim_build": 2.0, "fim_logdet": 3.0, "logdet_accuracy": 20.0},
+        "crlb": {"parse": 1.0, "fim_build": 2.0, "crlb_blocks": 18.0, "accuracy": 1.5, "curvature": 3.0},
+    }
+    for command, times in reported.items():
+        text, total = scaling.phases(command, json.dumps({"times": times}))
+        assert total == sum(times.values()), command
+        assert all(name in text for name in times), command
