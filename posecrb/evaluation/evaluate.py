@@ -96,7 +96,7 @@ def evaluate(graph: PoseGraph, settings: EvaluationSettings, *, step: Callable[[
         # how many digits of it to trust, with the last run's factor: a stage of its own (a selected
         # inversion, about twice the factorization's flops)
         t0 = time.perf_counter()
-        accuracy = logdet_accuracy(fim.matrix, factor[0], ld, "paper FIM")
+        accuracy = logdet_accuracy(factor[0], ld, "paper FIM")
         accuracy_seconds = time.perf_counter() - t0
     except PosecrbError as exc:
         if errors != "keep":

@@ -12,7 +12,6 @@ from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
-import scipy.sparse as sp
 
 from ..core.status import OK, Status
 
@@ -75,16 +74,16 @@ class LogdetAccuracy:
         return {"condition": self.condition, "error_bound": self.error_bound, **self.status.as_json()}
 
 
-def logdet_accuracy(a: sp.spmatrix, factor: Any, logdet: float, name: str = "matrix") -> LogdetAccuracy:
-    """``LogdetAccuracy`` of ``logdet`` computed from ``factor`` (a Cholesky factor of ``a``): one
+def logdet_accuracy(factor: Any, logdet: float, name: str = "matrix") -> LogdetAccuracy:
+    """``LogdetAccuracy`` of ``logdet`` computed from ``factor`` (a Cholesky factor; None for an empty
+    matrix): the bound reads the factor only, never the matrix itself. One
     selected inversion that also sums ``|Z| (|L| |L^T|)`` supernode by supernode (dense products
     of the blocks it forms anyway, never the product ``|L| |L^T|`` itself), about twice the flops
     of the factorization, no other factorization."""
     from ..core.errors import NumericalError  # noqa: PLC0415
     from .selinv import SelectedInverse  # noqa: PLC0415 -- import cycle: selinv builds on cholesky
 
-    n = a.shape[0]
-    if n == 0 or factor is None:
+    if factor is None or factor.P().size == 0:
         return LogdetAccuracy(0.0, 0.0)
     eps = float(np.finfo(float).eps)
     try:
