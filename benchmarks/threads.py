@@ -17,14 +17,21 @@ settings run by run, each in a fresh process:
            BLAS at 1 thread or at every core (SymbolicCholesky's ``threaded``, which the library
            sets only for the block matrices of 3D graphs >= 10,000 poses and 2D >= 50,000)
 
+  greedy   posecrb.selection.select_edges(load(FILE), --budget) with the tree objective (the
+           incremental greedy; after a warm-up selection of 10 edges that compiles the kernels):
+           "1" with every step fused in one compiled call on one thread, "library" as posecrb runs
+           it (each step on two threads of its own when two cores are free and the factor splits,
+           posecrb.selection.greedy): wall and CPU seconds, the select stage, the refreshes and
+           the value (the same bit for bit)
+
   load     the solver's M_red factorization (median of 3 per process), next to ``--hogs K``
            processes that never sleep (started for the whole run): "1" thread, "all" threads,
            and "library", the library's choice (posecrb.linalg.threads.load_aware_threads: the
            threads of CHOLMOD's BLAS, fewer when other processes keep cores busy); e.g.
            ``--what load --dim 3 --poses 20000 --hogs 1`` and the same with ``--hogs 0``
 
-Usage: python benchmarks/threads.py [--dim 2] [--poses 30000] [--rounds 2] [--what solve,selinv,logdet,load]
-       [--hogs K] [--absolute-terms]
+Usage: python benchmarks/threads.py [--dim 2] [--poses 30000] [--rounds 2]
+       [--what solve,selinv,logdet,greedy,load] [--hogs K] [--absolute-terms] [--budget K|P%]
 """
 from __future__ import annotations
 
@@ -61,6 +68,26 @@ if what == "solve":
     r = solve(g)
     out = {"wall": time.perf_counter() - t, "cpu": time.process_time() - c, "objective": r.objective,
            "hvp": r.hessian_vector_products, "certified": r.certified}
+elif what == "greedy":
+    import posecrb.selection.greedy as sel
+    from posecrb.selection.select import select_edges
+    if threads == "1":
+        sel._two_threads_allowed = lambda k: False
+    select_edges(g, 10)
+    t, c = time.perf_counter(), time.process_time()
+    r = select_edges(g, os.environ["BENCH_BUDGET"])
+    out = {"wall": time.perf_counter() - t, "cpu": time.process_time() - c, "value": r.value,
+           "select": r.times["select"], "refreshes": r.stats["refreshes"], "steps": r.budget}
+    # the factor the greedy updates (the full graph's pattern) and where its tree splits
+    import numpy as np
+    from posecrb.selection import tree_objective
+    pathchol, kernels = sel._compiled()
+    obj = tree_objective(g)
+    pf = pathchol.PathFactor(obj.evaluate(np.ones(g.m)).data[0])
+    top, mid = kernels.subtree_split(pf.indptr, pf.indices, pf.parent, sel.SPLIT_SHARE)
+    out["factor"] = {"blocks": len(obj.blocks), "entries": int(pf.indptr[-1]), "columns": pf.n,
+                     "trunk": pf.n - top if top >= 0 else None,
+                     "trunk_entries": int(pf.indptr[-1] - pf.indptr[top]) if top >= 0 else None}
 elif what == "load":
     import contextlib, statistics
     from posecrb.linalg import cholesky, threads as th
@@ -130,6 +157,7 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--hogs", type=int, default=0, help="busy processes next to the measured ones (--what load)")
     ap.add_argument("--absolute-terms", action="store_true",
                     help="--what selinv: also sum the log-det's accuracy bound (as fim and bounds do)")
+    ap.add_argument("--budget", default="2000", help="--what greedy: edges to select (K or P%%)")
     ap.add_argument("--cache-dir", default=None)
     args = ap.parse_args(argv)
     path = grid_file(args.dim, args.poses, directory=args.cache_dir)
@@ -146,12 +174,14 @@ def main(argv: list[str] | None = None) -> int:
 
 def _measure(args: argparse.Namespace, path: Path) -> None:
     for what in args.what.split(","):
-        settings = ("1", "all", "library") if what in ("load", "selinv") else ("1", "all")
+        settings = (("1", "all", "library") if what in ("load", "selinv") else ("1", "library") if what == "greedy"
+                    else ("1", "all"))
         runs: dict[str, list[dict]] = {s: [] for s in settings}
         for k in range(args.rounds):
             for threads in (settings if k % 2 == 0 else settings[::-1]):
                 env = child_env(threads=None)
                 env["BENCH_ABSOLUTE_TERMS"] = "1" if args.absolute_terms else "0"
+                env["BENCH_BUDGET"] = args.budget
                 load = os.getloadavg()[0]
                 r = subprocess.run([sys.executable, "-c", CHILD, what, str(path), threads], env=env,
                                    capture_output=True, text=True, check=False)
@@ -162,7 +192,14 @@ def _measure(args: argparse.Namespace, path: Path) -> None:
                 d["load"] = load
                 runs[threads].append(d)
                 extra = (f", {d['hvp']} HVPs, objective {d['objective']:.10g}" if what == "solve" else
-                         f", absolute terms {d['terms']:.10g}" if d.get("terms") is not None else "")
+                         f", absolute terms {d['terms']:.10g}" if d.get("terms") is not None else
+                         f", {d['steps']} steps, select {d['select']:.2f} s, {d['refreshes']} refreshes, "
+                         f"value {d['value']!r}" if what == "greedy" else "")
+                if what == "greedy" and k == 0 and threads == settings[0]:
+                    f = d["factor"]
+                    print(f"  factor: {f['blocks']} Laplacian block(s), {f['entries']:,} entries in {f['columns']:,} "
+                          f"columns; trunk above the two subtrees: "
+                          + (f"{f['trunk']:,} columns, {f['trunk_entries']:,} entries" if f["trunk"] else "none"))
                 if what == "selinv" and k == 0 and threads == settings[0]:
                     g = d["gflop"]
                     print(f"  wide supernodes: {g['inversion']:.1f} Gflop of inversion "

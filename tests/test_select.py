@@ -30,6 +30,7 @@ from posecrb.selection import (
     tree_objective,
 )
 from posecrb.selection.relaxation import project_capped_simplex, projected_gradient
+from posecrb.sim.generators import grid
 from posecrb.solver.estimate import from_vertices
 
 from .helpers import dense_model_fisher, random_rotations, random_spd
@@ -322,6 +323,65 @@ def test_incremental_greedy_refresh_does_not_change_the_choice(monkeypatch, unif
     assert b.stats["refreshes"] > 1
     assert a.order.tolist() == b.order.tolist()
     assert a.certificate.submodular_bound == pytest.approx(b.certificate.submodular_bound, rel=1e-10)
+
+
+def test_two_thread_steps_choose_what_the_fused_kernel_chooses(monkeypatch):
+    """The one-Laplacian greedy's steps on two threads (the backward substitution's two subtrees,
+    the candidates' two halves) against the fused compiled steps, whose choices the tests above
+    check against the other engines and dense values: the same order, gains and bound bit for bit,
+    across a refresh, on a grid whose nested-dissection factor splits in two."""
+    import posecrb.selection.greedy as sel
+
+    g = grid(2, 70, noise=True, rng=1)      # 4,900 poses: the selection's analysis takes METIS
+    g = replace(g, info=g.info * (1.0 + 0.5 * np.random.default_rng(4).random(g.m))[:, None, None])
+    used = []
+    two_threads = sel._steps_two_threads
+    monkeypatch.setattr(sel, "_steps_two_threads", lambda *a: used.append(a[3]) or two_threads(*a))
+    monkeypatch.setattr(sel, "THREADED_FACTOR_ENTRIES", 0)
+    monkeypatch.setattr(sel, "_two_threads_allowed", lambda k: True)
+    threaded = select_edges(g, 300)          # more than REFRESH_EVERY steps: one refresh on the way
+    assert used and all(top > mid > 0 for top, mid in used)
+    assert threaded.stats["refreshes"] == 2
+    monkeypatch.setattr(sel, "_two_threads_allowed", lambda k: False)
+    count = len(used)
+    fused = select_edges(g, 300)
+    assert len(used) == count
+    assert threaded.order.tolist() == fused.order.tolist()
+    assert threaded.value == fused.value
+    assert threaded.certificate.submodular_bound == fused.certificate.submodular_bound
+
+
+def _closed_pattern(parent: list[int]) -> tuple[np.ndarray, np.ndarray]:
+    """CSC pattern of a Cholesky factor whose column j holds j and all its ancestors."""
+    cols = []
+    for j in range(len(parent)):
+        rows, a = [j], parent[j]
+        while a != -1:
+            rows.append(a)
+            a = parent[a]
+        cols.append(rows)
+    indptr = np.cumsum([0] + [len(c) for c in cols]).astype(np.int64)
+    return indptr, np.concatenate(cols).astype(np.int64)
+
+
+def test_subtree_split_finds_the_two_halves_below_the_trunk():
+    from posecrb.selection._kernels import subtree_split
+
+    # two subtrees {0, 1, 2} and {3, 4, 5} below the trunk 6 <- 7
+    parent = [2, 2, 6, 5, 5, 6, 7, -1]
+    indptr, indices = _closed_pattern(parent)
+    par = np.array(parent, dtype=np.int64)
+    assert subtree_split(indptr, indices, par, 0.25) == (6, 3)
+    assert subtree_split(indptr, indices, par, 0.5) == (-1, -1)          # halves too small
+    # a column of the first half with a row in the second: not independent
+    cross = np.insert(indices, indptr[1], 4)
+    assert subtree_split(indptr + (np.arange(indptr.size) >= 2), cross, par, 0.25) == (-1, -1)
+    for other in ([1, 2, 3, 4, 5, 6, 7, -1],            # a path: no node with two children
+                  [2, 2, 6, 5, 5, 6, -1, -1],           # two roots
+                  [2, 2, 7, 5, 5, 7, 7, -1],            # three children below the trunk
+                  [4, 4, 5, 5, 6, 6, 7, -1]):           # not postordered: subtrees interleave
+        indptr, indices = _closed_pattern(other)
+        assert subtree_split(indptr, indices, np.array(other, dtype=np.int64), 0.0) == (-1, -1)
 
 
 def test_lazy_greedy_with_random_projections_reports_exact_values():

@@ -165,3 +165,25 @@ def test_python_blas_usable_threads_follow_the_enclosing_limit_and_the_load(monk
         assert threads.python_blas_usable_threads() == 2
         monkeypatch.setattr(threads, "busy_cores", lambda: 1)
         assert threads.python_blas_usable_threads() == 1
+
+
+def test_own_usable_threads_follow_the_load_and_stay_off_in_pool_workers(monkeypatch):
+    monkeypatch.setattr(threads, "_cores", lambda: 2)
+    monkeypatch.setattr(threads, "busy_cores", lambda: 0)
+    assert threads.own_usable_threads() == 2
+    monkeypatch.setattr(threads, "busy_cores", lambda: 1)
+    assert threads.own_usable_threads() == 1
+    monkeypatch.setattr(threads, "busy_cores", lambda: 0)
+    monkeypatch.setattr(threads, "_IN_POOL_WORKER", True)   # what single_threaded_worker sets
+    assert threads.own_usable_threads() == 1
+    monkeypatch.setattr(threads, "_IN_POOL_WORKER", False)
+    monkeypatch.setattr(threads, "_cores", lambda: 1)
+    assert threads.own_usable_threads() == 1
+
+
+def test_single_threaded_worker_turns_posecrb_threads_off():
+    """In a real pool worker (the initializer of every --jobs pool), not a flag set by hand."""
+    from concurrent.futures import ProcessPoolExecutor
+
+    with ProcessPoolExecutor(1, initializer=threads.single_threaded_worker) as pool:
+        assert pool.submit(threads.own_usable_threads).result() == 1

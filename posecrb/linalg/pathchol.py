@@ -93,12 +93,14 @@ def _backward(indptr, indices, lval, y):  # pragma: no cover - compiled
 
 
 @njit(cache=True, nogil=True)
-def _backward1(indptr, indices, lval, y):  # pragma: no cover - compiled
-    """``_backward`` for one column (n,). Kept apart: this pass over the whole factor is the scalar
-    greedy's hottest loop, and the r-column kernel with r = 1 made ``select --objective tree`` on
-    city10000 about 1.8x slower (measured; the forward pass, along the reach only, showed no
-    difference and is shared)."""
-    for j in range(indptr.shape[0] - 2, -1, -1):
+def _backward1(indptr, indices, lval, y, lo, hi):  # pragma: no cover - compiled
+    """``_backward`` for one column (n,), columns ``hi - 1`` down to ``lo`` (0 and n: all of them).
+    Kept apart: this pass over the whole factor is the scalar greedy's hottest loop, and the
+    r-column kernel with r = 1 made ``select --objective tree`` on city10000 about 1.8x slower
+    (measured; the forward pass, along the reach only, showed no difference and is shared). A range
+    of columns reads ``y`` only on its own columns and their ancestors', so once the columns above
+    two disjoint subtrees of the elimination tree are done, the two subtrees can run at once."""
+    for j in range(hi - 1, lo - 1, -1):
         acc = y[j]
         for q in range(indptr[j] + 1, indptr[j + 1]):
             acc -= lval[q] * y[indices[q]]
@@ -187,7 +189,7 @@ def _solve1(indptr, indices, lval, parent, iperm, rows, valid, u, mark):  # prag
             y[iperm[rows[a]]] += u[a, 0]
     path = _reach(parent, _valid_rows(iperm, rows, valid), mark, 1)
     _forward(indptr, indices, lval, path, y.reshape(n, 1))
-    _backward1(indptr, indices, lval, y)
+    _backward1(indptr, indices, lval, y, 0, indptr.shape[0] - 1)
     return y
 
 

@@ -25,8 +25,11 @@ directory), which does posecrb's own small dense products.
   supernodes of at least 10^9 flops (the top separators of large graphs, nearly all of its flops
   there) run it on the cores no other process keeps busy (``python_blas_usable_threads``).
 
-Process pools run each worker with every pool at one thread (``single_threaded_worker``), so
-``--jobs`` workers never oversubscribe the cores.
+* posecrb's own threads (the scalar greedy's two halves, posecrb.selection.greedy) take the cores
+  no other process keeps busy (``own_usable_threads``).
+
+Process pools run each worker with every pool at one thread (``single_threaded_worker``), and
+posecrb's own threads off, so ``--jobs`` workers never oversubscribe the cores.
 
 Rounding: a threaded BLAS splits a product into blocks by thread, so a factorization's last bits
 can depend on the number of threads (never on the run: for a fixed count the blocking, hence the
@@ -43,6 +46,9 @@ import sys
 import time
 from collections.abc import Iterator
 from typing import Any
+
+# Set in a process pool's worker (``single_threaded_worker``): posecrb's own threads stay off there.
+_IN_POOL_WORKER = False
 
 # Threads of CHOLMOD's BLAS inside ``factorization_threads`` (None: leave them as they are).
 _FACTOR_THREADS: contextvars.ContextVar[int | None] = contextvars.ContextVar("factor_threads", default=None)
@@ -172,6 +178,17 @@ def python_blas_usable_threads() -> int:
     return 1 if threads <= 1 else usable_threads(threads, _cores(), busy_cores())
 
 
+def own_usable_threads() -> int:
+    """Threads for posecrb's own parallel steps (Python threads around compiled kernels that
+    release the GIL: the scalar greedy of posecrb.selection.greedy): the cores no other process
+    keeps busy, and 1 in a process pool's worker (``single_threaded_worker``), whose pool already
+    shares the cores out."""
+    if _IN_POOL_WORKER:
+        return 1
+    cores = _cores()
+    return usable_threads(cores, cores, busy_cores()) if cores > 1 else 1
+
+
 def cholmod_single_threaded() -> Any:
     """CHOLMOD's BLAS at one thread inside (a context manager; nothing to do when it has one)."""
     ctl = cholmod_blas()
@@ -211,8 +228,10 @@ def all_single_threaded() -> Any:
 def single_threaded_worker() -> None:
     """Initializer of a process pool's workers: every BLAS/OpenMP pool at one thread for the
     worker's life (the workers share the cores; threads inside each would oversubscribe them)."""
+    global _IN_POOL_WORKER
     import numpy  # noqa: F401, PLC0415 -- load the libraries first: threadpoolctl sets the loaded ones
     import sksparse.cholmod  # noqa: F401, PLC0415
     from threadpoolctl import threadpool_limits  # noqa: PLC0415 -- only in pool workers
 
     threadpool_limits(limits=1)
+    _IN_POOL_WORKER = True

@@ -14,8 +14,10 @@ The fiedler objective is concave in x but not submodular; its greedy is MAC's Gr
 """
 from __future__ import annotations
 
+import contextlib
 import heapq
 import math
+from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass
 from types import ModuleType
 from typing import TYPE_CHECKING, Any
@@ -43,9 +45,12 @@ _BATCH_GROWTH = 2
 # The lazy greedy seeds its queue by random projections ("auto") from this many candidates on.
 JL_FROM_CANDIDATES = 50_000
 JL_PROJECTIONS = 64
-# "auto" greedy strategy: incremental (every gain exact at every step, O(candidates) per step)
-# unless candidates x budget x (per-edge work) exceeds this, then lazy.
-_INCREMENTAL_WORK = 2e9
+# The one-Laplacian incremental greedy runs each step on two threads (when two cores are free) from
+# this many entries of its factor on, if the elimination tree splits into two subtrees of at least
+# SPLIT_SHARE of them each (nested dissection). Below, one step takes too little for the threads'
+# hand-offs (tens of microseconds) and runs fused in one compiled call.
+THREADED_FACTOR_ENTRIES = 500_000
+SPLIT_SHARE = 0.25
 
 
 def _compiled() -> tuple[ModuleType, ModuleType]:
@@ -192,7 +197,9 @@ def incremental_greedy_scalar(obj: LogDetObjective, x: np.ndarray, cand: np.ndar
                                refresh_every: int) -> tuple[np.ndarray, GreedyStats]:
     """``incremental_greedy`` for one Laplacian block with the path engine, every step of a
     stretch fused into one compiled call (``posecrb.selection._kernels.scalar_greedy_steps``); Python only
-    between stretches: Minoux's bound on ~64 prefixes and a refresh every ``refresh_every`` steps."""
+    between stretches: Minoux's bound on ~64 prefixes and a refresh every ``refresh_every`` steps.
+    Large factors whose elimination tree splits in two run each step on two threads instead
+    (``_steps_two_threads``), with the same result bit for bit."""
 
     pathchol, kernels = _compiled()
     b = obj.blocks[0]
@@ -205,45 +212,106 @@ def incremental_greedy_scalar(obj: LogDetObjective, x: np.ndarray, cand: np.ndar
     online = math.inf
     refreshes = solves = 0
     step = 0
-    h: np.ndarray        # h, pf and prow are set by the refresh at step 0
+    h: np.ndarray        # h, pf, prow and split are set by the refresh at step 0
     pf: PathFactor
     prow: np.ndarray
+    split: tuple[int, int]
     value = 0.0
-    while step < k:
-        if step % refresh_every == 0:
-            state = obj.evaluate(x)
-            value = state.value
-            h = np.full(cand.size, -np.inf)
-            idx = np.flatnonzero(alive)
-            h[idx] = b.h_selected(state.data[0], cand[idx])[:, 0, 0]
-            pf = pathchol.PathFactor(state.data[0])
-            prow = np.ascontiguousarray(pf.iperm[rc])
-            refreshes += 1
-        if step % every == 0:
-            top = b.mult * np.log1p(np.maximum(h[alive], 0.0))
-            online = min(online, value + (float(np.partition(top, top.size - k)[top.size - k:].sum())
-                                          if top.size > k else float(top.sum())))
-        stop = min(k, (step // every + 1) * every, (step // refresh_every + 1) * refresh_every)
-        update_last = stop < k and stop % refresh_every != 0
-        pf._mark[:] = 0
-        pos, gains = kernels.scalar_greedy_steps(pf.indptr, pf.indices, pf.lval, pf.parent, prow, vc, uc, h, alive,
-                                         stop - step, b.mult, update_last, pf._mark, np.zeros(pf.n))
-        pf._mark[:] = 0
-        x[cand[pos]] = 1.0
-        chosen.append(cand[pos])
-        value += float(gains.sum())
-        solves += stop - step - (0 if update_last else 1)
-        step = stop
+    with ThreadPoolExecutor(max_workers=1) if _two_threads_allowed(k) else contextlib.nullcontext() as pool:
+        while step < k:
+            if step % refresh_every == 0:
+                state = obj.evaluate(x)
+                value = state.value
+                h = np.full(cand.size, -np.inf)
+                idx = np.flatnonzero(alive)
+                h[idx] = b.h_selected(state.data[0], cand[idx])[:, 0, 0]
+                pf = pathchol.PathFactor(state.data[0])
+                prow = np.ascontiguousarray(pf.iperm[rc])
+                split = (-1, -1)
+                if pool is not None and pf.indptr[-1] >= THREADED_FACTOR_ENTRIES:
+                    split = kernels.subtree_split(pf.indptr, pf.indices, pf.parent, SPLIT_SHARE)
+                refreshes += 1
+            if step % every == 0:
+                top = b.mult * np.log1p(np.maximum(h[alive], 0.0))
+                online = min(online, value + (float(np.partition(top, top.size - k)[top.size - k:].sum())
+                                              if top.size > k else float(top.sum())))
+            stop = min(k, (step // every + 1) * every, (step // refresh_every + 1) * refresh_every)
+            update_last = stop < k and stop % refresh_every != 0
+            pf._mark[:] = 0
+            if pool is not None and split[0] >= 0:
+                pos, gains = _steps_two_threads(kernels, pool, pf, split, prow, vc, uc, h, alive, stop - step,
+                                                b.mult, update_last)
+            else:
+                pos, gains = kernels.scalar_greedy_steps(pf.indptr, pf.indices, pf.lval, pf.parent, prow, vc, uc, h,
+                                                         alive, stop - step, b.mult, update_last, pf._mark,
+                                                         np.zeros(pf.n), 1)
+            pf._mark[:] = 0
+            x[cand[pos]] = 1.0
+            chosen.append(cand[pos])
+            value += float(gains.sum())
+            solves += stop - step - (0 if update_last else 1)
+            step = stop
     return np.concatenate(chosen), GreedyStats(solves, refreshes, k, "exact", online)
 
 
-def pick_strategy(strategy: str, n_cand: int, k: int, obj: LogDetObjective) -> str:
+def _two_threads_allowed(k: int) -> bool:
+    """Whether the scalar greedy may run its steps on two threads: more than one step, and two cores
+    that no other process keeps busy (not in a process pool's worker; posecrb.linalg.threads)."""
+    if k < 2:
+        return False
+    from ..linalg.threads import own_usable_threads  # noqa: PLC0415 -- lazy: start-up time
+
+    return own_usable_threads() >= 2
+
+
+def _steps_two_threads(kernels: ModuleType, pool: ThreadPoolExecutor, pf: PathFactor, split: tuple[int, int],
+                       prow: np.ndarray, valid: np.ndarray, u: np.ndarray, h: np.ndarray, alive: np.ndarray,
+                       nsteps: int, mult: float, update_last: bool) -> tuple[np.ndarray, np.ndarray]:
+    """``scalar_greedy_steps`` with the two parts of a step that pass over everything on two threads:
+    the backward substitution's two subtrees below the trunk (``subtree_split``: disjoint entries
+    of the work vector once the trunk is done) and the two halves of the candidates' downdate.
+    Every entry is computed by the same operations in the same order as in the fused kernel, so
+    the choices and gains are the same bit for bit. Python runs once per step here, a few compiled
+    calls that each take milliseconds on the factors this is used for (THREADED_FACTOR_ENTRIES);
+    the kernels release the GIL."""
+    from ..linalg.pathchol import _backward1  # noqa: PLC0415 -- lazy, like the kernels
+
+    top, mid = split
+    c = h.size
+    half = c // 2
+    y = np.zeros(pf.n)
+    chosen = np.empty(nsteps, np.int64)
+    gains = np.empty(nsteps)
+    for step in range(nsteps):
+        pos, he, gain = kernels.scalar_greedy_take(h, alive, mult)
+        chosen[step], gains[step] = pos, gain
+        if step == nsteps - 1 and not update_last:
+            break
+        path = kernels.scalar_greedy_solve(pf.indptr, pf.indices, pf.lval, pf.parent, prow, valid, u, pos, pf._mark,
+                                           step + 1, y, top)
+        other = pool.submit(_backward1, pf.indptr, pf.indices, pf.lval, y, mid, top)
+        _backward1(pf.indptr, pf.indices, pf.lval, y, 0, mid)
+        other.result()
+        inv = 1.0 / (1.0 + he)
+        other = pool.submit(kernels.scalar_greedy_downdate, h, alive, u, prow, valid, y, inv, half, c)
+        kernels.scalar_greedy_downdate(h, alive, u, prow, valid, y, inv, 0, half)
+        other.result()
+        kernels.scalar_greedy_update(pf.indptr, pf.indices, pf.lval, path, prow, valid, u, pos, y)
+    return chosen, gains
+
+
+def pick_strategy(strategy: str, gains: str) -> str:
+    """The greedy strategy ``auto`` stands for: the lazy greedy when its queue is to be seeded by
+    random projections (``gains="jl"``), otherwise the incremental greedy. Its step costs one solve with
+    the whole factor and one pass over the candidates, whatever the graph; the lazy greedy's costs
+    as many path solves as stale gains it re-evaluates, 30-90 per step on the shared datasets, whose
+    loop closures cluster, and about 200 on a regular grid, whose gains are nearly all equal: it was
+    the slower of the two on every graph measured (docs/performance.md, "Selection at scale")."""
     if strategy not in STRATEGIES:
         raise UsageError(f"unknown greedy strategy {strategy!r}; choose from {', '.join(STRATEGIES)}")
     if strategy != "auto":
         return strategy
-    p, r = obj.blocks[0].U.shape[1:]
-    return "incremental" if n_cand * k * p * r * r <= _INCREMENTAL_WORK else "lazy"
+    return "lazy" if gains == "jl" else "incremental"
 
 
 def lazy_greedy(obj: LogDetObjective, x: np.ndarray, cand: np.ndarray, k: int, gains: str,

@@ -144,7 +144,7 @@ def _prepare(graph: PoseGraph, budget: str | int, objective: str, fixed: str, an
 def _greedy_logdet(p: _Problem, gains: str, strategy: str, engine: str, rng: np.random.Generator) -> _Choice:
     obj = p.obj
     assert isinstance(obj, LogDetObjective)
-    strategy = pick_strategy(strategy, p.cand.size, p.k, obj)
+    strategy = pick_strategy(strategy, gains)
     mode = gains
     if mode == "auto":
         mode = "jl" if strategy == "lazy" and p.cand.size > JL_FROM_CANDIDATES else "exact"
@@ -283,7 +283,7 @@ def select_edges(graph: PoseGraph, budget: str | int, *, objective: str = "tree"
     ``estimate`` (fim only): "solve" (certified optimum of the full graph), "vertices" or a
     file; ``reference`` an already computed ``posecrb.solver.estimate.Estimate``. ``strategy`` (log-det
     greedy): "incremental" (every gain exact at every step), "lazy" (priority queue) or "auto"
-    (incremental unless candidates x budget is huge). ``gains`` (lazy only): "exact" (selected
+    (incremental; lazy with ``gains="jl"``). ``gains`` (lazy only): "exact" (selected
     inversion), "jl" (random projections seed the queue) or "auto" (jl above 50000 candidates).
     ``engine``: "path" (posecrb.linalg.pathchol) or "cholmod" (CHOLMOD update_inplace and whole-factor
     solves, for comparison). ``polish`` (fiedler relax): at most this many eigensolves of swap search
@@ -296,7 +296,9 @@ def select_edges(graph: PoseGraph, budget: str | int, *, objective: str = "tree"
     than they save and collapse when another process holds the other core (city10000, fiedler
     relax on a loaded 2-core machine: about 3x the time with two threads). threadpoolctl scans the
     libraries loaded at the call; a library loaded later (scipy's BLAS, on the first selected
-    inversion) is limited by that inversion's own call (posecrb.linalg.selinv).
+    inversion) is limited by that inversion's own call (posecrb.linalg.selinv). The tree objective's
+    incremental greedy on a large factor runs each step on two threads of its own when two cores
+    are free (``posecrb.selection.greedy``), with the same choices bit for bit.
     """
     with threadpool_limits(limits=1, user_api="blas"):
         return _select_edges(graph, budget, objective=objective, method=method, fixed=fixed, certify=certify,
