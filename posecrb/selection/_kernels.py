@@ -133,15 +133,15 @@ def scalar_greedy_update(indptr, indices, lval, path, prow, valid, u, pos, y):  
 
 @njit(cache=True, nogil=True)
 def scalar_greedy_steps(indptr, indices, lval, parent, prow, valid, u, h, alive, nsteps, mult, update_last,
-                        mark, y, first_stamp):  # pragma: no cover - compiled
+                        mark, y):  # pragma: no cover - compiled
     """``nsteps`` steps of the incremental greedy for one Laplacian block, fused (no Python per step).
 
     prow (c, p): permuted rows of the candidates' U; u (c, p); h (c,) current ``U_f^T M^{-1} U_f``
     (-inf once chosen); alive (c,). Per step: the argmax of h (first on ties), then
     ``z = M^{-1} u_e`` (forward along the reach, backward over all columns), the Woodbury
     downdate ``h_f -= (u_f . z)^2 / (1 + h_e)`` of every alive f, and the rank-one update of L.
-    ``mark`` holds no stamp from ``first_stamp`` on (one stamp per step). Returns the chosen
-    positions and their gains ``mult * log1p(h_e)``."""
+    ``mark`` holds no positive stamp (step s stamps s + 1). Returns the chosen positions and their
+    gains ``mult * log1p(h_e)``."""
     c = u.shape[0]
     chosen = np.empty(nsteps, np.int64)
     gains = np.empty(nsteps)
@@ -151,7 +151,7 @@ def scalar_greedy_steps(indptr, indices, lval, parent, prow, valid, u, h, alive,
         gains[step] = gain
         if step == nsteps - 1 and not update_last:
             break
-        path = scalar_greedy_solve(indptr, indices, lval, parent, prow, valid, u, pos, mark, first_stamp + step, y, 0)
+        path = scalar_greedy_solve(indptr, indices, lval, parent, prow, valid, u, pos, mark, step + 1, y, 0)
         scalar_greedy_downdate(h, alive, u, prow, valid, y, 1.0 / (1.0 + he), 0, c)
         scalar_greedy_update(indptr, indices, lval, path, prow, valid, u, pos, y)
     return chosen, gains

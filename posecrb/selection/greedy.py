@@ -244,7 +244,7 @@ def incremental_greedy_scalar(obj: LogDetObjective, x: np.ndarray, cand: np.ndar
             else:
                 pos, gains = kernels.scalar_greedy_steps(pf.indptr, pf.indices, pf.lval, pf.parent, prow, vc, uc, h,
                                                          alive, stop - step, b.mult, update_last, pf._mark,
-                                                         np.zeros(pf.n), 1)
+                                                         np.zeros(pf.n))
             pf._mark[:] = 0
             x[cand[pos]] = 1.0
             chosen.append(cand[pos])
