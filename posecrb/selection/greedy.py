@@ -215,7 +215,7 @@ def incremental_greedy_scalar(obj: LogDetObjective, x: np.ndarray, cand: np.ndar
     h: np.ndarray        # h, pf, prow and split are set by the refresh at step 0
     pf: PathFactor
     prow: np.ndarray
-    split: tuple[int, int]
+    split: tuple[int, int] | None = None   # depends on the factor's pattern only: the same at every refresh
     value = 0.0
     with ThreadPoolExecutor(max_workers=1) if _two_threads_allowed(k) else contextlib.nullcontext() as pool:
         while step < k:
@@ -227,9 +227,9 @@ def incremental_greedy_scalar(obj: LogDetObjective, x: np.ndarray, cand: np.ndar
                 h[idx] = b.h_selected(state.data[0], cand[idx])[:, 0, 0]
                 pf = pathchol.PathFactor(state.data[0])
                 prow = np.ascontiguousarray(pf.iperm[rc])
-                split = (-1, -1)
-                if pool is not None and pf.indptr[-1] >= THREADED_FACTOR_ENTRIES:
-                    split = kernels.subtree_split(pf.indptr, pf.indices, pf.parent, SPLIT_SHARE)
+                if split is None:
+                    split = (kernels.subtree_split(pf.indptr, pf.indices, pf.parent, SPLIT_SHARE)
+                             if pool is not None and pf.indptr[-1] >= THREADED_FACTOR_ENTRIES else (-1, -1))
                 refreshes += 1
             if step % every == 0:
                 top = b.mult * np.log1p(np.maximum(h[alive], 0.0))
@@ -238,7 +238,7 @@ def incremental_greedy_scalar(obj: LogDetObjective, x: np.ndarray, cand: np.ndar
             stop = min(k, (step // every + 1) * every, (step // refresh_every + 1) * refresh_every)
             update_last = stop < k and stop % refresh_every != 0
             pf._mark[:] = 0
-            if pool is not None and split[0] >= 0:
+            if pool is not None and split is not None and split[0] >= 0:
                 pos, gains = _steps_two_threads(kernels, pool, pf, split, prow, vc, uc, h, alive, stop - step,
                                                 b.mult, update_last)
             else:
