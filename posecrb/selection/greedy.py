@@ -302,7 +302,7 @@ def _steps_two_threads(kernels: ModuleType, pool: ThreadPoolExecutor, pf: PathFa
 
 def pick_strategy(strategy: str, gains: str) -> str:
     """The greedy strategy ``auto`` stands for: the lazy greedy when its queue is to be seeded by
-    random projections (``gains="jl"``), otherwise the incremental greedy. Its step costs one solve with
+    random projections (``gains="jl"``), otherwise the incremental greedy, whose step costs one solve with
     the whole factor and one pass over the candidates, whatever the graph; the lazy greedy's costs
     as many path solves as stale gains it re-evaluates, 30-90 per step on the shared datasets, whose
     loop closures cluster, and about 200 on a regular grid, whose gains are nearly all equal: it was
