@@ -171,8 +171,8 @@ def main() -> int:
     from threadpoolctl import threadpool_limits
 
     from posecrb.io import load
-    from posecrb.linalg._selinv_kernels import _supernodes
     from posecrb.linalg.cholesky import PermutedFactor, solve_tail
+    from posecrb.linalg.selinv import supernode_bounds
     from posecrb.solver.problem import Problem
     from posecrb.solver.solve import SolverOptions
 
@@ -195,7 +195,7 @@ def main() -> int:
         stream = np.random.default_rng(1).standard_normal(lower.data.size)
         rate = nbytes / _median(lambda: np.add.reduce(stream), args.repeat)
         converted = _median(lambda: solve_tail(factor, first, W[:, :3]), args.repeat)
-        bounds = _supernodes(lower.indptr, lower.indices)
+        bounds = supernode_bounds(lower.indptr, lower.indices)
         indptr = lower.indptr.astype(np.int64)
         perm = factor.P()
         position = np.empty_like(perm)

@@ -135,7 +135,7 @@ else:
         # flops of the wide supernodes (w columns, s rows below): the inversion's dtrsm, dpotri,
         # dsymm, dgemm; the accuracy bound's dsyrk, dlauum, dtrmm; and those of the threaded ones
         import numpy as np
-        bounds = selinv._kernels()._supernodes(sel.indptr, sel.indices)
+        bounds = selinv.supernode_bounds(sel.indptr, sel.indices)
         w = np.diff(bounds).astype(float)
         s_ = (sel.indptr[bounds[:-1] + 1] - sel.indptr[bounds[:-1]]).astype(float) - w
         wide = w >= selinv._WIDE

@@ -142,6 +142,17 @@ def test_solve_json_imports_only_what_it_needs(solvable_g2o):
     assert _loaded(modules, "scipy.sparse.linalg", "scipy.linalg") == []
 
 
+@pytest.mark.parametrize("command", ["fim", "bounds", "crlb"])
+def test_small_inversions_import_no_numba(solvable_g2o, command):
+    """The log-det's accuracy bound and the CRLB invert small factors with numpy and LAPACK
+    (posecrb.linalg.selinv's block kernels): numba's import and first call would cost more."""
+    out, modules = _run([command, str(solvable_g2o), "--format", "json"], listing=True)
+    assert out.returncode == 0, out.stderr
+    row = json.loads(out.stdout)
+    assert row["poses"] == 12
+    assert _loaded(modules, "numba") == []
+
+
 def test_select_fiedler_imports_no_numba(tmp_path):
     """lambda_2 needs no compiled kernel: numba (0.2-0.5 s) and scipy's graph and eigen modules stay
     unloaded (320 poses: the sparse path, Lanczos on the pseudo-inverse); the log-det objectives

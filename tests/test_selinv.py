@@ -123,14 +123,18 @@ def _dense_absolute_terms(factor) -> float:
     return float(np.sum(np.abs(z) * (np.abs(lower) @ np.abs(lower).T)))
 
 
-@pytest.mark.parametrize("wide", [1, 32, 10**9])     # every supernode through LAPACK, the default, none
+# numpy's block kernels (None), or the compiled ones with every supernode through LAPACK, the
+# default split, none through LAPACK
+@pytest.mark.parametrize("wide", [None, 1, 32, 10**9])
 @pytest.mark.parametrize("case", ["random", "chain", "dense"])
 def test_absolute_terms_match_the_dense_sum(monkeypatch, wide, case):
     """The log-det's componentwise condition number (posecrb.linalg.accuracy), summed supernode by
     supernode during the selected inversion, against the dense ``|Z| (|L| |L^T|)``."""
     from posecrb.linalg import selinv
 
-    monkeypatch.setattr(selinv, "_WIDE", wide)
+    monkeypatch.setattr(selinv, "_BLOCK_BUDGET_SECONDS", np.inf if wide is None else -1.0)
+    if wide is not None:
+        monkeypatch.setattr(selinv, "_WIDE", wide)
     rng = np.random.default_rng(11)
     if case == "random":
         a = random_sparse_spd(rng, 90, 0.03)
@@ -154,11 +158,13 @@ def test_absolute_terms_match_the_dense_sum(monkeypatch, wide, case):
     assert selinv.SelectedInverse(factor).absolute_terms is None
 
 
-def test_large_separators_run_threaded_with_the_same_inverse(monkeypatch):
+@pytest.mark.parametrize("block", [False, True], ids=["compiled", "block"])
+def test_large_separators_run_threaded_with_the_same_inverse(monkeypatch, block):
     """The supernodes above ``_THREADED_FLOPS`` run numpy's BLAS at the usable thread count, the rest
-    at one; the inverse and the log-det's absolute terms match the dense ones either way."""
+    at one; the inverse and the log-det's absolute terms match the dense ones either way. The
+    compiled kernels take the supernodes of at least ``_WIDE`` columns through BLAS, the block
+    kernels all of them."""
     from posecrb.linalg import selinv, threads
-    from posecrb.linalg.selinv import _kernels
 
     real = threads.python_blas
     seen: list[int] = []
@@ -181,6 +187,8 @@ def test_large_separators_run_threaded_with_the_same_inverse(monkeypatch):
     # a 2D grid of 3x3 blocks: separators 9-12 columns wide with 30-42 rows below and a root of 60
     # columns (24,000-144,000 flops of inversion each), so that some run threaded and some not
     monkeypatch.setattr(selinv, "_WIDE", 8)
+    monkeypatch.setattr(selinv, "_BLOCK_BUDGET_SECONDS", np.inf if block else -1.0)
+    wide = 0 if block else 8
     monkeypatch.setattr(selinv, "_THREADED_FLOPS", 3e4)
     side = 14
     path = sp.diags([-np.ones(side - 1), 2 * np.ones(side), -np.ones(side - 1)], [-1, 0, 1])
@@ -191,11 +199,11 @@ def test_large_separators_run_threaded_with_the_same_inverse(monkeypatch):
     sel = selinv.SelectedInverse(factor, absolute_terms=True)
     lower = factor.L()
     indptr = lower.indptr.astype(np.int64)
-    bounds = _kernels()._supernodes(indptr, lower.indices)
+    bounds = selinv.supernode_bounds(indptr, lower.indices)
     w = np.diff(bounds)
     s = indptr[bounds[:-1] + 1] - indptr[bounds[:-1]] - w
-    big = int(((w >= 8) & (2.0 * s**2 * w + 3.0 * s * w**2 + 2.0 * w**3 / 3.0 >= 3e4)).sum())
-    assert 0 < big < int((w >= 8).sum())       # both kinds of wide supernodes are exercised
+    big = int(((w >= wide) & (2.0 * s**2 * w + 3.0 * s * w**2 + 2.0 * w**3 / 3.0 >= 3e4)).sum())
+    assert 0 < big < int((w >= wide).sum())    # both kinds of BLAS supernodes are exercised
     assert seen == [1] + [2] * big              # the big ones on two threads, inside one thread
     dense = a.toarray()
     assert_within(sel.diagonal(), np.diag(np.linalg.inv(dense)), inverse_entry_atol(dense), "diagonal")

@@ -77,7 +77,20 @@ def factor_of(a: sp.csc_matrix):
 
 
 def supernode_widths(sel: SelectedInverse) -> np.ndarray:
-    return np.diff(selinv._kernels()._supernodes(sel.indptr, sel.indices))
+    return np.diff(selinv.supernode_bounds(sel.indptr, sel.indices))
+
+
+# The kernel paths: numpy's block kernels for every supernode, or the compiled kernels with
+# supernodes at least ``wide`` columns through LAPACK and the rest in the compiled loop.
+KERNEL_PATHS = {"block": None, "lapack-all": 1, "lapack-8": 8, "default": selinv._WIDE, "loop-all": 10**9}
+
+
+def use_kernel_path(monkeypatch, path: str) -> None:
+    """Force ``path`` (``KERNEL_PATHS``) on every factor, whatever its size."""
+    wide = KERNEL_PATHS[path]
+    monkeypatch.setattr(selinv, "_BLOCK_BUDGET_SECONDS", np.inf if wide is None else -1.0)
+    if wide is not None:
+        monkeypatch.setattr(selinv, "_WIDE", wide)
 
 
 def pattern_reference(sel: SelectedInverse, inv: np.ndarray) -> np.ndarray:
@@ -87,10 +100,10 @@ def pattern_reference(sel: SelectedInverse, inv: np.ndarray) -> np.ndarray:
     return inv[perm[np.asarray(sel.indices)], perm[cols]]
 
 
-@pytest.mark.parametrize("wide", [1, 8, selinv._WIDE, 10**9], ids=["lapack-all", "lapack-8", "default", "loop-all"])
+@pytest.mark.parametrize("path", sorted(KERNEL_PATHS))
 @pytest.mark.parametrize("case", sorted(CASES))
-def test_every_pattern_entry_matches_dense_inverse(case, wide, monkeypatch):
-    monkeypatch.setattr(selinv, "_WIDE", wide)
+def test_every_pattern_entry_matches_dense_inverse(case, path, monkeypatch):
+    use_kernel_path(monkeypatch, path)
     a = CASES[case](np.random.default_rng(11))
     dense = a.toarray()
     sel = SelectedInverse(factor_of(a), case)
@@ -109,7 +122,7 @@ def test_cases_cover_narrow_and_wide_supernodes_with_rows_below():
     widths = {}
     for case in ("grid2d", "grid3d"):
         sel = SelectedInverse(factor_of(CASES[case](rng)), case)
-        bounds = selinv._kernels()._supernodes(sel.indptr, sel.indices)
+        bounds = selinv.supernode_bounds(sel.indptr, sel.indices)
         w = np.diff(bounds)
         below = sel.indptr[bounds[:-1] + 1] - sel.indptr[bounds[:-1]] - w
         widths[case] = (w, below)
@@ -118,8 +131,53 @@ def test_cases_cover_narrow_and_wide_supernodes_with_rows_below():
     assert len(set(widths["grid3d"][0].tolist())) >= 5   # several supernode sizes
 
 
+def reference_supernodes(lower: sp.csc_matrix) -> list[int]:
+    """Supernode boundaries by their definition, column by column: column j + 1 continues column j's
+    supernode when its structure is column j's without row j."""
+    rows = [set(lower.indices[lower.indptr[j]:lower.indptr[j + 1]].tolist()) for j in range(lower.shape[0])]
+    return [0] + [j + 1 for j in range(lower.shape[0] - 1) if rows[j + 1] != rows[j] - {j}] + [lower.shape[0]]
+
+
+@pytest.mark.parametrize("case", sorted(CASES))
+def test_supernode_bounds_follow_the_definition(case):
+    sel = SelectedInverse(factor_of(CASES[case](np.random.default_rng(5))), case)
+    lower = sp.csc_matrix((sel.zval, sel.indices, sel.indptr), shape=(sel.n, sel.n))
+    assert selinv.supernode_bounds(sel.indptr, sel.indices).tolist() == reference_supernodes(lower)
+
+
+@pytest.mark.parametrize("n", [0, 1, 2])
+def test_supernode_bounds_of_tiny_factors(n):
+    diagonal = sp.csc_matrix(np.eye(n))
+    assert selinv.supernode_bounds(diagonal.indptr, diagonal.indices).tolist() == list(range(n + 1))
+    dense = sp.csc_matrix(np.tril(np.ones((n, n))))
+    assert selinv.supernode_bounds(dense.indptr, dense.indices).tolist() == ([0, n] if n else [0])
+
+
+@pytest.mark.parametrize("case", ["grid2d", "grid3d", "chain"])
+def test_block_kernels_are_chosen_by_their_predicted_cost(case, monkeypatch):
+    """A step per supernode and a lookup per entry of the lower triangle of each ``Z_SS`` (``s``
+    rows below a supernode: ``s (s + 1) / 2``), counted here from the definition; the block kernels
+    are taken exactly when that is within the budget."""
+    sel = SelectedInverse(factor_of(CASES[case](np.random.default_rng(5))), case)
+    lower = sp.csc_matrix((sel.zval, sel.indices, sel.indptr), shape=(sel.n, sel.n))
+    bounds = reference_supernodes(lower)
+    entries = 0
+    for first, end in zip(bounds[:-1], bounds[1:]):
+        below = len([r for r in lower.indices[lower.indptr[first]:lower.indptr[first + 1]] if r >= end])
+        entries += below * (below + 1) // 2
+    expected = selinv._BLOCK_SECONDS_PER_SUPERNODE * (len(bounds) - 1) + selinv._BLOCK_SECONDS_PER_ENTRY * entries
+    got = selinv.block_kernel_seconds(sel.indptr, np.asarray(bounds))
+    assert got == pytest.approx(expected, rel=1e-12)
+    for budget, block in ((expected * 1.01, True), (expected * 0.99, False)):
+        monkeypatch.setattr(selinv, "_BLOCK_BUDGET_SECONDS", budget)
+        kernels = selinv._inversion_kernels(sel.indptr, sel.indices, np.asarray(bounds))
+        assert isinstance(kernels, selinv._BlockKernels) is block
+
+
+@pytest.mark.parametrize("path", ["block", "default"])
 @pytest.mark.parametrize("shape", [(9, 9), (4, 4, 4)])
-def test_block_diagonal_of_lattice_fims(shape):
+def test_block_diagonal_of_lattice_fims(shape, path, monkeypatch):
+    use_kernel_path(monkeypatch, path)
     a = lattice_fim(shape, np.random.default_rng(2))
     inv = np.linalg.inv(a.toarray())
     got = inverse_block_diagonal(a, 3)
@@ -128,9 +186,11 @@ def test_block_diagonal_of_lattice_fims(shape):
     assert trace_inverse(a) == pytest.approx(np.trace(inv), rel=a.shape[0] * 10 * spd_condition(a.toarray()) * EPS)
 
 
+@pytest.mark.parametrize("path", ["block", "default"])
 @pytest.mark.parametrize("shape", [(10, 10), (20, 20), (6, 6, 6)])
 @pytest.mark.parametrize("ordering", ["metis", "amd"])
-def test_singular_laplacian_is_never_a_silent_value(shape, ordering):
+def test_singular_laplacian_is_never_a_silent_value(shape, ordering, path, monkeypatch):
+    use_kernel_path(monkeypatch, path)
     """An unanchored pose graph: its FIM is exactly singular. Rounding lets some factorizations
     through with a pivot of the order of eps; then the status must not be ok."""
     a = sp.csc_matrix(sp.kron(lattice_laplacian(shape), BLOCK))
@@ -189,16 +249,18 @@ class _GivenFactor:
         return np.arange(self._lower.shape[0])
 
 
-def test_factor_pattern_not_closed_is_an_error():
+@pytest.mark.parametrize("path", ["block", "lapack-all", "loop-all"])
+def test_factor_pattern_not_closed_is_an_error(path, monkeypatch):
+    use_kernel_path(monkeypatch, path)
     # column 0 reaches rows 1 and 2, but column 1 lacks row 2: no Cholesky factor has this pattern
     lower = np.array([[2.0, 0, 0], [0.5, 1.0, 0], [0.5, 0, 1.0]])
     with pytest.raises(NumericalError, match="not closed"):
         SelectedInverse(_GivenFactor(lower), "test matrix")
 
 
-@pytest.mark.parametrize("wide", [1, 10**9], ids=["lapack", "loop"])
-def test_non_finite_factor_is_an_error(wide, monkeypatch):
-    monkeypatch.setattr(selinv, "_WIDE", wide)
+@pytest.mark.parametrize("path", ["block", "lapack-all", "loop-all"])
+def test_non_finite_factor_is_an_error(path, monkeypatch):
+    use_kernel_path(monkeypatch, path)
     lower = np.linalg.cholesky(np.array([[4.0, 1, 0], [1, 3, 1], [0, 1, 2]]))
     lower[2, 1] = np.inf
     with pytest.raises(NumericalError, match="not finite"):

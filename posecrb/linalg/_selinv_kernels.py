@@ -24,33 +24,6 @@ except ImportError:  # pragma: no cover
 
 
 @njit(cache=True, nogil=True)
-def _supernodes(indptr, indices):  # pragma: no cover - compiled
-    """Column boundaries of the supernodes of a closed Cholesky pattern: column j+1 joins
-    column j's supernode when L[j+1, j] != 0 and |col j+1| = |col j| - 1 (then, the pattern
-    being closed, both columns have the same structure below the supernode)."""
-    n = indptr.shape[0] - 1
-    bounds = np.empty(n + 1, np.int64)
-    bounds[0] = 0
-    count = 1
-    for j in range(n - 1):
-        cj = indptr[j + 1] - indptr[j]
-        if not (cj > 1 and indices[indptr[j] + 1] == j + 1 and indptr[j + 2] - indptr[j + 1] == cj - 1):
-            bounds[count] = j + 1
-            count += 1
-    bounds[count] = n
-    return bounds[:count + 1]
-
-
-@njit(cache=True, nogil=True)
-def _column_supernodes(bounds, n):  # pragma: no cover - compiled
-    """The supernode of each column."""
-    col2sn = np.empty(n, np.int64)
-    for sidx in range(bounds.shape[0] - 1):
-        col2sn[bounds[sidx]:bounds[sidx + 1]] = sidx
-    return col2sn
-
-
-@njit(cache=True, nogil=True)
 def _row_squares(indptr, indices, val, n):  # pragma: no cover - compiled
     """``sum_k L[j, k]^2`` per row ``j``: the diagonal of ``L L^T``."""
     out = np.zeros(n)

@@ -23,9 +23,12 @@ blocks of one supernode (``Z_SS`` gathered from the ancestors, at most the facto
 Supernodes at least ``_WIDE`` columns wide, the separators near the root that carry nearly all
 the flops, go through LAPACK/BLAS (dtrsm, dpotri, dsymm, dgemm: about twice the flops of the
 factorization); the narrow ones run in a loop compiled with numba (``cache=True``; the first call
-in a process imports numba and loads the cached machine code, ~0.3 s; the kernels live in
-``posecrb.linalg._selinv_kernels``, imported only then). Without numba the same code runs as
-plain Python, correct but slow. numpy's BLAS runs with one thread (many small calls), except in the
+in a process imports numba and loads the cached machine code, 0.7-0.9 s; the kernels live in
+``posecrb.linalg._selinv_kernels``, imported only then). Small factors, whose whole inversion
+costs less than that, never load numba: ``_BlockKernels`` takes every supernode through
+LAPACK/BLAS with numpy's gathers and scatters (``block_kernel_seconds`` predicts its overhead,
+``_BLOCK_BUDGET_SECONDS`` bounds it). Without numba the compiled code runs as plain Python,
+correct but slow. numpy's BLAS runs with one thread (many small calls), except in the
 supernodes of at least ``_THREADED_FLOPS``, the top separators of large graphs, which take the cores
 no other process keeps busy (``posecrb.linalg.threads.python_blas_usable_threads``).
 Per-pose blocks of the inverse are only guaranteed in the factor's pattern when the
@@ -41,7 +44,7 @@ from types import ModuleType
 import numpy as np
 import scipy.sparse as sp
 
-from ..core.errors import NumericalError, UsageError
+from ..core.errors import InternalError, NumericalError, UsageError
 from ..core.status import OK, Status
 from .cholesky import Factor, SymbolicCholesky
 
@@ -57,6 +60,112 @@ def _kernels():
     return _selinv_kernels
 
 
+def supernode_bounds(indptr: np.ndarray, indices: np.ndarray) -> np.ndarray:
+    """Column boundaries of the supernodes of a closed Cholesky pattern (CSC, sorted rows,
+    diagonal first): column j+1 joins column j's supernode when L[j+1, j] != 0 and
+    |col j+1| = |col j| - 1 (then, the pattern being closed, both columns have the same structure
+    below the supernode)."""
+    n = indptr.size - 1
+    if n < 2:
+        return np.arange(n + 1, dtype=np.int64)
+    count = np.diff(indptr)
+    # the entry after column j's diagonal; every column holds its diagonal, so it exists for j < n - 1
+    second = indices[np.minimum(indptr[:-2] + 1, indptr[-1] - 1)]
+    joins = (count[:-1] > 1) & (second == np.arange(1, n)) & (count[1:] == count[:-1] - 1)
+    return np.concatenate(([0], np.flatnonzero(~joins) + 1, [n])).astype(np.int64)
+
+
+class _BlockKernels:
+    """The kernels of ``posecrb.linalg._selinv_kernels`` in numpy, for small factors
+    (``_inversion_kernels``): every supernode goes through ``_wide_supernode``
+    (LAPACK/BLAS), its gathers and scatters are fancy indexing, and no supernode is left to the
+    compiled loop. The Python step per supernode (a dozen numpy and BLAS calls, 0.05-0.1 ms)
+    costs less on such factors than numba's import and first call (0.7-0.9 s) that the compiled
+    kernels need in a fresh process."""
+
+    def __init__(self, indptr: np.ndarray, indices: np.ndarray):
+        self._n = indptr.size - 1
+        # index arrays per block shape: supernodes of a pose graph repeat a few shapes
+        self._lower: dict[int, tuple[np.ndarray, np.ndarray, np.ndarray]] = {}
+        self._blocks: dict[tuple[int, int], tuple[np.ndarray, np.ndarray]] = {}
+        cols = np.repeat(np.arange(self._n, dtype=np.int64), np.diff(indptr))
+        # (column, row) of every entry as one integer: sorted, since CSC rows are sorted
+        self._keys = cols * self._n + indices
+
+    def _positions(self, rows: np.ndarray, cols: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Positions of entries (rows, cols), rows >= cols, in the factor's values, and which exist."""
+        target = cols * self._n + rows
+        pos = np.minimum(np.searchsorted(self._keys, target), self._keys.size - 1)
+        return pos, self._keys[pos] == target
+
+    def _tril(self, m: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """Rows and columns of the lower triangle of an ``m x m`` matrix, and weights 2 off the
+        diagonal and 1 on it (a symmetric matrix's sum from its lower triangle)."""
+        if m not in self._lower:
+            u, b = np.tril_indices(m)
+            self._lower[m] = (u, b, np.where(u == b, 1.0, 2.0))
+        return self._lower[m]
+
+    def _block(self, indptr: np.ndarray, j0: int, w: int, s: int) -> tuple[np.ndarray, np.ndarray]:
+        """Positions of the supernode's dense ``(w + s, w)`` block ``[L_JJ; L_SJ]`` in the values
+        and the mask of its stored (lower) part: column c holds rows c.. of the block."""
+        if (w, s) not in self._blocks:
+            r = np.arange(w + s)[:, None]
+            c = np.arange(w)
+            self._blocks[w, s] = (r - c, r >= c)
+        offset, stored = self._blocks[w, s]
+        return np.maximum(indptr[j0:j0 + w] + offset, 0), stored
+
+    @staticmethod
+    def _row_squares(indptr: np.ndarray, indices: np.ndarray, val: np.ndarray, n: int) -> np.ndarray:
+        return np.bincount(indices, weights=val * val, minlength=n)
+
+    @staticmethod
+    def _count_nonfinite(val: np.ndarray) -> int:
+        return int(np.count_nonzero(~np.isfinite(val)))
+
+    @staticmethod
+    def _takahashi_range(indptr: np.ndarray, indices: np.ndarray, val: np.ndarray, bounds: np.ndarray,
+                         col2sn: np.ndarray, hi: int, lo: int, posbuf: np.ndarray, terms: np.ndarray) -> int:
+        if hi != lo:
+            raise InternalError("the block kernels leave no supernode to the compiled loop")
+        return 0
+
+    def _gather_l(self, indptr: np.ndarray, val: np.ndarray, j0: int, w: int, s: int, ljj: np.ndarray,
+                  lsj: np.ndarray) -> None:
+        pos, stored = self._block(indptr, j0, w, s)
+        block = np.where(stored, val[pos], 0.0)
+        ljj[:] = block[:w]
+        lsj[:] = block[w:]
+
+    def _scatter(self, indptr: np.ndarray, val: np.ndarray, j0: int, w: int, s: int, zjj: np.ndarray,
+                 zsj: np.ndarray) -> None:
+        pos, stored = self._block(indptr, j0, w, s)
+        val[pos[stored]] = np.concatenate((zjj, zsj))[stored]
+
+    def _gather_zss(self, indptr: np.ndarray, indices: np.ndarray, val: np.ndarray, bounds: np.ndarray,
+                    col2sn: np.ndarray, j0: int, w: int, s: int, zss: np.ndarray, posbuf: np.ndarray,
+                    mirror: bool) -> int:
+        rows = np.asarray(indices[indptr[j0] + w: indptr[j0] + w + s], dtype=np.int64)
+        u, b, _ = self._tril(s)
+        pos, found = self._positions(rows[u], rows[b])
+        if not found.all():
+            return j0 + 1
+        zss[u, b] = val[pos]
+        if mirror:
+            zss[b, u] = val[pos]
+        return 0
+
+    def _abs_lower_dot(self, z: np.ndarray, v: np.ndarray) -> float:
+        u, b, weight = self._tril(z.shape[0])
+        return float((np.abs(z[u, b]) * v[u, b]) @ weight)
+
+    def _lookup(self, indptr: np.ndarray, indices: np.ndarray, zval: np.ndarray, rows: np.ndarray,
+                cols: np.ndarray) -> np.ndarray:
+        pos, found = self._positions(rows, cols)
+        return np.where(found, zval[pos], np.nan)
+
+
 # Supernodes at least this wide go through LAPACK/BLAS from Python (triangular solve, dpotri,
 # symmetric product), one call each; narrower ones run inside one compiled loop. On nested-
 # dissection orderings of pose graphs the wide ones are the few hundred separators near the root
@@ -69,6 +178,15 @@ _WIDE = 32
 # they save.
 _THREADED_FLOPS = 1e9
 
+# A factor is inverted without numba (``_BlockKernels``) when the block kernels' overhead is
+# predicted to cost at most ``_BLOCK_BUDGET_SECONDS``: a Python step per supernode and a lookup per
+# entry of the ``Z_SS`` blocks it gathers, measured on the shared datasets' FIMs (`python
+# benchmarks/selinv_paths.py`, docs/performance.md). numba's import and first call cost 0.7-0.9 s
+# in a fresh process, so below the budget the block kernels are the faster path of a command.
+_BLOCK_SECONDS_PER_SUPERNODE = 60e-6
+_BLOCK_SECONDS_PER_ENTRY = 200e-9
+_BLOCK_BUDGET_SECONDS = 0.3
+
 
 def _supernode_flops(w: np.ndarray, s: np.ndarray) -> np.ndarray:
     """Flops of ``_wide_supernode`` without the accuracy sum for ``w`` columns with ``s`` rows below:
@@ -76,8 +194,9 @@ def _supernode_flops(w: np.ndarray, s: np.ndarray) -> np.ndarray:
     return 2.0 * s * s * w + 3.0 * s * w * w + 2.0 * w ** 3 / 3.0
 
 
-def _wide_supernode(k: ModuleType, indptr: np.ndarray, indices: np.ndarray, val: np.ndarray, bounds: np.ndarray,
-                    col2sn: np.ndarray, sn: int, posbuf: np.ndarray, terms: np.ndarray) -> str | None:
+def _wide_supernode(k: ModuleType | _BlockKernels, indptr: np.ndarray, indices: np.ndarray, val: np.ndarray,
+                    bounds: np.ndarray, col2sn: np.ndarray, sn: int, posbuf: np.ndarray,
+                    terms: np.ndarray) -> str | None:
     """The block Takahashi step of supernode ``sn`` through LAPACK/BLAS, in place on ``val``
     (see ``_selinv_kernels._takahashi_range``): ``Y = L_SJ L_JJ^{-1}`` (dtrsm),
     ``(L_JJ L_JJ^T)^{-1}`` (dpotri, a third of the flops of an explicit inverse and product),
@@ -125,22 +244,47 @@ def _wide_supernode(k: ModuleType, indptr: np.ndarray, indices: np.ndarray, val:
     return None
 
 
+def _inversion_kernels(indptr: np.ndarray, indices: np.ndarray, bounds: np.ndarray) -> ModuleType | _BlockKernels:
+    """The kernels for a factor with supernodes ``bounds``: numpy's (``_BlockKernels``) where
+    ``block_kernel_seconds`` is within ``_BLOCK_BUDGET_SECONDS``, the compiled ones otherwise. The
+    choice depends on the factor alone, so one matrix always gets the same digits."""
+    if block_kernel_seconds(indptr, bounds) <= _BLOCK_BUDGET_SECONDS:
+        return _BlockKernels(indptr, indices)
+    return _kernels()
+
+
+def block_kernel_seconds(indptr: np.ndarray, bounds: np.ndarray) -> float:
+    """Predicted overhead of ``_BlockKernels`` on a factor (CSC ``indptr``, supernodes ``bounds``):
+    a Python step per supernode and a lookup per entry of the lower triangles of the ``Z_SS``
+    blocks, ``s (s + 1) / 2`` for a supernode with ``s`` rows below it."""
+    width = np.diff(bounds)
+    below = (indptr[bounds[:-1] + 1] - indptr[bounds[:-1]] - width).astype(float)
+    entries = float(np.sum(below * (below + 1) / 2))
+    return _BLOCK_SECONDS_PER_SUPERNODE * width.size + _BLOCK_SECONDS_PER_ENTRY * entries
+
+
 def _takahashi_inplace(indptr: np.ndarray, indices: np.ndarray, val: np.ndarray,
-                       terms: np.ndarray | None = None) -> str | None:
+                       terms: np.ndarray | None = None, bounds: np.ndarray | None = None,
+                       k: ModuleType | _BlockKernels | None = None) -> str | None:
     """Overwrite ``val`` (the values of ``L``, CSC with sorted rows, diagonal first) with
     ``Z = (L L^T)^{-1}`` on the same pattern: supernode by supernode from the root down, the
     wide ones through LAPACK (``_wide_supernode``), runs of narrow ones in one compiled call.
     In place because supernode ``J`` reads only its own ``L`` and its ancestors' ``Z``: no
     second array of the factor's size. ``terms`` (one entry): accumulates
     ``sum_ij |Z_ij| (|L| |L^T|)_ij`` on the way (``SelectedInverse.absolute_terms``). Returns None
-    or why it failed."""
-    k = _kernels()
+    or why it failed. ``bounds`` (``supernode_bounds``) and ``k`` (``_inversion_kernels``) are
+    computed here when not given. With the block kernels every supernode is a step of the Python
+    loop below; they are only chosen where ``block_kernel_seconds`` bounds those steps (at most
+    ``_BLOCK_BUDGET_SECONDS / _BLOCK_SECONDS_PER_SUPERNODE`` = 5000), so the loop does not grow
+    with the dataset."""
     terms = np.zeros(0) if terms is None else terms
     n = indptr.size - 1
-    bounds = k._supernodes(indptr, indices)
-    col2sn = k._column_supernodes(bounds, n)
+    bounds = supernode_bounds(indptr, indices) if bounds is None else bounds
+    k = _inversion_kernels(indptr, indices, bounds) if k is None else k
+    col2sn = np.repeat(np.arange(bounds.size - 1, dtype=np.int64), np.diff(bounds))
     posbuf = np.empty(n, np.int64)
-    wide = np.flatnonzero(np.diff(bounds) >= _WIDE)
+    # the block kernels take every supernode through LAPACK; the compiled ones the wide ones only
+    wide = np.flatnonzero(np.diff(bounds) >= (_WIDE if isinstance(k, ModuleType) else 0))
     hi = bounds.size - 1
     # The largest separators run on every core no other process keeps busy (3D grid of 21,952
     # poses: the supernodes of at least 10^9 flops carry nearly all of the inversion's flops)
@@ -219,11 +363,13 @@ class SelectedInverse:
         self.indices = lower.indices
         zval = np.require(lower.data, dtype=np.float64, requirements=["C", "W"])
         del lower
-        a_diag = _kernels()._row_squares(self.indptr, self.indices, zval, self.perm.size)   # diag(L L^T)
+        bounds = supernode_bounds(self.indptr, self.indices)
+        self._kernels = _inversion_kernels(self.indptr, self.indices, bounds)
+        a_diag = self._kernels._row_squares(self.indptr, self.indices, zval, self.perm.size)   # diag(L L^T)
         terms = np.zeros(1 if absolute_terms else 0)
-        why = _takahashi_inplace(self.indptr, self.indices, zval, terms)
+        why = _takahashi_inplace(self.indptr, self.indices, zval, terms, bounds, self._kernels)
         if why is None:
-            bad = int(_kernels()._count_nonfinite(zval))
+            bad = int(self._kernels._count_nonfinite(zval))
             if bad:
                 why = f"{bad} entries of the selected inverse are not finite"
             else:
@@ -249,7 +395,7 @@ class SelectedInverse:
         """(A^{-1})[rows, cols] (original ordering); NaN where not in the factor's pattern."""
         a = self.iperm[np.asarray(rows, dtype=np.int64)]
         b = self.iperm[np.asarray(cols, dtype=np.int64)]
-        return _kernels()._lookup(self.indptr, self.indices, self.zval, np.maximum(a, b), np.minimum(a, b))
+        return self._kernels._lookup(self.indptr, self.indices, self.zval, np.maximum(a, b), np.minimum(a, b))
 
 
 def _block_pattern_padded(a: sp.spmatrix, block: int) -> sp.csc_matrix:
