@@ -1,7 +1,8 @@
 """The numba kernels of ``posecrb.linalg.selinv`` (selected inversion by the Takahashi recurrences).
 
 A module of their own so that importing ``posecrb.linalg.selinv`` (and the models that use it)
-does not import numba: ``selinv`` imports this module on the first inversion. Compiled with
+does not import numba: ``selinv`` imports this module on the first inversion of a factor too
+large for its numpy block kernels (``selinv.block_kernel_seconds``). Compiled with
 ``cache=True``: the first call in a process loads the cached machine code.
 """
 from __future__ import annotations
