@@ -146,14 +146,14 @@ class _BlockKernels:
     def _gather_zss(self, indptr: np.ndarray, indices: np.ndarray, val: np.ndarray, bounds: np.ndarray,
                     col2sn: np.ndarray, j0: int, w: int, s: int, zss: np.ndarray, posbuf: np.ndarray,
                     mirror: bool) -> int:
+        if mirror:   # only the compiled loop reads the upper triangle; _wide_supernode never asks
+            raise InternalError("the block kernels gather the lower triangle of Z_SS only")
         rows = np.asarray(indices[indptr[j0] + w: indptr[j0] + w + s], dtype=np.int64)
         u, b, _ = self._tril(s)
         pos, found = self._positions(rows[u], rows[b])
         if not found.all():
             return j0 + 1
         zss[u, b] = val[pos]
-        if mirror:
-            zss[b, u] = val[pos]
         return 0
 
     def _abs_lower_dot(self, z: np.ndarray, v: np.ndarray) -> float:
