@@ -237,6 +237,16 @@ def main(argv: list[str] | None = None) -> int:
         return d
 
     names = [c.strip() for c in args.candidates.split(",") if c.strip()]
+    kinds = {c.split("/")[0] for c in CANDIDATES} | {"pose-metis-relax"}
+    unknown = [n for n in names if n.count("/") != 1 or n.split("/")[0] not in kinds
+               or n.split("/")[1] not in ("1t", "all")]
+    if unknown or not names:
+        ap.error(f"unknown candidate(s) {', '.join(unknown) or '(none given)'}: KIND/1t or KIND/all with KIND one "
+                 f"of {', '.join(sorted(kinds))}")
+    if all(n.startswith("posecrb/") for n in names):
+        # posecrb's own path goes through scikit-sparse, which does not report CHOLMOD's flop count.
+        ap.error("the flop limit needs CHOLMOD's flop count: add a candidate that calls CHOLMOD directly "
+                 "(e.g. metis/all)")
     rows: dict[str, list[dict]] = {n: [] for n in names}
     rates = []
     for k in range(args.rounds):

@@ -772,8 +772,8 @@ def test_sparsify_reports_a_doubtful_crlb_trace(g2o_path, capsys, monkeypatch, s
     from posecrb.linalg.selinv import SelectedInverse
 
     class Doubtful(SelectedInverse):
-        def __init__(self, factor, name="matrix"):
-            super().__init__(factor, name)
+        def __init__(self, factor, name="matrix", **kwargs):
+            super().__init__(factor, name, **kwargs)
             self.status = Status(state, f"forced {state} of the {name}")
 
     monkeypatch.setattr(sparsify, "SelectedInverse", Doubtful)
@@ -823,3 +823,50 @@ def test_a_singular_starting_point_names_the_fixed_edges(monkeypatch):
     msg = str(exc.value)
     assert "anchored FIM of the 8 fixed edges" in msg and "(code 1)" in msg
     assert "fixed edges alone must determine every pose" in msg
+
+
+@pytest.mark.parametrize("objective,method,certify", [("tree", "relax", False), ("tree", "greedy", True),
+                                                      ("fim", "greedy", False)])
+def test_selection_inverts_with_the_compiled_kernels(monkeypatch, objective, method, certify):
+    """A selection inverts a factor per iteration: every inversion takes the compiled kernels, whose
+    one-time cost the iterations share, even where one inversion alone would take the block kernels
+    (a factor this small always would)."""
+    from posecrb.linalg import selinv
+    from posecrb.selection import objectives
+
+    kernels, alone = [], []
+    original = objectives.SelectedInverse.__init__
+
+    def spy(self, *args, **kwargs):
+        original(self, *args, **kwargs)
+        kernels.append(self._kernels)
+        bounds = selinv.supernode_bounds(self.indptr, self.indices)
+        alone.append(selinv._inversion_kernels(self.indptr, self.indices, bounds))
+
+    monkeypatch.setattr(objectives.SelectedInverse, "__init__", spy)
+    g = chain_graph(np.random.default_rng(41), n=12, extra=10, dim=2)
+    ref = from_vertices(g) if objective == "fim" else None
+    select_edges(g, "4", objective=objective, method=method, certify=certify, reference=ref, max_iter=20)
+    assert kernels, "the selection made no selected inversion"
+    assert all(k is selinv._kernels() for k in kernels)
+    # one of these factors inverted alone takes the block kernels: the check above is not vacuous
+    assert all(isinstance(k, selinv._BlockKernels) for k in alone)
+
+
+def test_sparsify_evaluates_with_the_compiled_kernels(monkeypatch):
+    """The sparsification experiment inverts a pruned graph's FIM per selection it evaluates."""
+    from posecrb.experiments import sparsify
+    from posecrb.linalg import selinv
+
+    kernels = []
+    original = sparsify.SelectedInverse.__init__
+
+    def spy(self, *args, **kwargs):
+        original(self, *args, **kwargs)
+        kernels.append(self._kernels)
+
+    monkeypatch.setattr(sparsify.SelectedInverse, "__init__", spy)
+    g = chain_graph(np.random.default_rng(31), n=14, extra=12, dim=2)
+    sparsify.sparsify_experiment(g, ["3"], "greedy,random", max_iter=20)
+    assert len(kernels) >= 2
+    assert all(k is selinv._kernels() for k in kernels)

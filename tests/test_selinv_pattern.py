@@ -172,6 +172,23 @@ def test_block_kernels_are_chosen_by_their_predicted_cost(case, monkeypatch):
         monkeypatch.setattr(selinv, "_BLOCK_BUDGET_SECONDS", budget)
         kernels = selinv._inversion_kernels(sel.indptr, sel.indices, np.asarray(bounds))
         assert isinstance(kernels, selinv._BlockKernels) is block
+        # a caller that inverts many factors takes the compiled kernels whatever the budget
+        repeated = selinv._inversion_kernels(sel.indptr, sel.indices, np.asarray(bounds), repeated=True)
+        assert repeated is selinv._kernels()
+
+
+def test_repeated_inversions_agree_with_the_dense_inverse():
+    """``repeated=True`` only changes the kernels: the same entries as the dense inverse."""
+    a = lattice_fim((6, 6), np.random.default_rng(11))
+    sel = SelectedInverse(factor_of(a), "lattice", repeated=True)
+    assert sel._kernels is selinv._kernels()
+    dense = np.linalg.inv(a.toarray())
+    n = a.shape[0]
+    rows, cols = np.tril_indices(n)
+    got = sel.entries(rows, cols)
+    known = ~np.isnan(got)
+    assert known.sum() >= n
+    assert_within(got[known], dense[rows, cols][known], inverse_entry_atol(a.toarray()), "entries")
 
 
 @pytest.mark.parametrize("path", ["block", "default"])

@@ -182,7 +182,7 @@ def _evaluate(context: dict, keep_mask: np.ndarray) -> dict:
     f, ld = SymbolicCholesky(fim.matrix).factor_logdet(fim.matrix, "pruned graph FIM")
     # A pruned graph can leave some unknowns barely observed: the trace then carries the selected
     # inverse's status (``crlb_trace_status`` beside it when not ok; None when it has no digit).
-    inverse = SelectedInverse(f, "pruned graph FIM")
+    inverse = SelectedInverse(f, "pruned graph FIM", repeated=True)   # one per selection evaluated
     out = {"tree": float(tree), "fiedler": float(lam), "fim_logdet": float(ld), "pruned": pruned}
     put(out, "crlb_trace", float(inverse.diagonal().sum()), inverse.status)
     return out

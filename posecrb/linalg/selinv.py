@@ -182,7 +182,11 @@ _THREADED_FLOPS = 1e9
 # predicted to cost at most ``_BLOCK_BUDGET_SECONDS``: a Python step per supernode and a lookup per
 # entry of the ``Z_SS`` blocks it gathers, measured on the shared datasets' FIMs (`python
 # benchmarks/selinv_paths.py`, docs/performance.md). numba's import and first call cost 0.7-0.9 s
-# in a fresh process, so below the budget the block kernels are the faster path of a command.
+# in a fresh process, so below the budget the block kernels are the faster path of a command that
+# inverts once or twice. A caller that inverts many factors in one process (a selection's
+# iterations) shares that one-time cost and takes the compiled kernels (``repeated``): with the
+# block kernels, `select --method relax` on intel took 1.63 s in-process instead of 0.20 s
+# (docs/performance.md).
 _BLOCK_SECONDS_PER_SUPERNODE = 60e-6
 _BLOCK_SECONDS_PER_ENTRY = 200e-9
 _BLOCK_BUDGET_SECONDS = 0.3
@@ -244,11 +248,13 @@ def _wide_supernode(k: ModuleType | _BlockKernels, indptr: np.ndarray, indices: 
     return None
 
 
-def _inversion_kernels(indptr: np.ndarray, indices: np.ndarray, bounds: np.ndarray) -> ModuleType | _BlockKernels:
+def _inversion_kernels(indptr: np.ndarray, indices: np.ndarray, bounds: np.ndarray,
+                       repeated: bool = False) -> ModuleType | _BlockKernels:
     """The kernels for a factor with supernodes ``bounds``: numpy's (``_BlockKernels``) where
-    ``block_kernel_seconds`` is within ``_BLOCK_BUDGET_SECONDS``, the compiled ones otherwise. The
-    choice depends on the factor alone, so one matrix always gets the same digits."""
-    if block_kernel_seconds(indptr, bounds) <= _BLOCK_BUDGET_SECONDS:
+    ``block_kernel_seconds`` is within ``_BLOCK_BUDGET_SECONDS``, the compiled ones otherwise, and
+    always the compiled ones for ``repeated`` inversions (``SelectedInverse``). The choice depends
+    on the factor and the caller alone, so one matrix always gets the same digits from a caller."""
+    if not repeated and block_kernel_seconds(indptr, bounds) <= _BLOCK_BUDGET_SECONDS:
         return _BlockKernels(indptr, indices)
     return _kernels()
 
@@ -349,9 +355,14 @@ class SelectedInverse:
     *unavailable* when it reaches ``1 / eps`` (the inverse has no correct digit) and a *warning*
     above ``WARN_CONDITION``: a cheap necessary check; callers that report an accuracy estimate
     (``posecrb.models.paper.crlb.inverse_accuracy``) keep theirs.
+
+    ``repeated``: the caller inverts many factors in one process (a selection's iterations), so the
+    compiled kernels' one-time cost is shared and they are used whatever the factor's size; by
+    default small factors are inverted without numba (``_inversion_kernels``).
 """
 
-    def __init__(self, factor: Factor, name: str = "matrix", absolute_terms: bool = False) -> None:
+    def __init__(self, factor: Factor, name: str = "matrix", absolute_terms: bool = False,
+                 repeated: bool = False) -> None:
         lower = factor.L()
         if not sp.isspmatrix_csc(lower):  # pragma: no cover - CHOLMOD returns CSC
             lower = sp.csc_matrix(lower)
@@ -364,7 +375,7 @@ class SelectedInverse:
         zval = np.require(lower.data, dtype=np.float64, requirements=["C", "W"])
         del lower
         bounds = supernode_bounds(self.indptr, self.indices)
-        self._kernels = _inversion_kernels(self.indptr, self.indices, bounds)
+        self._kernels = _inversion_kernels(self.indptr, self.indices, bounds, repeated)
         a_diag = self._kernels._row_squares(self.indptr, self.indices, zval, self.perm.size)   # diag(L L^T)
         terms = np.zeros(1 if absolute_terms else 0)
         why = _takahashi_inplace(self.indptr, self.indices, zval, terms, bounds, self._kernels)

@@ -97,7 +97,7 @@ class LogDetBlock:
     def h_selected(self, factor: Factor, edges: np.ndarray) -> np.ndarray:
         """``H_e = U_e^T M^{-1} U_e`` for many edges from one selected inversion."""
 
-        sel = SelectedInverse(factor, self.name)
+        sel = SelectedInverse(factor, self.name, repeated=True)   # one per iteration of a selection
         rows, U, valid = self.rows[edges], self.U[edges], self.valid[edges]
         k, p, _ = U.shape
         r = np.repeat(rows, p, axis=1).ravel()
