@@ -222,6 +222,17 @@ def main(argv: list[str] | None = None) -> int:
         res = dgemm_child() if args.one == "dgemm" else run_one(args.one, Path(args.matrix))
         print(json.dumps(res))
         return 0
+    names = [c.strip() for c in args.candidates.split(",") if c.strip()]
+    kinds = {c.split("/")[0] for c in CANDIDATES} | {"pose-metis-relax"}
+    unknown = [n for n in names if n.count("/") != 1 or n.split("/")[0] not in kinds
+               or n.split("/")[1] not in ("1t", "all")]
+    if unknown or not names:
+        ap.error(f"unknown candidate(s) {', '.join(unknown) or '(none given)'}: KIND/1t or KIND/all with KIND one "
+                 f"of {', '.join(sorted(kinds))}")
+    if all(n.startswith("posecrb/") for n in names):
+        # posecrb's own path goes through scikit-sparse, which does not report CHOLMOD's flop count.
+        ap.error("the flop limit needs CHOLMOD's flop count: add a candidate that calls CHOLMOD directly "
+                 "(e.g. metis/all)")
     print_header("FIM log-det candidates (benchmarks/factor_candidates.py)")
     path = matrix_path(args.grid3, args.cache_dir)
     print(f"matrix: {path} (sigma {DEFAULT_SIGMA}); cache {cache_dir(args.cache_dir)}")
@@ -236,17 +247,6 @@ def main(argv: list[str] | None = None) -> int:
         d["cpu"] = r.cpu
         return d
 
-    names = [c.strip() for c in args.candidates.split(",") if c.strip()]
-    kinds = {c.split("/")[0] for c in CANDIDATES} | {"pose-metis-relax"}
-    unknown = [n for n in names if n.count("/") != 1 or n.split("/")[0] not in kinds
-               or n.split("/")[1] not in ("1t", "all")]
-    if unknown or not names:
-        ap.error(f"unknown candidate(s) {', '.join(unknown) or '(none given)'}: KIND/1t or KIND/all with KIND one "
-                 f"of {', '.join(sorted(kinds))}")
-    if all(n.startswith("posecrb/") for n in names):
-        # posecrb's own path goes through scikit-sparse, which does not report CHOLMOD's flop count.
-        ap.error("the flop limit needs CHOLMOD's flop count: add a candidate that calls CHOLMOD directly "
-                 "(e.g. metis/all)")
     rows: dict[str, list[dict]] = {n: [] for n in names}
     rates = []
     for k in range(args.rounds):

@@ -5,6 +5,8 @@ import importlib
 import sys
 from pathlib import Path
 
+import pytest
+
 BENCHMARKS = Path(__file__).resolve().parents[1] / "benchmarks"
 
 
@@ -42,3 +44,17 @@ def test_scaling_phases_count_every_stage_the_command_times():
         text, total = scaling.phases(command, json.dumps({"times": times}))
         assert total == sum(times.values()), command
         assert all(name in text for name in times), command
+
+
+def test_factor_candidates_rejects_runs_it_cannot_report(tmp_path, capsys):
+    """An unknown candidate, or only posecrb's own (no CHOLMOD flop count, so no flop limit), is a
+    usage error before any grid is built or any candidate is factored."""
+    candidates = _module("factor_candidates")
+    for spec, message in (("metis/all,bogus/all", "unknown candidate(s) bogus/all"),
+                          ("metis/2t", "unknown candidate(s) metis/2t"),
+                          ("posecrb/all,posecrb/1t", "needs CHOLMOD's flop count")):
+        with pytest.raises(SystemExit) as exc:
+            candidates.main(["--candidates", spec, "--cache-dir", str(tmp_path)])
+        assert exc.value.code == 2
+        assert message in capsys.readouterr().err
+    assert not any(tmp_path.iterdir())   # nothing was built
