@@ -825,6 +825,24 @@ def test_a_singular_starting_point_names_the_fixed_edges(monkeypatch):
     assert "fixed edges alone must determine every pose" in msg
 
 
+def record_inversion_kernels(monkeypatch) -> tuple[list, list]:
+    """Every ``SelectedInverse`` made from now on records the kernels it took, and the kernels the
+    same factor would take alone (without ``repeated``)."""
+    from posecrb.linalg import selinv
+
+    kernels, alone = [], []
+    original = selinv.SelectedInverse.__init__
+
+    def spy(self, *args, **kwargs):
+        original(self, *args, **kwargs)
+        kernels.append(self._kernels)
+        alone.append(selinv._inversion_kernels(self.indptr, self.indices,
+                                               selinv.supernode_bounds(self.indptr, self.indices)))
+
+    monkeypatch.setattr(selinv.SelectedInverse, "__init__", spy)
+    return kernels, alone
+
+
 @pytest.mark.parametrize("objective,method,certify", [("tree", "relax", False), ("tree", "greedy", True),
                                                       ("fim", "greedy", False)])
 def test_selection_inverts_with_the_compiled_kernels(monkeypatch, objective, method, certify):
@@ -832,18 +850,8 @@ def test_selection_inverts_with_the_compiled_kernels(monkeypatch, objective, met
     one-time cost the iterations share, even where one inversion alone would take the block kernels
     (a factor this small always would)."""
     from posecrb.linalg import selinv
-    from posecrb.selection import objectives
 
-    kernels, alone = [], []
-    original = objectives.SelectedInverse.__init__
-
-    def spy(self, *args, **kwargs):
-        original(self, *args, **kwargs)
-        kernels.append(self._kernels)
-        bounds = selinv.supernode_bounds(self.indptr, self.indices)
-        alone.append(selinv._inversion_kernels(self.indptr, self.indices, bounds))
-
-    monkeypatch.setattr(objectives.SelectedInverse, "__init__", spy)
+    kernels, alone = record_inversion_kernels(monkeypatch)
     g = chain_graph(np.random.default_rng(41), n=12, extra=10, dim=2)
     ref = from_vertices(g) if objective == "fim" else None
     select_edges(g, "4", objective=objective, method=method, certify=certify, reference=ref, max_iter=20)
@@ -858,14 +866,7 @@ def test_sparsify_evaluates_with_the_compiled_kernels(monkeypatch):
     from posecrb.experiments import sparsify
     from posecrb.linalg import selinv
 
-    kernels = []
-    original = sparsify.SelectedInverse.__init__
-
-    def spy(self, *args, **kwargs):
-        original(self, *args, **kwargs)
-        kernels.append(self._kernels)
-
-    monkeypatch.setattr(sparsify.SelectedInverse, "__init__", spy)
+    kernels, _ = record_inversion_kernels(monkeypatch)
     g = chain_graph(np.random.default_rng(31), n=14, extra=12, dim=2)
     sparsify.sparsify_experiment(g, ["3"], "greedy,random", max_iter=20)
     assert len(kernels) >= 2

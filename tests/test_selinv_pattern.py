@@ -177,20 +177,6 @@ def test_block_kernels_are_chosen_by_their_predicted_cost(case, monkeypatch):
         assert repeated is selinv._kernels()
 
 
-def test_repeated_inversions_agree_with_the_dense_inverse():
-    """``repeated=True`` only changes the kernels: the same entries as the dense inverse."""
-    a = lattice_fim((6, 6), np.random.default_rng(11))
-    sel = SelectedInverse(factor_of(a), "lattice", repeated=True)
-    assert sel._kernels is selinv._kernels()
-    dense = np.linalg.inv(a.toarray())
-    n = a.shape[0]
-    rows, cols = np.tril_indices(n)
-    got = sel.entries(rows, cols)
-    known = ~np.isnan(got)
-    assert known.sum() >= n
-    assert_within(got[known], dense[rows, cols][known], inverse_entry_atol(a.toarray()), "entries")
-
-
 @pytest.mark.parametrize("path", ["block", "default"])
 @pytest.mark.parametrize("shape", [(9, 9), (4, 4, 4)])
 def test_block_diagonal_of_lattice_fims(shape, path, monkeypatch):
