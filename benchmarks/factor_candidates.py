@@ -223,7 +223,7 @@ def main(argv: list[str] | None = None) -> int:
         print(json.dumps(res))
         return 0
     names = [c.strip() for c in args.candidates.split(",") if c.strip()]
-    kinds = {c.split("/")[0] for c in CANDIDATES} | {"pose-metis-relax"}
+    kinds = {c.split("/")[0] for c in CANDIDATES}
     unknown = [n for n in names if n.count("/") != 1 or n.split("/")[0] not in kinds
                or n.split("/")[1] not in ("1t", "all")]
     if unknown or not names:
