@@ -191,6 +191,45 @@ def test_so_basis_is_orthogonal_and_skew():
         np.testing.assert_array_equal(np.einsum("axy,bxy->ab", G, G), 2.0 * np.eye(G.shape[0]))
 
 
+@pytest.mark.parametrize("dim", [2, 3])
+@pytest.mark.parametrize("extra_columns", [0, 1])
+def test_tangent_blocks_are_each_generator_times_each_block(dim, extra_columns):
+    """G_a Z_i for every pose and generator, at the first level's width and past it (the split
+    preconditioner's point): the same digits as the matrix product, which only adds zeros."""
+    rng = np.random.default_rng(40 + dim)
+    graph = random_pose_graph(9, dim, rng, loop_closures=4)[0]
+    system = TangentSystem.build(Problem.from_graph(graph))
+    Z = rng.standard_normal((9, dim, dim + extra_columns))
+    G = so_basis(dim)
+    reference = np.stack([np.stack([G[a] @ Z[i] for a in range(G.shape[0])]) for i in range(9)])
+    np.testing.assert_array_equal(system.tangent_blocks(Z), reference)
+
+
+@pytest.mark.parametrize("dim", [2, 3])
+@pytest.mark.parametrize("with_lambda", [False, True])
+def test_k_eliminates_to_the_tangent_hessian(dim, with_lambda):
+    """K's Schur complement on the tangent coordinates is E^T (S + s I) E (module docstring), against
+    the dense Q, Lambda and E at a random point."""
+    rng = np.random.default_rng(50 + dim)
+    graph = random_pose_graph(12, dim, rng, loop_closures=6, rot_noise=0.05, trans_noise=0.05)[0]
+    problem = Problem.from_graph(graph)
+    system = TangentSystem.build(problem)
+    Z = np.ascontiguousarray(np.swapaxes(random_pose_graph(12, dim, rng)[1], 1, 2))
+    lam = RelaxedModel(problem).evaluate(Z).lam if with_lambda else None
+    shift = 0.25
+    K = system.matrix(Z, lam, shift).toarray()
+    f = system.first
+    L11 = K[:f, :f]
+    schur = K[f:, f:] - K[f:, :f] @ np.linalg.solve(L11, K[:f, f:])
+    E = _dense_E(Z)
+    reference = E.T @ (_dense_S(problem, lam, dim) + shift * np.eye(E.shape[0])) @ E
+    # the elimination solves with the translation Laplacian (backward stable: cond eps relative to
+    # the eliminated term), both sides sum products of the same entries
+    scale = np.abs(K[f:, :f]).max() ** 2 / np.linalg.eigvalsh(L11)[0] + np.abs(reference).max()
+    tol = MARGIN * K.shape[0] * spd_condition(L11) * EPS * scale
+    assert np.abs(schur - reference).max() <= tol
+
+
 def test_a_graph_certified_at_the_first_level_never_factors_the_base_preconditioner(monkeypatch):
     """With the tangent preconditioner the base (Q + delta I)^{-1} is built on first use only:
     a 2D graph certified at the first level needs M_red once, for the certificate."""

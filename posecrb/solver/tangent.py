@@ -35,6 +35,7 @@ from ..linalg.cholesky import SymbolicCholesky, solve_tail
 from ..linalg.ordering import solver_symbolic
 from ..linalg.threads import factorization_threads
 from .problem import Problem
+from .stiefel import to_components
 
 
 def so_basis(d: int) -> np.ndarray:
@@ -46,22 +47,57 @@ def so_basis(d: int) -> np.ndarray:
     return G
 
 
+def generator_entries(G: np.ndarray) -> list[list[tuple[int, int, float]]]:
+    """For each generator G_a, its entries (x, u, s) with ``G_a[x, u] = s``: ``(G_a Z)[x] = s Z[u]``
+    summed over them (:func:`so_basis` gives two per generator, +-1)."""
+    return [[(int(x), int(u), float(G[a, x, u])) for x, u in zip(*np.nonzero(G[a]), strict=True)]
+            for a in range(G.shape[0])]
+
+
+def generator_traces(entries: list[list[tuple[int, int, float]]], left: np.ndarray, right: np.ndarray,
+                     middle: np.ndarray) -> np.ndarray:
+    """(k, k, nb) ``tr((G_a L_n)^T M_n (G_b R_n))`` for blocks L, R and M given component-major
+    (posecrb.solver.stiefel.to_components): ``left``, ``right`` (d, r, nb), ``middle`` (d, d, nb).
+
+    With ``P_n = L_n R_n^T`` it is ``sum G_a[x, u] G_b[y, v] M[x, y] P[u, v]``: four terms per pair
+    of generators (``entries``, :func:`generator_entries`), each a product of two length-nb
+    vectors, instead of the products through G_a L and G_b R, whose blocks are k times the size
+    (docs/performance.md).
+    """
+    d, nb = left.shape[0], left.shape[2]
+    P = np.empty((d, d, nb))
+    for u in range(d):
+        for v in range(d):
+            np.einsum("cn,cn->n", left[u], right[v], out=P[u, v])
+    k = len(entries)
+    out = np.zeros((k, k, nb))
+    for a, ea in enumerate(entries):
+        for b, eb in enumerate(entries):
+            for x, u, sa in ea:
+                for y, v, sb in eb:
+                    out[a, b] += (sa * sb) * (middle[x, y] * P[u, v])
+    return out
+
+
 @dataclass
 class TangentSystem:
     """The pattern, symbolic analysis and value map of K (module docstring) for one problem."""
 
     basis: np.ndarray              # (k, d, d)
+    entries: list[list[tuple[int, int, float]]]   # generator_entries(basis)
     symbolic: SymbolicCholesky
     pattern: sp.csc_matrix
     first: int                     # rows of K before the tangent coordinates: (n - 1) d
     lt_values: np.ndarray          # L(W^tau) (x) I_d, in the order of lt_pos
     lt_pos: np.ndarray
-    b_pos: np.ndarray              # (nb, d, k) positions of B's blocks, (nb, k, d) of B^T's
+    # The per-block data below is stored component-major (block index last, as
+    # posecrb.solver.stiefel.to_components): the kernels of ``matrix`` are length-nb vector operations.
+    b_pos: np.ndarray              # (k, d, nb) positions of B's blocks, and of B^T's
     bt_pos: np.ndarray
-    v_blocks: np.ndarray           # (nb, d) V_red[t, i*d:(i+1)*d] per block (t, i)
+    v_blocks: np.ndarray           # (d, nb) V_red[t, i*d:(i+1)*d] per block (t, i)
     v_pose: np.ndarray             # i of each block
-    d_pos: np.ndarray              # (nc, k, k) positions of D's blocks, one per d x d block of C
-    c_blocks: np.ndarray           # (nc, d, d) the blocks of C
+    d_pos: np.ndarray              # (k, k, nc) positions of D's blocks, one per d x d block of C
+    c_blocks: np.ndarray           # (d, d, nc) the blocks of C
     c_row: np.ndarray              # pose pair (i, j) of each block
     c_col: np.ndarray
     diag_block: np.ndarray         # index into the C blocks of each pose's diagonal block
@@ -114,31 +150,48 @@ class TangentSystem:
         pose_of_row = np.concatenate([np.repeat(np.arange(1, n), d), np.repeat(np.arange(n), k)])
         symbolic = solver_symbolic(pattern, d, n, mode=problem.factor_mode(d + k), pose_of_row=pose_of_row,
                                    pose_order=problem.pose_order())
-        return cls(basis=G, symbolic=symbolic, pattern=pattern, first=first,
-                   lt_values=lt_values, lt_pos=pos[:nl], b_pos=pos[nl:nl + nbk].reshape(b_r.shape),
-                   bt_pos=pos[nl + nbk:nl + 2 * nbk].reshape(b_r.shape), v_blocks=v_blocks, v_pose=v_pose,
-                   d_pos=pos[nl + 2 * nbk:].reshape(d_r.shape), c_blocks=cb.data.copy(), c_row=c_row, c_col=c_col,
-                   diag_block=diag)
+        return cls(basis=G, entries=generator_entries(G), symbolic=symbolic, pattern=pattern, first=first,
+                   lt_values=lt_values, lt_pos=pos[:nl],
+                   b_pos=to_components(pos[nl:nl + nbk].reshape(b_r.shape).transpose(0, 2, 1)),
+                   bt_pos=to_components(pos[nl + nbk:nl + 2 * nbk].reshape(b_r.shape).transpose(0, 2, 1)),
+                   v_blocks=to_components(v_blocks), v_pose=v_pose,
+                   d_pos=to_components(pos[nl + 2 * nbk:].reshape(d_r.shape)), c_blocks=to_components(cb.data),
+                   c_row=c_row, c_col=c_col, diag_block=diag)
 
     def tangent_blocks(self, Z: np.ndarray) -> np.ndarray:
-        """(n, k, d, d) the columns of E at Z: ``G_a Z_i``."""
-        return np.einsum("axy,nyc->naxc", self.basis, Z)
+        """(n, k, d, r) the columns of E at Z (n, d, r): ``G_a Z_i``.
+
+        Each row of G_a has one nonzero, +-1 (:func:`so_basis`), so the product copies rows of Z_i
+        with a sign. Written that way it has the product's digits and skips the contraction over
+        the zeros, which took a few percent of a large 2D solve (docs/performance.md).
+        """
+        n, d, r = Z.shape
+        out = np.zeros((n, len(self.entries), d, r))
+        for a, generator in enumerate(self.entries):     # k <= 3 generators, two entries each
+            for x, u, sign in generator:
+                out[:, a, x] += sign * Z[:, u]
+        return out
 
     def matrix(self, Z: np.ndarray, lam: np.ndarray | None, shift: float) -> sp.csc_matrix:
         """K at the point Z (n, d, d) with Lambda's blocks ``lam`` (None: without Lambda) and shift s."""
-        GZ = self.tangent_blocks(Z)
+        entries = self.entries
+        Zt = to_components(Z)                               # (d, d, n)
         data = np.empty(self.pattern.nnz)
         data[self.lt_pos] = self.lt_values
-        # B[(t, c), (i, a)] = sum_x V_red[t, i d + x] (G_a Z_i)[x, c]
-        blocks = np.einsum("bx,baxc->bca", self.v_blocks, GZ[self.v_pose])
+        # B[(t, c), (i, a)] = sum_x V_red[t, i d + x] (G_a Z_i)[x, c] = sum_(x, u, s) s V_red[t, i d + x] Z_i[u, c]
+        Zv = Zt[:, :, self.v_pose]
+        blocks = np.zeros((len(entries),) + Zv.shape[1:])   # (k, c, nb)
+        for a, ea in enumerate(entries):
+            for x, u, sign in ea:
+                blocks[a] += (sign * self.v_blocks[x]) * Zv[u]
         data[self.b_pos] = blocks
         data[self.bt_pos] = blocks
         # D[(i, a), (j, b)] = tr((G_a Z_i)^T C_ij (G_b Z_j)), minus Lambda's and plus the shift's on the diagonal
-        dblk = np.einsum("naxc,nxy,nbyc->nab", GZ[self.c_row], self.c_blocks, GZ[self.c_col])
+        dblk = generator_traces(entries, Zt[:, :, self.c_row], Zt[:, :, self.c_col], self.c_blocks)
         diag = self.diag_block
         if lam is not None:
-            dblk[diag] -= np.einsum("naxc,nxy,nbyc->nab", GZ, lam, GZ)
-        dblk[diag] += shift * np.einsum("axy,bxy->ab", self.basis, self.basis)
+            dblk[:, :, diag] -= generator_traces(entries, Zt, Zt, to_components(lam))
+        dblk[:, :, diag] += shift * np.einsum("axy,bxy->ab", self.basis, self.basis)[:, :, None]
         data[self.d_pos] = dblk
         P = self.pattern
         K = sp.csc_matrix((data, P.indices, P.indptr), shape=P.shape, copy=False)
@@ -175,14 +228,17 @@ class TangentSystem:
         """(n k, k) orthonormal coordinates of the directions ``Z_i H`` (H in so(d)), i.e.
         ``Omega_i = Z_i H Z_i^T``, at a first-level point Z (n, d, d): the rotation of every pose at
         once, along which ``S Z = 0`` leaves K's Schur complement only its shift 2 s."""
-        n, k = Z.shape[0], self.basis.shape[0]
-        omega = np.einsum("nxy,byz,nwz->bnxw", Z, self.basis, Z)
-        coords = 0.5 * np.einsum("axw,bnxw->nab", self.basis, omega).reshape(n * k, k)
-        return np.linalg.qr(coords)[0]
+        G = self.basis
+        n, k, d = Z.shape[0], G.shape[0], G.shape[1]
+        omega = np.matmul(np.matmul(Z[:, None], G[None]), np.swapaxes(Z, 1, 2)[:, None])   # (n, b, x, w)
+        # coordinate a of Omega_b at pose i: <G_a, Omega_b> / 2 (every G_a has Frobenius norm sqrt 2)
+        coords = 0.5 * np.swapaxes(np.matmul(omega.reshape(n, k, d * d), G.reshape(k, d * d).T), 1, 2)
+        return np.linalg.qr(coords.reshape(n * k, k))[0]
 
     def diagonal_mean(self, Z: np.ndarray, lam: np.ndarray) -> float:
         """Mean diagonal of ``2 E^T (C - Lambda) E`` at Z (n, d, r): the scale of the Hessian on the
         tangent coordinates before the translations are eliminated."""
-        GZ = self.tangent_blocks(Z)
-        cl = self.c_blocks[self.diag_block] - lam
-        return 2.0 * float(np.mean(np.einsum("naxc,nxy,nayc->na", GZ, cl, GZ)))
+        Zt = to_components(Z)
+        cl = self.c_blocks[:, :, self.diag_block] - to_components(lam)
+        traces = generator_traces(self.entries, Zt, Zt, cl)
+        return 2.0 * float(np.mean(np.diagonal(traces)))
