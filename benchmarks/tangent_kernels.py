@@ -90,7 +90,7 @@ def main() -> int:
     from posecrb.solver.problem import Problem
     from posecrb.solver.staircase import RelaxedModel
     from posecrb.solver.stiefel import from_components, random_point, to_components
-    from posecrb.solver.tangent import TangentSystem, generator_entries, generator_traces
+    from posecrb.solver.tangent import TangentSystem, generator_traces
 
     print_header("the tangent system's kernels against einsum contractions (ms per call)", threads=1)
     print(f"\n{'dataset':32s} {'d':>1s} {'width':>5s} {'poses':>7s} | {'E einsum':>8s} {'E rows':>7s} "
@@ -108,7 +108,6 @@ def main() -> int:
                 e_einsum = median_time(lambda: np.einsum("axy,nyc->naxc", G, Z), args.repeat)
                 e_rows = median_time(lambda: system.tangent_blocks(Z), args.repeat)
                 diff_e = np.abs(system.tangent_blocks(Z) - ref_e).max() / np.abs(ref_e).max()
-                entries = generator_entries(G)
                 blocks_c = from_components(system.c_blocks)      # (nc, d, d)
 
                 def contraction():
@@ -116,8 +115,8 @@ def main() -> int:
 
                 def products():
                     Zt = to_components(Z)
-                    out = generator_traces(entries, Zt[:, :, system.c_row], Zt[:, :, system.c_col], system.c_blocks)
-                    return from_components(out)
+                    left, right = Zt[:, :, system.c_row], Zt[:, :, system.c_col]
+                    return from_components(generator_traces(system.entries, left, right, system.c_blocks))
 
                 ref_k = contraction()
                 k_einsum = median_time(contraction, args.repeat)
