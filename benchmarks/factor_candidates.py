@@ -22,6 +22,9 @@ against the first candidate's:
                   collapses when another process holds a core) and factored densely (dpotrf) with
                   every BLAS thread
 each with the BLAS of CHOLMOD at one thread ("1t") and at every core ("all"), where it applies.
+The table's "process CPU / wall" is the candidate's whole process: about 1 for one thread, up to
+the number of threads with more (OpenBLAS's waiting threads spin, so CPU time does not say they
+worked).
 
 The limit is the fewest flops of any candidate divided by the dgemm rate of all cores (the
 system BLAS's dgemm, the one CHOLMOD calls, 3000 x 3000, best of 2 s), measured in the same run;
@@ -70,10 +73,19 @@ def matrix_path(poses: int, directory: str | None) -> Path:
     return out
 
 
-def _limit_blas(threads: str):
+def _blas_limit(limits: int | None):
+    """threadpoolctl's limit on every BLAS of this process, CHOLMOD's included. threadpoolctl sets only
+    the libraries loaded when the limit is entered, and CHOLMOD's BLAS (the system's libblas.so.3)
+    loads with CHOLMOD, so CHOLMOD is loaded first: a limit entered before left it on every core."""
+    import numpy  # noqa: F401  (numpy's own BLAS)
+    import sksparse.cholmod  # noqa: F401  (CHOLMOD and its BLAS, the library _cholmod loads too)
     from threadpoolctl import threadpool_limits
 
-    return threadpool_limits(limits=1 if threads == "1t" else None)
+    return threadpool_limits(limits=limits)
+
+
+def _limit_blas(threads: str):
+    return _blas_limit(1 if threads == "1t" else None)
 
 
 def _pose_perm(a, por, method: str):
@@ -135,7 +147,6 @@ def _split(a, por) -> dict:
     import numpy as np
     import scipy.sparse as sp
     from scipy.linalg import lapack
-    from threadpoolctl import threadpool_limits
 
     from posecrb.linalg.ordering import expand_permutation, pose_adjacency_of, pose_permutation
 
@@ -173,7 +184,7 @@ def _split(a, por) -> dict:
         del f
 
     t1 = time.perf_counter()
-    with threadpool_limits(limits=1):
+    with _blas_limit(1):
         threads = [threading.Thread(target=work, args=(h,)) for h in (0, 1)]
         for th in threads:
             th.start()
@@ -182,7 +193,7 @@ def _split(a, por) -> dict:
     t2 = time.perf_counter()
     # S = L1 L1^T + L2 L2^T - A_ss; L L^T = J lauum(J L J) J with J the reversal (lauum forms U U^T)
     s = -a[sep_rows][:, sep_rows].toarray(order="F")
-    with threadpool_limits(limits=1):
+    with _blas_limit(1):
         for _, lss, _, _ in results:
             u = np.asfortranarray(lss[::-1, ::-1])
             uut, info = lapack.dlauum(u, lower=0, overwrite_c=1)
@@ -202,9 +213,8 @@ def _split(a, por) -> dict:
 
 def dgemm_child() -> dict:
     import _cholmod
-    from threadpoolctl import threadpool_limits
 
-    with threadpool_limits(limits=1):
+    with _blas_limit(1):
         one = _cholmod.dgemm_rate()
     return {"dgemm_1t": one, "dgemm_all": _cholmod.dgemm_rate(), "cores": os.cpu_count()}
 
@@ -266,11 +276,11 @@ def main(argv: list[str] | None = None) -> int:
           f"best of {args.rounds} round(s); load average {os.getloadavg()[0]:.1f} at the end")
     print()
     print("| candidate | ordering | Gflop | analysis s | factor s | total s | GF/s | x limit | peak RSS | "
-          "logdet - first |")
-    print("|---|---|---|---|---|---|---|---|---|---|")
+          "process CPU / wall | logdet - first |")
+    print("|---|---|---|---|---|---|---|---|---|---|---|")
     for r in best:
         if "error" in r:
-            print(f"| {r['candidate']} | failed: {r['error']} |||||||||")
+            print(f"| {r['candidate']} | failed: {r['error']} ||||||||||")
             continue
         total = r["analyse"] + r["factor"]
         flops = r.get("flops")
@@ -278,7 +288,7 @@ def main(argv: list[str] | None = None) -> int:
         print(f"| {r['candidate']} | {r['ordering']} | {flops / 1e9:.0f} | " if flops else
               f"| {r['candidate']} | {r['ordering']} | | ", end="")
         print(f"{r['analyse']:.2f} | {r['factor']:.2f} | {total:.2f} | {gfs} | {total / limit:.2f} | "
-              f"{r['peak_rss'] / 2**30:.2f} GB | {r['logdet'] - ref:+.2e} |")
+              f"{r['peak_rss'] / 2**30:.2f} GB | {r['cpu']:.1f} / {r['wall']:.1f} s | {r['logdet'] - ref:+.2e} |")
     return 0
 
 

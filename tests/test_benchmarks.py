@@ -58,3 +58,26 @@ def test_factor_candidates_rejects_runs_it_cannot_report(tmp_path, capsys):
         assert exc.value.code == 2
         assert message in capsys.readouterr().err
     assert not any(tmp_path.iterdir())   # nothing was built
+
+
+def test_factor_candidates_one_thread_reaches_cholmods_blas():
+    """A '/1t' candidate must run CHOLMOD's BLAS at one thread. threadpoolctl limits only the
+    libraries loaded when the limit is entered, and CHOLMOD's BLAS loads with CHOLMOD: the limit
+    once came first, and every '/1t' figure was measured with two threads. A fresh process (nothing
+    loaded yet, as in the script's candidate processes) with OpenBLAS set to two threads."""
+    import os
+    import subprocess
+
+    code = ("import sys; sys.path.insert(0, sys.argv[1]); import factor_candidates as fc\n"
+            "with fc._limit_blas('1t'):\n"
+            "    import _cholmod; import sksparse.cholmod\n"
+            "    from posecrb.linalg.threads import cholmod_threads\n"
+            "    inside = cholmod_threads()\n"
+            "print(inside, cholmod_threads())\n")
+    env = dict(os.environ, OPENBLAS_NUM_THREADS="2", OMP_NUM_THREADS="2")
+    out = subprocess.run([sys.executable, "-c", code, str(BENCHMARKS)], env=env, capture_output=True, text=True,
+                         check=True, timeout=120)
+    inside, after = (int(x) for x in out.stdout.split())
+    if after < 2:
+        pytest.skip("CHOLMOD's BLAS has a single thread here: no limit to check")
+    assert inside == 1
