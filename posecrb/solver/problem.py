@@ -250,11 +250,14 @@ class Problem:
         Z is a point of St(d, r)^n (its defect term is then :meth:`defect_constant`)."""
         n, d = self.n, self.d
         Zb = Z.reshape(n, d, -1)
-        Zi = Zb[self.src]
+        # np.take along the first axis gathers the same rows as fancy indexing, 3-5x faster for
+        # these (m, d, r) and (m, r) gathers (a tenth of a second per solve on the 2D grid of
+        # 100,489 poses, docs/performance.md)
+        Zi = np.take(Zb, self.src, axis=0)
         # rotation residual, transposed: Z_j - R~^T Z_i  (d x r)
-        rr = Zb[self.dst] - self.rotT @ Zi
+        rr = np.take(Zb, self.dst, axis=0) - self.rotT @ Zi
         # translation residual: p_j - p_i - Z_i^T t~  (r,)
-        tr = p[self.dst] - p[self.src] - np.einsum("ea,ear->er", self.trans, Zi)
+        tr = np.take(p, self.dst, axis=0) - np.take(p, self.src, axis=0) - np.einsum("ea,ear->er", self.trans, Zi)
         f = float(np.dot(self.kappa, np.einsum("eab,eab->e", rr, rr))
                   + np.dot(self.tau, np.einsum("er,er->e", tr, tr)))
         return f + self.defect_constant()
