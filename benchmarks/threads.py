@@ -24,6 +24,12 @@ settings run by run, each in a fresh process:
            posecrb.selection.greedy): wall and CPU seconds, the select stage, the refreshes and
            the value (the same bit for bit)
 
+  openmp   the solver's M_red factorization as the library runs it (median of 3 per process):
+           "team" with CHOLMOD's own OpenMP team (its compile-time size, 4 threads in Debian's
+           SuiteSparse 5), "library" with it off (posecrb.linalg.threads.cholmod_openmp_serial,
+           which the library applies where CHOLMOD's BLAS has threads); also the process's
+           voluntary context switches
+
   load     the solver's M_red factorization (median of 3 per process), next to ``--hogs K``
            processes that never sleep (started for the whole run): "1" thread, "all" threads,
            and "library", the library's choice (posecrb.linalg.threads.load_aware_threads: the
@@ -31,7 +37,7 @@ settings run by run, each in a fresh process:
            ``--what load --dim 3 --poses 20000 --hogs 1`` and the same with ``--hogs 0``
 
 Usage: python benchmarks/threads.py [--dim 2] [--poses 30000] [--rounds 2]
-       [--what solve,selinv,logdet,greedy,load] [--hogs K] [--absolute-terms] [--budget K|P%]
+       [--what solve,selinv,logdet,greedy,openmp,load] [--hogs K] [--absolute-terms] [--budget K|P%]
 """
 from __future__ import annotations
 
@@ -88,6 +94,25 @@ elif what == "greedy":
     out["factor"] = {"blocks": len(obj.blocks), "entries": int(pf.indptr[-1]), "columns": pf.n,
                      "trunk": pf.n - top if top >= 0 else None,
                      "trunk_entries": int(pf.indptr[-1] - pf.indptr[top]) if top >= 0 else None}
+elif what == "openmp":
+    import contextlib, resource, statistics
+    from posecrb.linalg import cholesky
+    from posecrb.solver.problem import Problem
+    p = Problem.from_graph(g)
+    p._full_parts()
+    sym = p._full_symbolic
+    if threads == "team":
+        cholesky.cholmod_openmp_serial = contextlib.nullcontext
+    M = p.full_matrix(None, 1e-3)
+    walls = []
+    c = time.process_time()
+    switches = resource.getrusage(resource.RUSAGE_SELF).ru_nvcsw
+    for _ in range(3):
+        t = time.perf_counter()
+        sym.factor(M)
+        walls.append(time.perf_counter() - t)
+    out = {"wall": statistics.median(walls), "cpu": (time.process_time() - c) / 3, "threaded": sym.threaded,
+           "switches": (resource.getrusage(resource.RUSAGE_SELF).ru_nvcsw - switches) / 3}
 elif what == "load":
     import contextlib, statistics
     from posecrb.linalg import cholesky, threads as th
@@ -175,7 +200,7 @@ def main(argv: list[str] | None = None) -> int:
 def _measure(args: argparse.Namespace, path: Path) -> None:
     for what in args.what.split(","):
         settings = (("1", "all", "library") if what in ("load", "selinv") else ("1", "library") if what == "greedy"
-                    else ("1", "all"))
+                    else ("team", "library") if what == "openmp" else ("1", "all"))
         runs: dict[str, list[dict]] = {s: [] for s in settings}
         for k in range(args.rounds):
             for threads in (settings if k % 2 == 0 else settings[::-1]):
@@ -194,7 +219,10 @@ def _measure(args: argparse.Namespace, path: Path) -> None:
                 extra = (f", {d['hvp']} HVPs, objective {d['objective']:.10g}" if what == "solve" else
                          f", absolute terms {d['terms']:.10g}" if d.get("terms") is not None else
                          f", {d['steps']} steps, select {d['select']:.2f} s, {d['refreshes']} refreshes, "
-                         f"value {d['value']!r}" if what == "greedy" else "")
+                         f"value {d['value']!r}" if what == "greedy" else
+                         f", {d['switches']:.0f} voluntary context switches per factorization"
+                         + ("" if d["threaded"] else " (a one-thread factorization: the library keeps the team)")
+                         if what == "openmp" else "")
                 if what == "greedy" and k == 0 and threads == settings[0]:
                     f = d["factor"]
                     print(f"  factor: {f['blocks']} Laplacian block(s), {f['entries']:,} entries in {f['columns']:,} "

@@ -6,6 +6,7 @@ import multiprocessing
 import sys
 from concurrent.futures import ProcessPoolExecutor
 
+import pytest
 import scipy.linalg  # noqa: F401 -- its BLAS among the loaded ones
 import sksparse.cholmod  # noqa: F401
 
@@ -187,3 +188,71 @@ def test_single_threaded_worker_turns_posecrb_threads_off():
 
     with ProcessPoolExecutor(1, initializer=threads.single_threaded_worker) as pool:
         assert pool.submit(threads.own_usable_threads).result() == 1
+
+
+def _openmp_runtime():
+    """ctypes handle of the OpenMP runtime loaded with CHOLMOD, or None."""
+    import ctypes
+
+    paths = [c.filepath for c in threads.controller().lib_controllers if c.user_api == "openmp"]
+    if not paths:
+        return None
+    lib = ctypes.CDLL(paths[0])
+    lib.omp_get_max_active_levels.restype = ctypes.c_int
+    lib.omp_set_max_active_levels.argtypes = [ctypes.c_int]
+    return lib
+
+
+def test_cholmod_openmp_serial_turns_parallel_regions_off_and_restores():
+    lib = _openmp_runtime()
+    if lib is None:
+        pytest.skip("no OpenMP runtime is loaded with CHOLMOD here")
+    before = lib.omp_get_max_active_levels()
+    lib.omp_set_max_active_levels(3)
+    try:
+        with threads.cholmod_openmp_serial():
+            assert lib.omp_get_max_active_levels() == 0
+        assert lib.omp_get_max_active_levels() == 3
+        with pytest.raises(RuntimeError), threads.cholmod_openmp_serial():
+            raise RuntimeError("a failed factorization")
+        assert lib.omp_get_max_active_levels() == 3
+    finally:
+        lib.omp_set_max_active_levels(before)
+
+
+_TEAM_PROBE = """
+import os, sys
+import numpy as np, scipy.sparse as sp
+from posecrb.linalg.cholesky import SymbolicCholesky
+from posecrb.linalg import threads
+side = 20      # a 3D grid Laplacian: separators of hundreds of rows, where CHOLMOD opens its team
+lap = sp.diags([-np.ones(side - 1), 2 * np.ones(side), -np.ones(side - 1)], [-1, 0, 1])
+eye = sp.identity(side)
+a = (sp.kron(sp.kron(lap, eye), eye) + sp.kron(sp.kron(eye, lap), eye) + sp.kron(sp.kron(eye, eye), lap)
+     + sp.identity(side ** 3)).tocsc()
+openmp = any(c.user_api == "openmp" for c in threads.controller().lib_controllers)
+count = lambda: len(os.listdir("/proc/self/task"))
+start = count()
+SymbolicCholesky(a, mode="supernodal", threaded=True).factor_logdet(a)
+threaded = count()
+SymbolicCholesky(a, mode="supernodal").factor_logdet(a)
+print(openmp, start, threaded, count())
+"""
+
+
+@pytest.mark.skipif(not sys.platform.startswith("linux"), reason="counts the threads in /proc/self/task")
+def test_threaded_factorization_opens_no_openmp_team():
+    """CHOLMOD's supernodal factorization opens an OpenMP team of a compile-time size; next to the
+    BLAS threads of a threaded factorization it is kept off (a fresh process: a team, once opened,
+    stays). The one-thread factorizations keep CHOLMOD's default, which here opens the team: the
+    probe sees it, so the first count is not blind to it."""
+    import os
+    import subprocess
+
+    env = dict(os.environ, OPENBLAS_NUM_THREADS="1")    # no BLAS threads come or go
+    out = subprocess.run([sys.executable, "-c", _TEAM_PROBE], env=env, capture_output=True, text=True,
+                         check=True, timeout=300)
+    openmp, start, threaded, after = out.stdout.split()
+    if openmp != "True" or int(after) == int(start):
+        pytest.skip("CHOLMOD opens no OpenMP team here")
+    assert int(threaded) == int(start)

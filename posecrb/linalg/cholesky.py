@@ -17,7 +17,7 @@ from sksparse.cholmod import CholmodNotPositiveDefiniteError, Factor, analyze
 
 from ..core.errors import NotPositiveDefinite, NumericalError, UsageError
 from .lanczos import largest_eigenpair
-from .threads import cholmod_single_threaded, load_aware_threads
+from .threads import cholmod_openmp_serial, cholmod_single_threaded, load_aware_threads
 
 log = logging.getLogger("posecrb")
 
@@ -144,7 +144,8 @@ class SymbolicCholesky:
             a = self._permuted(a)
         try:
             if self.threaded:
-                with load_aware_threads():
+                # CHOLMOD's own OpenMP team would compete with its BLAS threads (threads module)
+                with load_aware_threads(), cholmod_openmp_serial():
                     f = self._symbolic.cholesky(a, beta=beta)
             else:
                 with cholmod_single_threaded():

@@ -27,6 +27,11 @@ directory), which does posecrb's own small dense products.
 
 * posecrb's own threads (the scalar greedy's two halves, posecrb.selection.greedy) take the cores
   no other process keeps busy (``own_usable_threads``).
+* In the factorizations that give CHOLMOD's BLAS threads, CHOLMOD's own OpenMP loops run on the
+  calling thread (``cholmod_openmp_serial``): CHOLMOD 3's supernodal factorization opens an OpenMP
+  team of a size fixed when it was compiled (4 threads in Debian's SuiteSparse 5, whatever
+  ``OMP_NUM_THREADS`` says) for loops over the rows of each supernode, and next to OpenBLAS's
+  threads on 2 cores that team cost more than its loops save.
 
 Process pools run each worker with every pool at one thread (``single_threaded_worker``), and
 posecrb's own threads off, so ``--jobs`` workers never oversubscribe the cores.
@@ -187,6 +192,50 @@ def own_usable_threads() -> int:
         return 1
     cores = _cores()
     return usable_threads(cores, cores, busy_cores()) if cores > 1 else 1
+
+
+@functools.lru_cache(maxsize=4)
+def _openmp_levels(paths: tuple[str, ...]) -> tuple[tuple[Any, Any], ...]:
+    """(omp_get_max_active_levels, omp_set_max_active_levels) of each OpenMP runtime in ``paths``."""
+    import ctypes  # noqa: PLC0415 -- only where CHOLMOD factors
+
+    found = []
+    for path in paths:
+        try:
+            lib = ctypes.CDLL(path)
+            get, put = lib.omp_get_max_active_levels, lib.omp_set_max_active_levels
+        except (OSError, AttributeError):
+            continue
+        get.restype, get.argtypes = ctypes.c_int, []
+        put.restype, put.argtypes = None, [ctypes.c_int]
+        found.append((get, put))
+    return tuple(found)
+
+
+@contextlib.contextmanager
+def cholmod_openmp_serial() -> Iterator[None]:
+    """Every OpenMP parallel region on one thread inside (a context manager).
+
+    CHOLMOD 3's supernodal factorization opens an OpenMP team of a compile-time size (Debian's
+    SuiteSparse 5: ``num_threads(4)``, which ``OMP_NUM_THREADS`` and threadpoolctl cannot lower)
+    for loops over the rows of each supernode. On a 2-core machine those 4 threads wake and sleep
+    at every supernode next to OpenBLAS's two: the solve of the 3D grid of 21,952 poses made
+    150,000 voluntary context switches, the M_red factorization of the 2D grid of 100,489 poses
+    took 1.08-1.11 s against 0.83-0.89 s without the team (docs/performance.md, "CHOLMOD's OpenMP
+    team"). ``max-active-levels = 0`` makes every parallel region inactive, i.e. run by the
+    thread that meets it; the previous value is restored on exit. In GCC's libgomp the setting is
+    process-wide, so another thread's OpenMP regions run on one thread meanwhile too.
+    """
+    paths = tuple(c.filepath for c in controller().lib_controllers if c.user_api == "openmp")
+    levels = _openmp_levels(paths) if paths else ()
+    saved = [get() for get, _ in levels]
+    for _, put in levels:
+        put(0)
+    try:
+        yield
+    finally:
+        for (_, put), level in zip(levels, saved):
+            put(level)
 
 
 def cholmod_single_threaded() -> Any:
