@@ -26,9 +26,9 @@ settings run by run, each in a fresh process:
 
   openmp   the solver's M_red factorization as the library runs it (median of 3 per process):
            "team" with CHOLMOD's own OpenMP team (its compile-time size, 4 threads in Debian's
-           SuiteSparse 5), "library" with it off (posecrb.linalg.threads.cholmod_openmp_serial,
-           which the library applies where CHOLMOD's BLAS has threads); also the process's
-           voluntary context switches
+           SuiteSparse 5), "library" with it off as in every factorization of the library
+           (posecrb.linalg.threads.cholmod_openmp_serial); also the process's voluntary context
+           switches
 
   load     the solver's M_red factorization (median of 3 per process), next to ``--hogs K``
            processes that never sleep (started for the whole run): "1" thread, "all" threads,
@@ -220,9 +220,8 @@ def _measure(args: argparse.Namespace, path: Path) -> None:
                          f", absolute terms {d['terms']:.10g}" if d.get("terms") is not None else
                          f", {d['steps']} steps, select {d['select']:.2f} s, {d['refreshes']} refreshes, "
                          f"value {d['value']!r}" if what == "greedy" else
-                         f", {d['switches']:.0f} voluntary context switches per factorization"
-                         + ("" if d["threaded"] else " (a one-thread factorization: the library keeps the team)")
-                         if what == "openmp" else "")
+                         f", {d['switches']:.0f} voluntary context switches per factorization, CHOLMOD's BLAS "
+                         + ("threaded" if d["threaded"] else "at one thread") if what == "openmp" else "")
                 if what == "greedy" and k == 0 and threads == settings[0]:
                     f = d["factor"]
                     print(f"  factor: {f['blocks']} Laplacian block(s), {f['entries']:,} entries in {f['columns']:,} "

@@ -143,12 +143,12 @@ class SymbolicCholesky:
         if self._perm is not None:
             a = self._permuted(a)
         try:
+            # CHOLMOD's own OpenMP team stays off: it cost more than its loops save (threads module)
             if self.threaded:
-                # CHOLMOD's own OpenMP team would compete with its BLAS threads (threads module)
                 with load_aware_threads(), cholmod_openmp_serial():
                     f = self._symbolic.cholesky(a, beta=beta)
             else:
-                with cholmod_single_threaded():
+                with cholmod_single_threaded(), cholmod_openmp_serial():
                     f = self._symbolic.cholesky(a, beta=beta)
         except CholmodNotPositiveDefiniteError as exc:
             raise NotPositiveDefinite(name, str(exc).split(": ", 1)[-1]) from None

@@ -27,11 +27,11 @@ directory), which does posecrb's own small dense products.
 
 * posecrb's own threads (the scalar greedy's two halves, posecrb.selection.greedy) take the cores
   no other process keeps busy (``own_usable_threads``).
-* In the factorizations that give CHOLMOD's BLAS threads, CHOLMOD's own OpenMP loops run on the
-  calling thread (``cholmod_openmp_serial``): CHOLMOD 3's supernodal factorization opens an OpenMP
-  team of a size fixed when it was compiled (4 threads in Debian's SuiteSparse 5, whatever
-  ``OMP_NUM_THREADS`` says) for loops over the rows of each supernode, and next to OpenBLAS's
-  threads on 2 cores that team cost more than its loops save.
+* CHOLMOD's own OpenMP loops run on the calling thread in every factorization
+  (``cholmod_openmp_serial``): CHOLMOD 3's supernodal factorization opens an OpenMP team of a size
+  fixed when it was compiled (4 threads in Debian's SuiteSparse 5, whatever ``OMP_NUM_THREADS``
+  says) for loops over the rows of large supernodes, and on 2 cores, next to OpenBLAS's threads or
+  not, that team cost more than its loops save.
 
 Process pools run each worker with every pool at one thread (``single_threaded_worker``), and
 posecrb's own threads off, so ``--jobs`` workers never oversubscribe the cores.
@@ -218,13 +218,15 @@ def cholmod_openmp_serial() -> Iterator[None]:
 
     CHOLMOD 3's supernodal factorization opens an OpenMP team of a compile-time size (Debian's
     SuiteSparse 5: ``num_threads(4)``, which ``OMP_NUM_THREADS`` and threadpoolctl cannot lower)
-    for loops over the rows of each supernode. On a 2-core machine those 4 threads wake and sleep
-    at every supernode next to OpenBLAS's two: the solve of the 3D grid of 21,952 poses made
-    150,000 voluntary context switches, the M_red factorization of the 2D grid of 100,489 poses
-    took 1.08-1.11 s against 0.83-0.89 s without the team (docs/performance.md, "CHOLMOD's OpenMP
-    team"). ``max-active-levels = 0`` makes every parallel region inactive, i.e. run by the
-    thread that meets it; the previous value is restored on exit. In GCC's libgomp the setting is
-    process-wide, so another thread's OpenMP regions run on one thread meanwhile too.
+    for loops over the rows of large supernodes. On a 2-core machine those 4 threads wake and
+    sleep at every such supernode: the solve of the 3D grid of 21,952 poses made 150,000 voluntary
+    context switches, the M_red factorization of the 2D grid of 100,489 poses (CHOLMOD's BLAS on
+    two threads) took 1.6-1.8 s against 0.9 s without the team, that of the grid of 30,276 poses
+    (one thread) 0.34-0.41 s against 0.23-0.32 s (docs/performance.md, "CHOLMOD's OpenMP team").
+    Small factorizations never open the team. ``max-active-levels = 0`` makes every parallel
+    region inactive, i.e. run by the thread that meets it; the previous value is restored on exit.
+    In GCC's libgomp the setting is process-wide, so another thread's OpenMP regions run on one
+    thread meanwhile too.
     """
     paths = tuple(c.filepath for c in controller().lib_controllers if c.user_api == "openmp")
     levels = _openmp_levels(paths) if paths else ()
