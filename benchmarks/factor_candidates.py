@@ -21,7 +21,8 @@ against the first candidate's:
                   assembled from the two trailing blocks (LAPACK dlauum, one thread: threaded lauum
                   collapses when another process holds a core) and factored densely (dpotrf) with
                   every BLAS thread
-each with the BLAS of CHOLMOD at one thread ("1t") and at every core ("all"), where it applies.
+each with the BLAS of CHOLMOD at one thread ("1t") and at every core ("all"), where it applies,
+and CHOLMOD's own OpenMP team off (posecrb.linalg.threads.cholmod_openmp_serial) as in posecrb.
 The table's "process CPU / wall" is the candidate's whole process: about 1 for one thread, up to
 the number of threads with more (OpenBLAS's waiting threads spin, so CPU time does not say they
 worked).
@@ -108,7 +109,10 @@ def run_one(name: str, path: Path) -> dict:
     por = np.load(path.with_suffix(".por.npy"))
     base_rss = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss * 1024
     out: dict = {"candidate": name, "rows": a.shape[0], "nnz": int(a.nnz)}
-    with _limit_blas(threads):
+    from posecrb.linalg.threads import cholmod_openmp_serial
+
+    # CHOLMOD's own OpenMP team off for every candidate, as posecrb's factorizations keep it
+    with _limit_blas(threads), cholmod_openmp_serial():
         if kind == "posecrb":
             from posecrb.linalg.ordering import ordered_symbolic
 
