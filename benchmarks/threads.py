@@ -94,15 +94,21 @@ elif what == "greedy":
     out["factor"] = {"blocks": len(obj.blocks), "entries": int(pf.indptr[-1]), "columns": pf.n,
                      "trunk": pf.n - top if top >= 0 else None,
                      "trunk_entries": int(pf.indptr[-1] - pf.indptr[top]) if top >= 0 else None}
-elif what == "openmp":
+elif what in ("openmp", "load"):
+    # the solver's M_red factorization, three times: "openmp" toggles CHOLMOD's own OpenMP team,
+    # "load" the threads of its BLAS
     import contextlib, resource, statistics
     from posecrb.linalg import cholesky
     from posecrb.solver.problem import Problem
     p = Problem.from_graph(g)
     p._full_parts()
     sym = p._full_symbolic
-    if threads == "team":
+    if what == "openmp" and threads == "team":
         cholesky.cholmod_openmp_serial = contextlib.nullcontext
+    if what == "load":
+        sym.threaded = threads != "1"
+        if threads == "all":
+            cholesky.load_aware_threads = contextlib.nullcontext
     M = p.full_matrix(None, 1e-3)
     walls = []
     c = time.process_time()
@@ -113,24 +119,6 @@ elif what == "openmp":
         walls.append(time.perf_counter() - t)
     out = {"wall": statistics.median(walls), "cpu": (time.process_time() - c) / 3, "threaded": sym.threaded,
            "switches": (resource.getrusage(resource.RUSAGE_SELF).ru_nvcsw - switches) / 3}
-elif what == "load":
-    import contextlib, statistics
-    from posecrb.linalg import cholesky, threads as th
-    from posecrb.solver.problem import Problem
-    p = Problem.from_graph(g)
-    p._full_parts()
-    sym = p._full_symbolic
-    sym.threaded = threads != "1"
-    if threads == "all":
-        cholesky.load_aware_threads = contextlib.nullcontext
-    M = p.full_matrix(None, 1e-3)
-    walls = []
-    c = time.process_time()
-    for _ in range(3):
-        t = time.perf_counter()
-        sym.factor(M)
-        walls.append(time.perf_counter() - t)
-    out = {"wall": statistics.median(walls), "cpu": (time.process_time() - c) / 3}
 else:
     from posecrb.models.paper.fim import paper_fim, fim_symbolic
     fim = paper_fim(g, g.vertex_rot, g.vertex_trans, 0, "eq59", variant="consistent")
