@@ -251,7 +251,7 @@ class Problem:
         n, d = self.n, self.d
         Zb = Z.reshape(n, d, -1)
         # np.take along the first axis gathers the same rows as fancy indexing, 3-5x faster for
-        # these (m, d, r) and (m, r) gathers (a tenth of a second per solve on the 2D grid of
+        # these (m, d, r) and (m, r) gathers (0.3-0.4 CPU seconds per solve on the 2D grid of
         # 100,489 poses, docs/performance.md)
         Zi = np.take(Zb, self.src, axis=0)
         # rotation residual, transposed: Z_j - R~^T Z_i  (d x r)
