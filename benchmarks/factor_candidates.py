@@ -21,6 +21,13 @@ against the first candidate's:
                   assembled from the two trailing blocks (LAPACK dlauum, one thread: threaded lauum
                   collapses when another process holds a core) and factored densely (dpotrf) with
                   every BLAS thread
+  mumps           another library: MUMPS's multifrontal LDL^T (sequential library, SYM=1) through
+                  benchmarks/mumps_logdet.c, compiled on first use against the system's MUMPS
+                  (Debian: libmumps-seq-dev; $POSECRB_MUMPS_LIBS overrides the link flags,
+                  $POSECRB_MUMPS_CFLAGS the include flags) and run in a process of its own, with
+                  MUMPS's automatic ordering; mumps-pose-metis with posecrb's ordering (the pose
+                  graph's METIS) as MUMPS's pivot order. Skipped with the reason where no MUMPS
+                  compiles. Its flops are MUMPS's own count (RINFOG(3)), never the limit's.
 each with the BLAS of CHOLMOD at one thread ("1t") and at every core ("all"), where it applies,
 and CHOLMOD's own OpenMP team off (posecrb.linalg.threads.cholmod_openmp_serial) as in posecrb.
 The table's "process CPU / wall" is the candidate's whole process: about 1 for one thread, up to
@@ -50,7 +57,9 @@ from _common import child_env, print_header, run_process
 from grids import DEFAULT_SIGMA, cache_dir, grid_file
 
 CANDIDATES = ["posecrb/1t", "posecrb/all", "nesdis/1t", "nesdis/all", "metis/all", "amd/all",
-              "pose-metis/1t", "pose-metis/all", "pose-nesdis/all", "pose-nesdis-relax/all", "split/all"]
+              "pose-metis/1t", "pose-metis/all", "pose-nesdis/all", "pose-nesdis-relax/all", "split/all",
+              "mumps/all", "mumps-pose-metis/1t", "mumps-pose-metis/all"]
+MUMPS_LIBS = "-ldmumps_seq -lmumps_common_seq -lmpiseq_seq -lpord_seq -lm"
 RELAX = {"nrelax": (16, 64, 256), "zrelax": (0.8, 0.2, 0.1)}
 
 
@@ -109,6 +118,9 @@ def run_one(name: str, path: Path) -> dict:
     por = np.load(path.with_suffix(".por.npy"))
     base_rss = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss * 1024
     out: dict = {"candidate": name, "rows": a.shape[0], "nnz": int(a.nnz)}
+    if kind.startswith("mumps"):
+        out.update(_mumps(a, por, kind, threads, path))
+        return out
     from posecrb.linalg.threads import cholmod_openmp_serial
 
     # CHOLMOD's own OpenMP team off for every candidate, as posecrb's factorizations keep it
@@ -143,6 +155,84 @@ def run_one(name: str, path: Path) -> dict:
     out["peak_rss"] = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss * 1024
     out["base_rss"] = base_rss
     return out
+
+
+def _mumps_driver(cache: Path) -> Path:
+    """benchmarks/mumps_logdet.c compiled against the system's MUMPS (cached next to the grids);
+    a RuntimeError with the compiler's reason where it does not build."""
+    import shlex
+    import subprocess
+
+    src = Path(__file__).resolve().with_name("mumps_logdet.c")
+    exe = cache / "mumps_logdet"
+    if exe.is_file() and exe.stat().st_mtime >= src.stat().st_mtime:
+        return exe
+    cc = os.environ.get("CC", "cc")
+    tmp = exe.with_name(f"mumps_logdet.{os.getpid()}.tmp")
+    cmd = [cc, "-O2", "-o", str(tmp), str(src), *shlex.split(os.environ.get("POSECRB_MUMPS_CFLAGS", "")),
+           *shlex.split(os.environ.get("POSECRB_MUMPS_LIBS", MUMPS_LIBS))]
+    try:
+        r = subprocess.run(cmd, capture_output=True, text=True)
+    except OSError as exc:
+        raise RuntimeError(f"skipped: no C compiler ({exc})") from None
+    if r.returncode != 0:
+        reason = (r.stderr.strip().splitlines() or ["unknown"])[0]
+        raise RuntimeError(f"skipped: MUMPS does not compile here ({' '.join(cmd)}: {reason})")
+    os.replace(tmp, exe)
+    return exe
+
+
+def _mumps(a, por, kind: str, threads: str, path: Path) -> dict:
+    """MUMPS's log-det in its own process (module docstring); the driver's figures, the pose
+    ordering's time counted in the analysis."""
+    import subprocess
+    import tempfile
+
+    import numpy as np
+    import scipy.sparse as sp
+
+    try:
+        exe = _mumps_driver(path.parent)
+    except RuntimeError as exc:
+        return {"error": str(exc)}
+    data = path.with_suffix(".mumps.bin")
+    if not data.is_file():
+        low = sp.tril(a).tocoo()
+        tmp = data.with_name(f"{data.name}.{os.getpid()}.tmp")
+        with open(tmp, "wb") as f:
+            np.array([a.shape[0], low.nnz], np.int64).tofile(f)
+            (low.row + 1).astype(np.int32).tofile(f)
+            (low.col + 1).astype(np.int32).tofile(f)
+            low.data.astype(np.float64).tofile(f)
+        os.replace(tmp, data)
+    env = dict(os.environ)
+    if threads == "1t":
+        env.update(OPENBLAS_NUM_THREADS="1", OMP_NUM_THREADS="1", MKL_NUM_THREADS="1")
+    with tempfile.TemporaryDirectory(prefix="posecrb-mumps-") as tmpdir:
+        t_order = 0.0
+        argv = [str(exe), str(data), "7"]
+        ordering = "MUMPS's automatic choice"
+        if kind == "mumps-pose-metis":
+            t0 = time.perf_counter()
+            _, perm = _pose_perm(a, por, "metis")
+            t_order = time.perf_counter() - t0
+            position = np.empty_like(perm)
+            position[perm] = np.arange(perm.size)
+            perm_file = Path(tmpdir) / "perm.bin"
+            (position + 1).astype(np.int32).tofile(perm_file)
+            argv = [str(exe), str(data), "1", str(perm_file)]
+            ordering = "METIS (pose graph)"
+        r = subprocess.run(argv, capture_output=True, text=True, env=env)
+    lines = r.stdout.strip().splitlines()
+    res = json.loads(lines[-1]) if lines else {"error": f"no output, exit {r.returncode}: {r.stderr.strip()}"}
+    if "error" in res:
+        return res
+    names = {0: "AMD", 2: "AMF", 3: "SCOTCH", 4: "PORD", 5: "METIS", 6: "QAMD"}
+    if kind == "mumps":
+        ordering = f"MUMPS's choice: {names.get(res['ordering_used'], res['ordering_used'])}"
+    return {"ordering": f"MUMPS, {ordering}", "analyse": t_order + res["analyse"], "factor": res["factor"],
+            "logdet": res["logdet"], "flops": res["flops"], "lnz": res["lnz"], "peak_rss": res["peak_rss"],
+            "foreign_flops": True}
 
 
 def _split(a, por) -> dict:
@@ -243,8 +333,9 @@ def main(argv: list[str] | None = None) -> int:
     if unknown or not names:
         ap.error(f"unknown candidate(s) {', '.join(unknown) or '(none given)'}: KIND/1t or KIND/all with KIND one "
                  f"of {', '.join(sorted(kinds))}")
-    if all(n.startswith("posecrb/") for n in names):
-        # posecrb's own path goes through scikit-sparse, which does not report CHOLMOD's flop count.
+    if all(n.startswith(("posecrb/", "mumps")) for n in names):
+        # posecrb's own path goes through scikit-sparse, which does not report CHOLMOD's flop count,
+        # and MUMPS counts its own way.
         ap.error("the flop limit needs CHOLMOD's flop count: add a candidate that calls CHOLMOD directly "
                  "(e.g. metis/all)")
     print_header("FIM log-det candidates (benchmarks/factor_candidates.py)")
@@ -272,7 +363,7 @@ def main(argv: list[str] | None = None) -> int:
     all_rate = max(r["dgemm_all"] for r in rates)
     one_rate = max(r["dgemm_1t"] for r in rates)
     best = [min(rs, key=lambda r: r.get("factor", 1e300) + r.get("analyse", 0)) for rs in rows.values()]
-    fl = min(r["flops"] for r in best if r.get("flops"))
+    fl = min(r["flops"] for r in best if r.get("flops") and not r.get("foreign_flops"))
     limit = fl / (all_rate * 1e9)
     ref = next((r["logdet"] for r in best if "logdet" in r), None)
     print(f"dgemm (system BLAS, CHOLMOD's): {one_rate:.1f} GF/s on one core, {all_rate:.1f} GF/s on all "
