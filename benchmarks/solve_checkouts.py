@@ -4,9 +4,13 @@ Each checkout (a directory holding a ``posecrb`` package, e.g. one made by
 ``git worktree add /tmp/before COMMIT``) runs in its own interpreter with that directory first
 on ``sys.path``: ``load(FILE, quaternions="raw")`` once, then ``solve(graph)`` --repeat times,
 timed around the call (the in-process column of benchmarks/peers_solve.py). The two checkouts
-alternate round by round (--rounds), and the table shows the median over every timed call of each
-side, the median ``optimize`` phase, Hessian-vector products, the staircase rank and the
-objectives' relative difference. Every BLAS pool runs at one thread (--threads), as in the solver.
+alternate round by round (--rounds; which one goes first flips every round), and the table shows
+the median over every timed call of each side, the median ``optimize`` and ``verify`` phases,
+Hessian-vector products, the certificate's Lanczos solves (counted around
+``posecrb.solver.staircase._largest_inverse_eig`` where a checkout has it), the staircase rank,
+the objectives' relative difference and the difference of the certificates' lambda_min. Every
+BLAS pool runs at one thread (--threads), as in the solver. --init vertices starts from the
+files' own rotations.
 
 --before-set / --after-set MODULE.NAME=VALUE (repeatable) set a module constant of that side
 before it solves (VALUE a Python literal), e.g. to time a threshold: ``--before DIR --after DIR
@@ -14,7 +18,7 @@ before it solves (VALUE a Python literal), e.g. to time a threshold: ``--before 
 
 Usage: python benchmarks/solve_checkouts.py --before DIR [--after DIR (default: this checkout)]
            [--before-set M.N=V] [--after-set M.N=V] [--rounds R] [--repeat K] [--threads T]
-           [--data-dir DIR] [NAME|FILE ...]
+           [--init chordal|vertices] [--data-dir DIR] [NAME|FILE ...]
 """
 from __future__ import annotations
 
@@ -39,25 +43,40 @@ for setting in json.loads(sys.argv[3]):
     setattr(mod, name, ast.literal_eval(value))
 from posecrb.io import load
 from posecrb.solver import solve
-repeat = int(sys.argv[2])
+import posecrb.solver.staircase as staircase
+lanczos = [0]
+if hasattr(staircase, "_largest_inverse_eig"):     # count the certificate's Lanczos solves
+    _eig = staircase._largest_inverse_eig
+
+    def _counted(*a, **k):
+        res = _eig(*a, **k)
+        lanczos[0] += res[2]
+        return res
+    staircase._largest_inverse_eig = _counted
+repeat, init = sys.argv[2].split(",")
+repeat = int(repeat)
 out = {}
 for path in sys.argv[4:]:
     graph = load(path, quaternions="raw")
     runs = []
     for _ in range(repeat):
+        lanczos[0] = 0
         t0 = time.perf_counter()
-        res = solve(graph)
-        runs.append((time.perf_counter() - t0, res.times["optimize"]))
-    out[path] = {"wall": [w for w, _ in runs], "optimize": [o for _, o in runs], "objective": res.objective,
-                 "hvps": res.hessian_vector_products, "rank": res.rank, "certified": res.certified}
+        res = solve(graph, init=init)
+        runs.append((time.perf_counter() - t0, res.times["optimize"], res.times["verify"]))
+    out[path] = {"wall": [w for w, _, _ in runs], "optimize": [o for _, o, _ in runs],
+                 "verify": [v for _, _, v in runs], "objective": res.objective, "lambda_min": res.lambda_min,
+                 "hvps": res.hessian_vector_products, "lanczos": lanczos[0], "rank": res.rank,
+                 "certified": res.certified}
 print(json.dumps(out))
 """
 
 
-def run_side(checkout: Path, files: list[Path], repeat: int, threads: int, settings: list[str]) -> dict:
+def run_side(checkout: Path, files: list[Path], repeat: int, threads: int, settings: list[str],
+             init: str = "chordal") -> dict:
     env = child_env(threads)
     env.pop("PYTHONPATH", None)     # the child puts its own checkout first
-    proc = subprocess.run([sys.executable, "-c", CHILD, str(checkout), str(repeat), json.dumps(settings),
+    proc = subprocess.run([sys.executable, "-c", CHILD, str(checkout), f"{repeat},{init}", json.dumps(settings),
                            *map(str, files)],
                           env=env, capture_output=True, text=True, check=False)
     if proc.returncode != 0:
@@ -73,6 +92,8 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--rounds", type=int, default=3)
     ap.add_argument("--repeat", type=int, default=3, help="timed solves per file and round")
     ap.add_argument("--threads", type=int, default=1)
+    ap.add_argument("--init", choices=("chordal", "vertices"), default="chordal",
+                    help="the solver's initial rotations (files without VERTEX lines need chordal)")
     ap.add_argument("--data-dir", default=None)
     for side in ("before", "after"):
         ap.add_argument(f"--{side}-set", action="append", default=[], metavar="MODULE.NAME=VALUE",
@@ -92,18 +113,21 @@ def main(argv: list[str] | None = None) -> int:
     print_header("in-process solve, two checkouts alternating", threads=args.threads,
                  extra=[f"before = {args.before.resolve()} {' '.join(args.before_set)}".rstrip(),
                         f"after = {args.after.resolve()} {' '.join(args.after_set)}".rstrip(),
-                        f"{args.rounds} alternating rounds x {args.repeat} timed solves per file; median of all"])
+                        f"{args.rounds} alternating rounds x {args.repeat} timed solves per file; median of all; "
+                        f"init {args.init}"])
     runs: dict[str, list[dict]] = {"before": [], "after": []}
-    for _ in range(args.rounds):
-        for side in ("before", "after"):
+    for k in range(args.rounds):
+        # the order flips every round, so a drift of the machine within a round favours neither side
+        for side in (("before", "after") if k % 2 == 0 else ("after", "before")):
             runs[side].append(run_side(getattr(args, side), files, args.repeat, args.threads,
-                                       getattr(args, f"{side}_set")))
+                                       getattr(args, f"{side}_set"), args.init))
 
     def pooled(side: str, key: str, path: str) -> float:
         return statistics.median(v for r in runs[side] for v in r[path][key])
 
     print(f"{'dataset':24s} {'before s':>9s} {'after s':>8s} {'ratio':>6s} {'optimize before -> after':>26s} "
-          f"{'HVPs':>10s} {'rank':>7s} {'F rel diff':>10s}")
+          f"{'verify before -> after':>24s} {'HVPs':>10s} {'Lanczos':>10s} {'rank':>7s} {'F rel diff':>10s} "
+          f"{'lambda_min diff':>15s}")
     total = {"before": 0.0, "after": 0.0}
     for f in files:
         p = str(f)
@@ -114,7 +138,9 @@ def main(argv: list[str] | None = None) -> int:
         rel = abs(a["objective"] - b["objective"]) / max(abs(b["objective"]), 1e-300)
         print(f"{f.stem:24s} {wb:9.3f} {wa:8.3f} {wa / wb:6.2f} "
               f"{pooled('before', 'optimize', p):12.3f} -> {pooled('after', 'optimize', p):9.3f} "
-              f"{b['hvps']:>4d} -> {a['hvps']:<4d} {b['rank']:>2d} -> {a['rank']:<2d} {rel:10.1e}"
+              f"{pooled('before', 'verify', p):11.3f} -> {pooled('after', 'verify', p):8.3f} "
+              f"{b['hvps']:>4d} -> {a['hvps']:<4d} {b['lanczos']:>4d} -> {a['lanczos']:<4d} "
+              f"{b['rank']:>2d} -> {a['rank']:<2d} {rel:10.1e} {a['lambda_min'] - b['lambda_min']:+15.1e}"
               + ("" if a["certified"] and b["certified"] else "  (not certified)"))
     print(f"{'sum':24s} {total['before']:9.3f} {total['after']:8.3f} {total['after'] / total['before']:6.2f}")
     return 0
