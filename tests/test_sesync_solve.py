@@ -14,8 +14,8 @@ from posecrb.lie.so import so2_exp, so_project
 from posecrb.sim.generators import uniform_rotations
 from posecrb.solver import solve
 from posecrb.solver.problem import Problem
-from posecrb.solver.staircase import RelaxedModel, verify
-from posecrb.solver.stiefel import lift, random_point
+from posecrb.solver.staircase import RelaxedModel, _next_escape_step, verify
+from posecrb.solver.stiefel import lift, random_point, retract
 from posecrb.solver.trust_region import TROptions, trust_region
 
 from .helpers import SESYNC_STOP, drop_edges, print_rounding, random_pose_graph, record_factor_full
@@ -123,6 +123,36 @@ def test_escape_from_saddle():
     assert res.rank >= 3
     assert res.objective < 1e-10
     np.testing.assert_allclose(res.rot, np.tile(np.eye(2), (n, 1, 1)), atol=1e-6)
+
+
+@pytest.mark.parametrize("dim", [2, 3])
+def test_escape_path_is_even_in_the_step(dim):
+    """The escape's step rule rests on f(retract([Y | 0] + a [0 | v])) being even in a: check it on
+    a random graph at a random point (the odd part is rounding, not a^3)."""
+    rng = np.random.default_rng(11)
+    g, _, _ = random_pose_graph(15, dim, rng, rot_noise=0.3, trans_noise=0.3)
+    model = RelaxedModel(Problem.from_graph(g))
+    Zp = lift(random_point(g.n, dim, dim + 1, rng), dim + 2)
+    direction = np.zeros_like(Zp)
+    direction[:, :, dim + 1] = rng.standard_normal((g.n, dim))
+    for a in (0.1, 1.0, 5.0):
+        plus, minus = (model.evaluate(retract(Zp, s * a * direction)).f for s in (1.0, -1.0))
+        f0 = model.evaluate(Zp).f
+        assert abs(plus - minus) <= 1e3 * EPS * max(abs(plus), abs(f0)), a
+        assert abs(plus - f0) > 1e6 * EPS * abs(f0)     # the path moves f: the check is not vacuous
+
+
+def test_escape_step_minimises_the_quartic_model():
+    """Against the closed form: for f(a) = f0 + lam a^2 + c a^4 the next step is sqrt(-lam / (2 c)),
+    clamped to [alpha / 16, alpha / 2]; without a minimiser (c <= 0, NaN) it halves."""
+    f0, lam = 10.0, -0.5
+    for c, alpha in ((1e-3, 100.0), (1e-3, 40.0), (1e-1, 8.0), (1e-6, 30.0), (50.0, 4.0)):
+        f = f0 + lam * alpha ** 2 + c * alpha ** 4
+        expected = min(alpha / 2, max(alpha / 16, np.sqrt(-lam / (2 * c))))
+        assert _next_escape_step(alpha, f, f0, lam) == pytest.approx(expected, rel=1e-9)
+    assert _next_escape_step(100.0, f0 + lam * 1e4 + 1e-3 * 1e8, f0, lam) == pytest.approx(np.sqrt(250.0))
+    assert _next_escape_step(8.0, f0 + lam * 64 - 1.0, f0, lam) == 4.0       # c < 0
+    assert _next_escape_step(8.0, float("nan"), f0, lam) == 4.0
 
 
 def test_disconnected_graph_raises():
