@@ -28,31 +28,42 @@ static double now(void) {
     return t.tv_sec + 1e-9 * t.tv_nsec;
 }
 
+/* The failure as the one JSON object the caller reads, and the exit code. */
+static void die(int code, const char *message, const char *detail) {
+    printf("{\"error\": \"%s%s\"}\n", message, detail);
+    exit(code);
+}
+
+static FILE *open_or_die(const char *path) {
+    FILE *f = fopen(path, "rb");
+    if (f == NULL)
+        die(1, "cannot open ", path);
+    return f;
+}
+
 static void *read_or_die(FILE *f, size_t size, size_t count, const char *what) {
     void *p = malloc(size * count);
-    if (p == NULL || fread(p, size, count, f) != count) {
-        printf("{\"error\": \"cannot read %s\"}\n", what);
-        exit(1);
-    }
+    if (p == NULL || fread(p, size, count, f) != count)
+        die(1, "cannot read ", what);
     return p;
 }
 
+/* One MUMPS phase (JOB = 1 analysis, 2 factorization); its error ends the program. */
+static void run_job(DMUMPS_STRUC_C *id, int job, const char *phase) {
+    id->job = job;
+    dmumps_c(id);
+    if (id->INFOG(1) < 0) {
+        printf("{\"error\": \"MUMPS %s: INFOG(1) = %d, INFOG(2) = %d\"}\n", phase, id->INFOG(1), id->INFOG(2));
+        exit(1);
+    }
+}
+
 int main(int argc, char **argv) {
-    if (argc < 3) {
-        printf("{\"error\": \"usage: mumps_logdet MATRIX ORDERING [PERM]\"}\n");
-        return 2;
-    }
-    FILE *f = fopen(argv[1], "rb");
-    if (f == NULL) {
-        printf("{\"error\": \"cannot open %s\"}\n", argv[1]);
-        return 1;
-    }
+    if (argc < 3)
+        die(2, "usage: mumps_logdet MATRIX ORDERING [PERM]", "");
+    FILE *f = open_or_die(argv[1]);
     int ordering = atoi(argv[2]);
-    int64_t head[2];
-    if (fread(head, 8, 2, f) != 2) {
-        printf("{\"error\": \"cannot read the header\"}\n");
-        return 1;
-    }
+    int64_t *head = read_or_die(f, sizeof(int64_t), 2, "the header");
     int64_t n = head[0], nnz = head[1];
     int *irn = read_or_die(f, sizeof(int), nnz, "row indices");
     int *jcn = read_or_die(f, sizeof(int), nnz, "column indices");
@@ -77,31 +88,19 @@ int main(int argc, char **argv) {
     id.ICNTL(7) = ordering;
     id.ICNTL(33) = 1;            /* the determinant */
     if (ordering == 1) {
-        if (argc < 4) {
-            printf("{\"error\": \"ordering 1 needs PERM\"}\n");
-            return 2;
-        }
-        FILE *g = fopen(argv[3], "rb");
-        if (g == NULL) {
-            printf("{\"error\": \"cannot open %s\"}\n", argv[3]);
-            return 1;
-        }
+        if (argc < 4)
+            die(2, "ordering 1 needs PERM", "");
+        FILE *g = open_or_die(argv[3]);
         id.perm_in = read_or_die(g, sizeof(int), n, "the pivot order");
         fclose(g);
     }
     double t0 = now();
-    id.job = 1;
-    dmumps_c(&id);
+    run_job(&id, 1, "analysis");
     double t1 = now();
-    if (id.INFOG(1) < 0) {
-        printf("{\"error\": \"MUMPS analysis: INFOG(1) = %d, INFOG(2) = %d\"}\n", id.INFOG(1), id.INFOG(2));
-        return 1;
-    }
-    id.job = 2;
-    dmumps_c(&id);
+    run_job(&id, 2, "factorization");
     double t2 = now();
-    if (id.INFOG(1) < 0) {
-        printf("{\"error\": \"MUMPS factorization: INFOG(1) = %d, INFOG(2) = %d\"}\n", id.INFOG(1), id.INFOG(2));
+    if (id.INFOG(12) > 0 || !(id.RINFOG(12) > 0.0)) {   /* negative pivots (INFOG(12)) or det <= 0 */
+        printf("{\"error\": \"not positive definite: %d negative pivots\"}\n", id.INFOG(12));
         return 1;
     }
     double logdet = log(id.RINFOG(12)) + id.INFOG(34) * log(2.0);

@@ -120,3 +120,7 @@ def test_factor_candidates_mumps_logdet_matches_dense_reference(tmp_path):
         # log-det error ~ n eps cond(A): far below 1e-9 for this size and conditioning
         assert abs(res["logdet"] - ref) <= 1e-9 * max(1.0, abs(ref)), kind
         assert res["flops"] > 0 and res["lnz"] >= a.nnz // 2
+    # an indefinite matrix is an error with its reason, never the log of a negative determinant
+    indefinite = sp.csc_matrix(np.array([[1.0, 2.0], [2.0, 1.0]]))
+    res = candidates._mumps(indefinite, np.arange(2), "mumps", "1t", tmp_path / "indefinite.fim.npz")
+    assert "not positive definite" in res["error"]
