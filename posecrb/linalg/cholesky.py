@@ -142,14 +142,11 @@ class SymbolicCholesky:
         a = _as_csc(a)
         if self._perm is not None:
             a = self._permuted(a)
+        blas_threads = load_aware_threads() if self.threaded else cholmod_single_threaded()
         try:
             # CHOLMOD's own OpenMP team stays off: it cost more than its loops save (threads module)
-            if self.threaded:
-                with load_aware_threads(), cholmod_openmp_serial():
-                    f = self._symbolic.cholesky(a, beta=beta)
-            else:
-                with cholmod_single_threaded(), cholmod_openmp_serial():
-                    f = self._symbolic.cholesky(a, beta=beta)
+            with blas_threads, cholmod_openmp_serial():
+                f = self._symbolic.cholesky(a, beta=beta)
         except CholmodNotPositiveDefiniteError as exc:
             raise NotPositiveDefinite(name, str(exc).split(": ", 1)[-1]) from None
         if self._perm is not None:
