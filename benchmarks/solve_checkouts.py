@@ -34,7 +34,8 @@ from _common import REPO, child_env, data_dir, print_header, suite_files
 CHILD = """
 import ast, importlib, json, sys, time
 sys.path.insert(0, sys.argv[1])
-for setting in json.loads(sys.argv[3]):
+options = json.loads(sys.argv[2])
+for setting in options["settings"]:
     target, value = setting.split("=", 1)
     module, name = target.rsplit(".", 1)
     mod = importlib.import_module(module)
@@ -44,8 +45,9 @@ for setting in json.loads(sys.argv[3]):
 from posecrb.io import load
 from posecrb.solver import solve
 import posecrb.solver.staircase as staircase
+counting = hasattr(staircase, "_largest_inverse_eig")   # the certificate's Lanczos solves
 lanczos = [0]
-if hasattr(staircase, "_largest_inverse_eig"):     # count the certificate's Lanczos solves
+if counting:
     _eig = staircase._largest_inverse_eig
 
     def _counted(*a, **k):
@@ -53,20 +55,18 @@ if hasattr(staircase, "_largest_inverse_eig"):     # count the certificate's Lan
         lanczos[0] += res[2]
         return res
     staircase._largest_inverse_eig = _counted
-repeat, init = sys.argv[2].split(",")
-repeat = int(repeat)
 out = {}
-for path in sys.argv[4:]:
+for path in sys.argv[3:]:
     graph = load(path, quaternions="raw")
     runs = []
-    for _ in range(repeat):
+    for _ in range(options["repeat"]):
         lanczos[0] = 0
         t0 = time.perf_counter()
-        res = solve(graph, init=init)
+        res = solve(graph, init=options["init"])
         runs.append((time.perf_counter() - t0, res.times["optimize"], res.times["verify"]))
     out[path] = {"wall": [w for w, _, _ in runs], "optimize": [o for _, o, _ in runs],
                  "verify": [v for _, _, v in runs], "objective": res.objective, "lambda_min": res.lambda_min,
-                 "hvps": res.hessian_vector_products, "lanczos": lanczos[0], "rank": res.rank,
+                 "hvps": res.hessian_vector_products, "lanczos": lanczos[0] if counting else None, "rank": res.rank,
                  "certified": res.certified}
 print(json.dumps(out))
 """
@@ -76,12 +76,16 @@ def run_side(checkout: Path, files: list[Path], repeat: int, threads: int, setti
              init: str = "chordal") -> dict:
     env = child_env(threads)
     env.pop("PYTHONPATH", None)     # the child puts its own checkout first
-    proc = subprocess.run([sys.executable, "-c", CHILD, str(checkout), f"{repeat},{init}", json.dumps(settings),
-                           *map(str, files)],
+    options = {"repeat": repeat, "init": init, "settings": settings}
+    proc = subprocess.run([sys.executable, "-c", CHILD, str(checkout), json.dumps(options), *map(str, files)],
                           env=env, capture_output=True, text=True, check=False)
     if proc.returncode != 0:
         raise SystemExit(f"{checkout}: solve failed:\n{proc.stderr}")
     return json.loads(proc.stdout)
+
+
+def _count(value: int | None) -> str:
+    return "n/a" if value is None else str(value)
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -139,7 +143,7 @@ def main(argv: list[str] | None = None) -> int:
         print(f"{f.stem:24s} {wb:9.3f} {wa:8.3f} {wa / wb:6.2f} "
               f"{pooled('before', 'optimize', p):12.3f} -> {pooled('after', 'optimize', p):9.3f} "
               f"{pooled('before', 'verify', p):11.3f} -> {pooled('after', 'verify', p):8.3f} "
-              f"{b['hvps']:>4d} -> {a['hvps']:<4d} {b['lanczos']:>4d} -> {a['lanczos']:<4d} "
+              f"{b['hvps']:>4d} -> {a['hvps']:<4d} {_count(b['lanczos']):>4s} -> {_count(a['lanczos']):<4s} "
               f"{b['rank']:>2d} -> {a['rank']:<2d} {rel:10.1e} {a['lambda_min'] - b['lambda_min']:+15.1e}"
               + ("" if a["certified"] and b["certified"] else "  (not certified)"))
     print(f"{'sum':24s} {total['before']:9.3f} {total['after']:8.3f} {total['after'] / total['before']:6.2f}")
