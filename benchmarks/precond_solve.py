@@ -6,7 +6,9 @@ graphs, CHOLMOD's supernodal kind above the fill switch), then times with every 
 (as inside the solver), median of --repeat calls after a warm-up:
 
 * ``solve_tail`` (posecrb.linalg.cholesky) with k = 1, 3 and 8 right-hand sides: the rotation rows
-  of M_red^{-1} [0; W], one call per truncated-CG step;
+  of M_red^{-1} [0; W], one call per truncated-CG step; once with CHOLMOD's BLAS at one thread and
+  once on every core (what ``posecrb.linalg.threads.solve_threads`` gives the solves of large
+  graphs when no other process keeps a core busy), the two calls alternating;
 * the memory bound: the factor's values read twice (forward and backward substitution) at the rate
   one core streams an array of the same size here (``numpy.add.reduce``, median of --repeat);
 * a candidate kept outside the package: a supernodal forward/backward substitution compiled with
@@ -21,6 +23,7 @@ Usage: python benchmarks/precond_solve.py [--repeat K] FILE
 from __future__ import annotations
 
 import argparse
+import os
 import statistics
 import sys
 import time
@@ -163,6 +166,18 @@ def _median(fn, repeat: int) -> float:
     return statistics.median(times)
 
 
+def _median_pair(fa, fb, repeat: int) -> tuple[float, float]:
+    """Medians of ``fa`` and ``fb``, called alternately ``repeat`` times each after a warm-up."""
+    fa(), fb()
+    ta, tb = [], []
+    for _ in range(repeat):
+        for fn, times in ((fa, ta), (fb, tb)):
+            t0 = time.perf_counter()
+            fn()
+            times.append(time.perf_counter() - t0)
+    return statistics.median(ta), statistics.median(tb)
+
+
 def main() -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("file")
@@ -173,6 +188,7 @@ def main() -> int:
     from posecrb.io import load
     from posecrb.linalg.cholesky import PermutedFactor, solve_tail
     from posecrb.linalg.selinv import supernode_bounds
+    from posecrb.linalg.threads import cholmod_blas
     from posecrb.solver.problem import Problem
     from posecrb.solver.solve import SolverOptions
 
@@ -186,8 +202,18 @@ def main() -> int:
     W = rng.standard_normal((problem.n * problem.d, 8))
     print(f"\n== {graph.name}: {graph.n} poses, {graph.m} edges, M_red {first + problem.n * problem.d} rows, "
           f"CHOLMOD kind {problem.factor_mode(problem.d + 1)}")
+    cores = len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else (os.cpu_count() or 1)
     with threadpool_limits(1):
-        cholmod = {k: _median(lambda k=k: solve_tail(factor, first, W[:, :k]), args.repeat) for k in (1, 3, 8)}
+        blas = cholmod_blas()
+
+        def on_every_core(k: int) -> np.ndarray:
+            with blas.limit(limits=cores):
+                return solve_tail(factor, first, W[:, :k])
+
+        pairs = {k: _median_pair(lambda k=k: solve_tail(factor, first, W[:, :k]), lambda k=k: on_every_core(k),
+                                 args.repeat) for k in (1, 3, 8)}
+        cholmod = {k: one for k, (one, _) in pairs.items()}
+        cholmod_all = {k: every for k, (_, every) in pairs.items()}
         reference = solve_tail(factor, first, W[:, :3])
         inner = factor._inner if isinstance(factor, PermutedFactor) else factor
         lower = inner.L()                       # converts CHOLMOD's factor in place (see above)
@@ -217,6 +243,8 @@ def main() -> int:
     print(f"{'solve':58s} {'k=1':>8s} {'k=3':>8s} {'k=8':>8s}")
     print(f"{'CHOLMOD supernodal (solve_tail, what the solver does)':58s} "
           + " ".join(f"{cholmod[k] * 1e3:6.1f}ms" for k in (1, 3, 8)))
+    print(f"{f'the same, CHOLMOD BLAS on {cores} threads (solve_threads)':58s} "
+          + " ".join(f"{cholmod_all[k] * 1e3:6.1f}ms" for k in (1, 3, 8)))
     print(f"{'CHOLMOD on the converted simplicial factor':58s} {'':>8s} {converted * 1e3:6.1f}ms")
     print(f"{'compiled supernodal substitution (numba, candidate)':58s} "
           + " ".join(f"{compiled[k] * 1e3:6.1f}ms" for k in (1, 3)))

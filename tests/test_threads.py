@@ -106,6 +106,94 @@ def test_factorizations_threaded_only_for_the_block_matrices_of_large_graphs():
     assert abs(ld1 - ld2) <= tol
 
 
+def test_solve_threads_count_the_load_once_a_second_inside_the_solver(monkeypatch):
+    """``solve_threads``: CHOLMOD's BLAS at the solver's factorization count, fewer when cores are
+    busy; the busy cores are counted again only when the last count is SOLVE_LOAD_SECONDS old;
+    outside ``solver_threads``, or at one thread, nothing changes."""
+    cholmod = {c.filepath for c in threads.cholmod_blas().lib_controllers}
+    before = _blas_threads()
+    clock = [100.0]
+    counts = []
+    busy = [0]
+
+    def fake_busy():
+        counts.append(clock[0])
+        return busy[0]
+
+    monkeypatch.setattr(threads, "busy_cores", fake_busy)
+    monkeypatch.setattr(threads, "_cores", lambda: 2)
+    monkeypatch.setattr(threads.time, "monotonic", lambda: clock[0])
+    with threads.solve_threads():                 # outside the solver
+        assert _blas_threads() == before
+    assert counts == []
+    with threads.solver_threads(2):
+        with threads.solve_threads():
+            inside = _blas_threads()
+            assert all(inside[p] == (2 if p in cholmod else 1) for p in inside)
+        assert set(_blas_threads().values()) == {1}
+        busy[0] = 1                               # another process takes a core ...
+        clock[0] += 0.5 * threads.SOLVE_LOAD_SECONDS
+        with threads.solve_threads():             # ... unseen until the count is a second old
+            assert all(_blas_threads()[p] == 2 for p in cholmod)
+        assert len(counts) == 1
+        clock[0] += threads.SOLVE_LOAD_SECONDS
+        with threads.solve_threads():
+            assert set(_blas_threads().values()) == {1}
+        assert len(counts) == 2
+    with threads.solver_threads(2):               # a new solver block counts afresh
+        busy[0] = 0
+        with threads.solve_threads():
+            assert all(_blas_threads()[p] == 2 for p in cholmod)
+        assert len(counts) == 3
+    with threads.solver_threads(1), threads.solve_threads():
+        assert set(_blas_threads().values()) == {1}
+    assert len(counts) == 3
+    assert _blas_threads() == before
+
+
+def test_schur_solves_of_large_graphs_take_the_solve_threads(monkeypatch):
+    """The solver's preconditioner and Lanczos solves (``Problem.schur_solve``) run inside
+    ``solve_threads`` exactly when M_red is a threaded matrix of a 3D graph, and give the same
+    solution."""
+    import numpy as np
+
+    import posecrb.solver.problem as problem_mod
+    from posecrb.sim.generators import grid
+    from posecrb.solver.problem import Problem
+
+    graph = grid(3, 5, noise=True, rng=0)
+    entered = []
+    real = threads.solve_threads
+
+    def spy():
+        entered.append(True)
+        return real()
+
+    monkeypatch.setattr(problem_mod, "solve_threads", spy)
+    W = np.random.default_rng(0).standard_normal((graph.n * 3, 3))
+    problem = Problem.from_graph(graph)
+    factor = problem.factor_full(None, 1.0, name="M_red")
+    symbolic = problem._full_symbolic
+    assert symbolic is not None and not symbolic.threaded     # a small graph: one thread
+    solutions = [problem.schur_solve(factor, W)]
+    assert entered == []
+    monkeypatch.setattr(symbolic, "threaded", True)           # as for a large graph
+    with threads.solver_threads(2):
+        solutions.append(problem.schur_solve(factor, W))
+    assert entered == [True]
+    flat = Problem.from_graph(grid(2, 12, noise=True, rng=0))   # 2D: one thread, even when large
+    flat_factor = flat.factor_full(None, 1.0, name="M_red")
+    assert flat._full_symbolic is not None
+    monkeypatch.setattr(flat._full_symbolic, "threaded", True)
+    flat.schur_solve(flat_factor, np.ones((flat.n * 2, 2)))
+    assert entered == [True]
+    dense = problem.full_matrix(None, 1.0).toarray()
+    reference = np.linalg.solve(dense, np.vstack([np.zeros((graph.n - 1, 3)), W]))[graph.n - 1:]
+    tol = 10 * dense.shape[0] * np.finfo(float).eps * np.linalg.cond(dense)
+    for x in solutions:
+        assert np.max(np.abs(x - reference)) <= tol * np.max(np.abs(reference))
+
+
 def test_running_tasks_and_own_threads_parse_the_kernel_texts():
     assert threads._running_tasks("0.95 0.97 1.02 3/84 10297\n") == 3
     assert threads._running_tasks("0.95 0.97 1.02") is None

@@ -19,7 +19,10 @@ directory), which does posecrb's own small dense products.
   benchmarks/threads.py).
 * The solver runs every BLAS at one thread (many small products and triangular solves), except
   CHOLMOD's in the M_red factorizations of those large graphs (``solver_threads``,
-  ``factorization_threads``).
+  ``factorization_threads``) and in the triangular solves with those factors of 3D graphs
+  (``solve_threads``, posecrb.solver.problem): the top separators of a 3D graph are dense
+  triangles of thousands of rows, whose solves two threads share. The solves re-count the busy
+  cores at most once a second.
 * numpy's/scipy's OpenBLAS stays at one thread in the solver and the selected inversion: its
   threads collapse under load (posecrb.linalg.selinv). The exception: the selected inversion's
   supernodes of at least 10^9 flops (the top separators of large graphs, nearly all of its flops
@@ -57,6 +60,13 @@ _IN_POOL_WORKER = False
 
 # Threads of CHOLMOD's BLAS inside ``factorization_threads`` (None: leave them as they are).
 _FACTOR_THREADS: contextvars.ContextVar[int | None] = contextvars.ContextVar("factor_threads", default=None)
+
+# The usable count of ``solve_threads`` and when it was taken (time.monotonic()): one list per
+# ``solver_threads`` block, so a solve re-counts the busy cores at most every SOLVE_LOAD_SECONDS.
+_SOLVE_LOAD: contextvars.ContextVar[list[float] | None] = contextvars.ContextVar("solve_load", default=None)
+# A preconditioner solve of a large graph takes about 0.1 s, a count of the busy cores a few
+# milliseconds (busy_cores' three samples): once a second costs under 1% of the solves.
+SOLVE_LOAD_SECONDS = 1.0
 
 # Modules that load a BLAS or OpenMP library: the controller is rebuilt when one more is imported.
 _LOADERS = ("numpy", "scipy.linalg", "sksparse.cholmod", "numba")
@@ -253,10 +263,12 @@ def solver_threads(factor_threads: int) -> Iterator[None]:
     """Every BLAS at one thread inside, except CHOLMOD's in ``factorization_threads`` blocks,
     which get ``factor_threads``."""
     token = _FACTOR_THREADS.set(factor_threads)
+    load = _SOLVE_LOAD.set([1.0, -float("inf")])
     try:
         with controller().limit(limits=1, user_api="blas"):
             yield
     finally:
+        _SOLVE_LOAD.reset(load)
         _FACTOR_THREADS.reset(token)
 
 
@@ -269,6 +281,21 @@ def factorization_threads() -> Iterator[None]:
         return
     with cholmod_blas().limit(limits=n):
         yield
+
+
+def solve_threads() -> Any:
+    """CHOLMOD's BLAS for one triangular solve with the factor of a large graph's matrix in a
+    ``solver_threads`` block (a context manager): the count ``solver_threads`` chose for the
+    factorizations, fewer while other processes keep cores busy, counted again when the last count
+    is SOLVE_LOAD_SECONDS old. Outside such a block, or at one thread, nothing changes."""
+    n = _FACTOR_THREADS.get()
+    load = _SOLVE_LOAD.get()
+    if n is None or n <= 1 or load is None:
+        return contextlib.nullcontext()
+    now = time.monotonic()
+    if now - load[1] >= SOLVE_LOAD_SECONDS:
+        load[0], load[1] = usable_threads(n, _cores(), busy_cores()), now
+    return contextlib.nullcontext() if load[0] <= 1 else cholmod_blas().limit(limits=int(load[0]))
 
 
 def all_single_threaded() -> Any:

@@ -49,7 +49,7 @@ from ..core.graph import PoseGraph
 from ..linalg.cholesky import SymbolicCholesky, cholesky, solve_tail
 from ..linalg.laplacian import reduced_laplacian
 from ..linalg.ordering import auto_ordering, pose_permutation, solver_symbolic
-from ..linalg.threads import factorization_threads
+from ..linalg.threads import factorization_threads, solve_threads
 
 # CHOLMOD's simplicial factorization for the solver's block matrices (M_red, the chordal
 # initialisation's connection Laplacian) when the pose-level fill is low: ``b * sum c_j^2 / sum c_j``
@@ -353,7 +353,16 @@ class Problem:
             return self._full_symbolic.factor(self.full_matrix(lam_blocks, shift), name=name)
 
     def schur_solve(self, factor: Factor, W: np.ndarray) -> np.ndarray:
-        """(Q - Lambda + s I)^{-1} W, the rotation block of M_red(s)^{-1} [0; W]."""
+        """(Q - Lambda + s I)^{-1} W, the rotation block of M_red(s)^{-1} [0; W]. For a large 3D graph
+        (one whose factorizations take CHOLMOD's threads, ``SymbolicCholesky.threaded``) CHOLMOD's
+        BLAS shares the solve's dense triangles out over the cores other processes leave free
+        (``solve_threads``). benchmarks/precond_solve.py on the Intel machine of
+        docs/performance.md, k = 3: 161 -> 137 ms on the 3D grid of 21,952 poses, whose top
+        separators are triangles of 3,136 rows; 158 -> 155 ms on the 2D grid of 100,489 poses,
+        whose separators have 951 rows, so 2D graphs keep one thread (their threads would only spin)."""
+        if self.d == 3 and self._full_symbolic is not None and self._full_symbolic.threaded:
+            with solve_threads():
+                return solve_tail(factor, self.n - 1, W)
         return solve_tail(factor, self.n - 1, W)
 
     def gershgorin_max(self) -> float:
