@@ -28,6 +28,12 @@ against the first candidate's:
                   MUMPS's automatic ordering; mumps-pose-metis with posecrb's ordering (the pose
                   graph's METIS) as MUMPS's pivot order. Skipped with the reason where no MUMPS
                   compiles. Its flops are MUMPS's own count (RINFOG(3)), never the limit's.
+  pardiso         another library: Intel oneMKL's PARDISO (Cholesky, two-level factorization)
+                  through ctypes (benchmarks/_pardiso.py), found through $POSECRB_MKL_RT (the
+                  path of libmkl_rt.so, e.g. from `pip install mkl` in a virtual environment of
+                  its own), with its own METIS ordering; pardiso-pose-metis with posecrb's ordering.
+                  Its threads are MKL's (1t: MKL_NUM_THREADS=1). Skipped with the reason where
+                  MKL is not given. Its flops are PARDISO's own count, never the limit's.
 each with the BLAS of CHOLMOD at one thread ("1t") and at every core ("all"), where it applies,
 and CHOLMOD's own OpenMP team off (posecrb.linalg.threads.cholmod_openmp_serial) as in posecrb.
 The table's "process CPU / wall" is the candidate's whole process: about 1 for one thread, up to
@@ -58,7 +64,8 @@ from grids import DEFAULT_SIGMA, cache_dir, grid_file
 
 CANDIDATES = ["posecrb/1t", "posecrb/all", "nesdis/1t", "nesdis/all", "metis/all", "amd/all",
               "pose-metis/1t", "pose-metis/all", "pose-nesdis/all", "pose-nesdis-relax/all", "split/all",
-              "mumps/all", "mumps-pose-metis/1t", "mumps-pose-metis/all"]
+              "mumps/all", "mumps-pose-metis/1t", "mumps-pose-metis/all", "pardiso/all",
+              "pardiso-pose-metis/1t", "pardiso-pose-metis/all"]
 MUMPS_LIBS = "-ldmumps_seq -lmumps_common_seq -lmpiseq_seq -lpord_seq -lm"
 RELAX = {"nrelax": (16, 64, 256), "zrelax": (0.8, 0.2, 0.1)}
 
@@ -120,6 +127,9 @@ def run_one(name: str, path: Path) -> dict:
     out: dict = {"candidate": name, "rows": a.shape[0], "nnz": int(a.nnz)}
     if kind.startswith("mumps"):
         out.update(_mumps(a, por, kind, threads, path))
+        return out
+    if kind.startswith("pardiso"):
+        out.update(_pardiso_candidate(a, por, kind, threads))
         return out
     from posecrb.linalg.threads import cholmod_openmp_serial
 
@@ -235,6 +245,32 @@ def _mumps(a, por, kind: str, threads: str, path: Path) -> dict:
             "foreign_flops": True}
 
 
+def _pardiso_candidate(a, por, kind: str, threads: str) -> dict:
+    """MKL PARDISO's log-det in this candidate's process (module docstring); the pose ordering's
+    time counted in the analysis."""
+    import _pardiso
+
+    if threads == "1t":
+        os.environ["MKL_NUM_THREADS"] = "1"     # read when MKL loads, just below
+    try:
+        _pardiso.library()
+    except _pardiso.Unavailable as exc:
+        return {"error": str(exc)}
+    perm, ordering = None, "PARDISO's METIS"
+    t0 = time.perf_counter()
+    if kind == "pardiso-pose-metis":
+        _, perm = _pose_perm(a, por, "metis")
+        ordering = "METIS (pose graph)"
+    t_order = time.perf_counter() - t0
+    try:
+        res = _pardiso.logdet(a, perm)
+    except (_pardiso.NotPositiveDefinite, RuntimeError) as exc:
+        return {"error": str(exc)}
+    return {"ordering": f"PARDISO, {ordering}", "analyse": t_order + res["analyse"], "factor": res["factor"],
+            "logdet": res["logdet"], "flops": res["flops"], "lnz": res["lnz"],
+            "peak_rss": resource.getrusage(resource.RUSAGE_SELF).ru_maxrss * 1024, "foreign_flops": True}
+
+
 def _split(a, por) -> dict:
     """Two halves in two threads, then the separator's dense Schur complement (module docstring)."""
     import _cholmod
@@ -333,9 +369,9 @@ def main(argv: list[str] | None = None) -> int:
     if unknown or not names:
         ap.error(f"unknown candidate(s) {', '.join(unknown) or '(none given)'}: KIND/1t or KIND/all with KIND one "
                  f"of {', '.join(sorted(kinds))}")
-    if all(n.startswith(("posecrb/", "mumps")) for n in names):
+    if all(n.startswith(("posecrb/", "mumps", "pardiso")) for n in names):
         # posecrb's own path goes through scikit-sparse, which does not report CHOLMOD's flop count,
-        # and MUMPS counts its own way.
+        # and MUMPS and PARDISO count their own way.
         ap.error("the flop limit needs CHOLMOD's flop count: add a candidate that calls CHOLMOD directly "
                  "(e.g. metis/all)")
     print_header("FIM log-det candidates (benchmarks/factor_candidates.py)")
