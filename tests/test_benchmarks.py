@@ -16,6 +16,21 @@ def _module(name: str):
     return importlib.import_module(name)
 
 
+def _random_spd(seed: int):
+    """A random sparse SPD matrix of 60 rows (condition number ~10^2), its dense log-det (numpy's
+    slogdet, the reference) and the pose of each row (ten poses of 6 rows), for the pose ordering."""
+    import numpy as np
+    import scipy.sparse as sp
+
+    rng = np.random.default_rng(seed)
+    n = 60
+    b = sp.random(n, n, density=0.08, random_state=rng)
+    a = (b @ b.T + sp.diags(rng.uniform(1.0, 2.0, n))).tocsc()
+    sign, ref = np.linalg.slogdet(a.toarray())
+    assert sign == 1
+    return a, float(ref), np.repeat(np.arange(n // 6), 6)
+
+
 def test_scaling_plot_and_markdown_write_from_records(tmp_path):
     scaling = _module("scaling")
     records = [{"dim": d, "poses": n, "edges": 2 * n, "command": c, "wall": 0.01 * n ** 1.1, "rss": 1e5 * n,
@@ -107,13 +122,7 @@ def test_factor_candidates_mumps_logdet_matches_dense_reference(tmp_path):
         candidates._mumps_driver(tmp_path)
     except RuntimeError as exc:
         pytest.skip(str(exc))
-    rng = np.random.default_rng(7)
-    n = 60
-    b = sp.random(n, n, density=0.08, random_state=rng)
-    a = (b @ b.T + sp.diags(rng.uniform(1.0, 2.0, n))).tocsc()     # SPD, condition number ~10^2
-    sign, ref = np.linalg.slogdet(a.toarray())
-    assert sign == 1
-    pose_of_row = np.repeat(np.arange(n // 6), 6)       # ten 6-row poses, for the pose ordering
+    a, ref, pose_of_row = _random_spd(7)
     for kind in ("mumps", "mumps-pose-metis"):
         res = candidates._mumps(a, pose_of_row, kind, "1t", tmp_path / "m.fim.npz")
         assert "error" not in res, res
@@ -154,13 +163,7 @@ def test_factor_candidates_pardiso_logdet_matches_dense_reference():
         pardiso.library()
     except pardiso.Unavailable as exc:
         pytest.skip(str(exc))
-    rng = np.random.default_rng(11)
-    n = 60
-    b = sp.random(n, n, density=0.08, random_state=rng)
-    a = (b @ b.T + sp.diags(rng.uniform(1.0, 2.0, n))).tocsc()     # SPD, condition number ~10^2
-    sign, ref = np.linalg.slogdet(a.toarray())
-    assert sign == 1
-    pose_of_row = np.repeat(np.arange(n // 6), 6)
+    a, ref, pose_of_row = _random_spd(11)
     for kind in ("pardiso", "pardiso-pose-metis"):
         res = candidates._pardiso_candidate(a, pose_of_row, kind, "all")
         assert "error" not in res, res
