@@ -23,7 +23,6 @@ Usage: python benchmarks/precond_solve.py [--repeat K] FILE
 from __future__ import annotations
 
 import argparse
-import os
 import statistics
 import sys
 import time
@@ -188,7 +187,7 @@ def main() -> int:
     from posecrb.io import load
     from posecrb.linalg.cholesky import PermutedFactor, solve_tail
     from posecrb.linalg.selinv import supernode_bounds
-    from posecrb.linalg.threads import cholmod_blas
+    from posecrb.linalg.threads import cholmod_blas, cholmod_threads
     from posecrb.solver.problem import Problem
     from posecrb.solver.solve import SolverOptions
 
@@ -202,7 +201,7 @@ def main() -> int:
     W = rng.standard_normal((problem.n * problem.d, 8))
     print(f"\n== {graph.name}: {graph.n} poses, {graph.m} edges, M_red {first + problem.n * problem.d} rows, "
           f"CHOLMOD kind {problem.factor_mode(problem.d + 1)}")
-    cores = len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else (os.cpu_count() or 1)
+    cores = cholmod_threads()      # CHOLMOD's BLAS threads as the solver finds them (its solve_threads count)
     with threadpool_limits(1):
         blas = cholmod_blas()
 
