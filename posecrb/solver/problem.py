@@ -38,6 +38,7 @@ preconditioner (Lambda = 0) and the certificate test ``Q - Lambda + eta I > 0``
 """
 from __future__ import annotations
 
+import contextlib
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -360,10 +361,9 @@ class Problem:
         docs/performance.md, k = 3: 161 -> 137 ms on the 3D grid of 21,952 poses, whose top
         separators are triangles of 3,136 rows; 158 -> 155 ms on the 2D grid of 100,489 poses,
         whose separators have 951 rows, so 2D graphs keep one thread (their threads would only spin)."""
-        if self.d == 3 and self._full_symbolic is not None and self._full_symbolic.threaded:
-            with solve_threads():
-                return solve_tail(factor, self.n - 1, W)
-        return solve_tail(factor, self.n - 1, W)
+        threaded = self.d == 3 and self._full_symbolic is not None and self._full_symbolic.threaded
+        with solve_threads() if threaded else contextlib.nullcontext():
+            return solve_tail(factor, self.n - 1, W)
 
     def gershgorin_max(self) -> float:
         """Upper bound on lambda_max(Q) <= lambda_max(C) (Q = C - PSD term)."""
