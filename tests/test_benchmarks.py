@@ -173,3 +173,20 @@ def test_factor_candidates_pardiso_logdet_matches_dense_reference():
     indefinite = sp.csc_matrix(np.array([[1.0, 2.0], [2.0, 1.0]]))
     res = candidates._pardiso_candidate(indefinite, np.arange(2), "pardiso", "all")
     assert "not positive definite" in res["error"]
+
+
+def test_select_engines_runs_both_engines_and_reports_the_choice(tmp_path, capsys):
+    """benchmarks/select_engines.py on a small graph: both engines as whole processes, the same edges,
+    ``auto``'s choice (the CHOLMOD engine here) and numba loaded by the path engine only."""
+    import numpy as np
+
+    from posecrb.io import write_g2o
+
+    from .helpers import random_pose_graph
+
+    write_g2o(random_pose_graph(80, 2, np.random.default_rng(7), loop_closures=30)[0], tmp_path / "small.g2o")
+    assert _module("select_engines").main(["--repeat", "1", "--data-dir", str(tmp_path), "small"]) == 0
+    row = next(line for line in capsys.readouterr().out.splitlines() if line.startswith("| small |"))
+    cells = [c.strip() for c in row.strip("|").split("|")]
+    assert cells[5] == "cholmod" and cells[8] == "yes" and cells[9] == "True, False"
+    assert float(cells[6]) > 0 and float(cells[7]) > 0

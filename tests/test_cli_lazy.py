@@ -155,8 +155,8 @@ def test_small_inversions_import_no_numba(solvable_g2o, command):
 
 def test_select_fiedler_imports_no_numba(tmp_path):
     """lambda_2 needs no compiled kernel: numba (0.2-0.5 s) and scipy's graph and eigen modules stay
-    unloaded (320 poses: the sparse path, Lanczos on the pseudo-inverse); the log-det objectives
-    load numba when their greedy first runs."""
+    unloaded (320 poses: the sparse path, Lanczos on the pseudo-inverse). Neither does the tree
+    objective's greedy on a graph this small (posecrb.selection.greedy.pick_engine: whole-factor solves)."""
     path = tmp_path / "chain.g2o"
     write_g2o(random_pose_graph(320, 2, np.random.default_rng(5), loop_closures=60)[0], path)
     out, modules = _run(["select", str(path), "--budget", "20%", "--objective", "fiedler", "--method", "relax",
@@ -166,7 +166,8 @@ def test_select_fiedler_imports_no_numba(tmp_path):
     assert _loaded(modules, "numba", "scipy.sparse.csgraph", "scipy.sparse.linalg", "scipy.linalg") == []
     out, modules = _run(["select", str(path), "--budget", "2", "--format", "json"], listing=True)
     assert out.returncode == 0, out.stderr
-    assert _loaded(modules, "numba") == ["numba"]
+    assert json.loads(out.stdout)["stats"]["engine"] == "cholmod"
+    assert _loaded(modules, "numba") == []
 
 
 def test_tables_json_off_a_terminal_loads_no_rich(solvable_g2o):

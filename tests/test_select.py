@@ -848,9 +848,13 @@ def record_inversion_kernels(monkeypatch) -> tuple[list, list]:
 def test_selection_inverts_with_the_compiled_kernels(monkeypatch, objective, method, certify):
     """A selection inverts a factor per iteration: every inversion takes the compiled kernels, whose
     one-time cost the iterations share, even where one inversion alone would take the block kernels
-    (a factor this small always would)."""
+    (a factor this small always would). Small problems take their H_e from solves instead (the
+    test below); the limits are lowered here so that this small graph counts as large."""
     from posecrb.linalg import selinv
+    from posecrb.selection import greedy, objectives
 
+    monkeypatch.setattr(objectives, "H_SOLVE_ENTRIES", 0)
+    monkeypatch.setattr(greedy, "CHOLMOD_ENGINE_ENTRIES", 0)
     kernels, alone = record_inversion_kernels(monkeypatch)
     g = chain_graph(np.random.default_rng(41), n=12, extra=10, dim=2)
     ref = from_vertices(g) if objective == "fim" else None
@@ -859,6 +863,47 @@ def test_selection_inverts_with_the_compiled_kernels(monkeypatch, objective, met
     assert all(k is selinv._kernels() for k in kernels)
     # one of these factors inverted alone takes the block kernels: the check above is not vacuous
     assert all(isinstance(k, selinv._BlockKernels) for k in alone)
+
+
+@pytest.mark.parametrize("objective,method,certify", [("tree", "relax", False), ("tree", "greedy", True),
+                                                      ("fim", "greedy", False)])
+def test_small_selections_solve_instead_of_inverting(monkeypatch, objective, method, certify):
+    """Below the limits a selection takes every H_e from solves with the whole factor and runs the
+    CHOLMOD engine: no selected inversion, no compiled kernel, and the values of the inverting run."""
+    from posecrb.selection import greedy, objectives
+
+    g = chain_graph(np.random.default_rng(41), n=12, extra=10, dim=2)
+    ref = from_vertices(g) if objective == "fim" else None
+    kernels, _ = record_inversion_kernels(monkeypatch)
+    compiled = []
+    monkeypatch.setattr(greedy, "_compiled", lambda: compiled.append(1) or pytest.fail("compiled kernels loaded"))
+    small = select_edges(g, "4", objective=objective, method=method, certify=certify, reference=ref, max_iter=20)
+    assert kernels == [] and compiled == []
+    if method == "greedy":
+        assert small.stats["engine"] == "cholmod"
+    monkeypatch.undo()
+    monkeypatch.setattr(objectives, "H_SOLVE_ENTRIES", 0)
+    monkeypatch.setattr(greedy, "CHOLMOD_ENGINE_ENTRIES", 0)
+    large = select_edges(g, "4", objective=objective, method=method, certify=certify, reference=ref, max_iter=20)
+    assert small.selected.tolist() == large.selected.tolist()
+    assert small.value == pytest.approx(dense_value(objective, g, small.kept_edges), rel=1e-10)
+    assert small.upper_bound == pytest.approx(large.upper_bound, rel=1e-10)
+
+
+def test_engine_choice_follows_the_problem_size():
+    """``auto`` is the CHOLMOD engine up to CHOLMOD_ENGINE_ENTRIES entries of M^{-1} U and the path
+    engine beyond; an unknown engine is a usage error."""
+    from posecrb.selection.greedy import CHOLMOD_ENGINE_ENTRIES, pick_engine
+
+    g = chain_graph(np.random.default_rng(5), n=12, extra=10, dim=2)
+    obj = tree_objective(g)
+    per_column = sum(b.size * b.U.shape[2] for b in obj.blocks)
+    fits = CHOLMOD_ENGINE_ENTRIES // per_column
+    assert pick_engine("auto", obj, 10, fits - 10) == "cholmod"
+    assert pick_engine("auto", obj, 10, fits - 9) == "path"
+    assert pick_engine("path", obj, 10, 1) == "path" and pick_engine("cholmod", obj, 10, 10 ** 9) == "cholmod"
+    with pytest.raises(UsageError, match="unknown update engine"):
+        pick_engine("dense", obj, 10, 1)
 
 
 def test_sparsify_evaluates_with_the_compiled_kernels(monkeypatch):
@@ -871,3 +916,22 @@ def test_sparsify_evaluates_with_the_compiled_kernels(monkeypatch):
     sparsify.sparsify_experiment(g, ["3"], "greedy,random", max_iter=20)
     assert len(kernels) >= 2
     assert all(k is selinv._kernels() for k in kernels)
+
+
+@pytest.mark.parametrize("r", [1, 3, 6])
+def test_numpy_logdet_eye_plus_matches_slogdet_and_the_compiled_kernel(r):
+    """``logdet(I + H)`` of the objectives' gains (numpy) against numpy's slogdet of each ``I + H`` and the
+    path engine's compiled kernel, on PSD blocks from zero to 10^5 in norm. A backward-stable
+    factorization of I + H (>= I, so its inverse has norm <= 1) perturbs the log-det by at most
+    about r eps ||I + H|| in absolute terms: the tolerance, with a margin of 64."""
+    from posecrb.linalg.pathchol import logdet_eye_plus as compiled
+    from posecrb.selection.objectives import logdet_eye_plus
+
+    rng = np.random.default_rng(r)
+    a = rng.standard_normal((40, r, r)) * np.exp(rng.uniform(-6, 6, 40))[:, None, None]
+    a[:5, :, : max(r - 1, 0)] = 0.0                   # rank-deficient (for r = 1: H = 0)
+    h = np.einsum("kab,kcb->kac", a, a)
+    ref = np.array([np.linalg.slogdet(np.eye(r) + x)[1] for x in h])
+    tol = 64 * r * np.finfo(float).eps * (1.0 + np.linalg.norm(h, ord=2, axis=(1, 2)))
+    assert np.all(np.abs(logdet_eye_plus(h) - ref) <= tol)
+    assert np.all(np.abs(logdet_eye_plus(h) - compiled(h)) <= tol)

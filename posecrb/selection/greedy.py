@@ -25,14 +25,19 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 
 from ..core.errors import NumericalError, UsageError
-from .objectives import FiedlerObjective, LogDetObjective
+from .objectives import FiedlerObjective, LogDetObjective, logdet_eye_plus
 
 if TYPE_CHECKING:
     from ..linalg.pathchol import PathFactor
 
 GAINS = ("auto", "exact", "jl")
 STRATEGIES = ("auto", "incremental", "lazy")
-ENGINES = ("path", "cholmod")
+ENGINES = ("auto", "path", "cholmod")
+# ``auto`` takes the CHOLMOD engine, which loads no numba, when the whole greedy is a few thousand
+# whole-factor solves of small blocks at most: at most this many entries of M^{-1} U touched over
+# the first gains and the steps (block rows x columns x (candidates + steps)). Above it the path
+# engine's compiled kernels pay for numba's import and first call (0.7-0.9 s in a fresh process).
+CHOLMOD_ENGINE_ENTRIES = 5_000_000
 # Greedy refreshes every gain by one selected inversion when one step needs more re-evaluations
 # than max(REFRESH_AFTER, remaining candidates / REFRESH_FRACTION) (deterministic: a count, not a
 # time). A refresh re-evaluates every remaining candidate at once, so it pays off only when a
@@ -76,7 +81,7 @@ class UpdateEngine:
 
     ``"path"``: posecrb.linalg.pathchol (forward solves along the elimination-tree reach of the edge's
     rows, in-place rank-one updates on the fixed full-graph pattern). ``"cholmod"``: CHOLMOD's
-    own ``update_inplace`` and dense solves with the whole factor (kept for comparison)."""
+    own ``update_inplace`` and dense solves with the whole factor, numpy for the rest (no numba)."""
 
     def __init__(self, obj: LogDetObjective, factors: list, kind: str):
         self.obj, self.kind = obj, kind
@@ -87,11 +92,12 @@ class UpdateEngine:
             self.factors = factors
 
     def gains(self, edges: np.ndarray) -> np.ndarray:
-        logdet_eye_plus = _compiled()[0].logdet_eye_plus
         total = np.zeros(edges.size)
         for b, f in zip(self.obj.blocks, self.factors):
-            h = f.h(b.rows[edges], b.valid[edges], b.U[edges]) if self.kind == "path" else b.h_solve(f, edges)
-            total += b.mult * logdet_eye_plus(h)
+            if self.kind == "path":
+                total += b.mult * _compiled()[0].logdet_eye_plus(f.h(b.rows[edges], b.valid[edges], b.U[edges]))
+            else:
+                total += b.mult * logdet_eye_plus(b.h_solve(f, edges))
         return total
 
     def solve(self, i: int, e: int) -> np.ndarray:
@@ -121,15 +127,18 @@ def incremental_greedy(obj: LogDetObjective, x: np.ndarray, cand: np.ndarray, k:
     so one solve ``M^{-1} U_e`` with the current factor (then updated by U_e) and one compiled
     pass over the candidates replace re-evaluations: the argmax is the exact greedy choice (ties:
     the first edge in the file). Every ``refresh_every`` steps the factor is recomputed and every
-    H re-derived by selected inversion, so rounding in the updates cannot accumulate."""
+    H re-derived by selected inversion (by solves with the factor on the CHOLMOD engine's small
+    blocks, ``LogDetBlock.h_many``), so rounding in the updates cannot accumulate. ``engine``:
+    ``ENGINES``, resolved by ``pick_engine``."""
 
     refresh_every = refresh_every or REFRESH_EVERY
+    engine = pick_engine(engine, obj, cand.size, k)
     if engine == "path" and len(obj.blocks) == 1 and obj.blocks[0].U.shape[2] == 1:
         return incremental_greedy_scalar(obj, x, cand, k, refresh_every)
-    pathchol, kernels = _compiled()
-    logdet_eye_plus = pathchol.logdet_eye_plus
+    compiled = engine == "path"
+    logdet = _compiled()[0].logdet_eye_plus if compiled else logdet_eye_plus
     state = obj.evaluate(x)
-    hs = [b.h_selected(f, cand) for b, f in zip(obj.blocks, state.data)]
+    hs = [b.h_selected(f, cand) if compiled else b.h_many(f, cand) for b, f in zip(obj.blocks, state.data)]
     local = [(np.ascontiguousarray(b.U[cand]), np.ascontiguousarray(b.rows[cand]),
               np.ascontiguousarray(b.valid[cand])) for b in obj.blocks]
     eng = UpdateEngine(obj, state.data, engine)
@@ -146,7 +155,7 @@ def incremental_greedy(obj: LogDetObjective, x: np.ndarray, cand: np.ndarray, k:
     every = max(1, k // 64)   # Minoux's bound on ~64 prefixes: any subset of them is a valid min
 
     def gains_alive():
-        g = sum(b.mult * logdet_eye_plus(h) for b, h in zip(obj.blocks, hs))
+        g: np.ndarray = sum((b.mult * logdet(h) for b, h in zip(obj.blocks, hs)), np.zeros(cand.size))
         g[~alive] = -np.inf
         return g
 
@@ -178,7 +187,7 @@ def incremental_greedy(obj: LogDetObjective, x: np.ndarray, cand: np.ndarray, k:
             state = obj.evaluate(x)
             idx = np.flatnonzero(alive)
             for h, b, f in zip(hs, obj.blocks, state.data):
-                h[idx] = b.h_selected(f, cand[idx])
+                h[idx] = b.h_selected(f, cand[idx]) if compiled else b.h_many(f, cand[idx])
             eng = UpdateEngine(obj, state.data, engine)
             refreshes += 1
             continue
@@ -187,10 +196,40 @@ def incremental_greedy(obj: LogDetObjective, x: np.ndarray, cand: np.ndarray, k:
             solves += 1
             he = h_e[i]
             inv = np.linalg.inv(np.eye(he.shape[0]) + 0.5 * (he + he.T))
-            (kernels.woodbury_downdate1 if inv.shape[0] == 1 else kernels.woodbury_downdate)(
-                h, uc, rc, vc, alive, np.ascontiguousarray(z), inv)
+            if compiled:
+                kernels = _compiled()[1]
+                (kernels.woodbury_downdate1 if inv.shape[0] == 1 else kernels.woodbury_downdate)(
+                    h, uc, rc, vc, alive, np.ascontiguousarray(z), inv)
+            else:
+                woodbury_downdate(h, uc, rc, vc, alive, z, inv)
         eng.add(e)
     return np.array(chosen, dtype=np.int64), GreedyStats(solves, refreshes, len(chosen), "exact", online)
+
+
+def woodbury_downdate(h: np.ndarray, u: np.ndarray, rows: np.ndarray, valid: np.ndarray, alive: np.ndarray,
+                      z: np.ndarray, inv: np.ndarray) -> None:
+    """``H_f <- H_f - C_f inv C_f^T`` with ``C_f = U_f^T Z[rows_f]`` for every alive f, in place, with
+    numpy: the CHOLMOD engine's form of ``posecrb.selection._kernels.woodbury_downdate``.
+
+    h (c, r, r), u (c, p, r), rows/valid (c, p), alive (c,), z (n, r), inv (r, r)."""
+    idx = np.flatnonzero(alive)
+    zc = z[rows[idx]] * valid[idx][:, :, None]                 # (a, p, r): Z at the candidates' rows
+    cf = np.einsum("kpa,kpb->kab", u[idx], zc)                  # C_f (a, r, r)
+    h[idx] -= np.einsum("kab,bc,kdc->kad", cf, inv, cf)
+
+
+def pick_engine(engine: str, obj: LogDetObjective, candidates: int, k: int) -> str:
+    """The update engine ``engine`` (``ENGINES``) stands for on this problem: ``auto`` is the CHOLMOD
+    engine when its whole-factor solves stay within ``CHOLMOD_ENGINE_ENTRIES`` (no numba to load),
+    the path engine otherwise. The choice depends on the sizes alone, so one problem always gets
+    the same digits."""
+    if engine not in ENGINES:
+        raise UsageError(f"unknown update engine {engine!r}; choose from {', '.join(ENGINES)}")
+    if engine != "auto":
+        return engine
+    entries = sum(b.size * b.U.shape[2] for b in obj.blocks) * (candidates + k)
+    small = entries <= CHOLMOD_ENGINE_ENTRIES and all(b.solves_suffice(candidates) for b in obj.blocks)
+    return "cholmod" if small else "path"
 
 
 def incremental_greedy_scalar(obj: LogDetObjective, x: np.ndarray, cand: np.ndarray, k: int,
@@ -325,6 +364,7 @@ def lazy_greedy(obj: LogDetObjective, x: np.ndarray, cand: np.ndarray, k: int, g
     selected inversion of a fresh factorisation instead. The first gains come from one selected inversion,
     or with ``gains="jl"`` from random projections (then the initial queue is an estimate and the
     choice greedy only approximately; every accepted gain is still computed exactly)."""
+    engine = pick_engine(engine, obj, cand.size, k)
     state = obj.evaluate(x)
     if gains == "jl":
         g0 = obj.gains_projected(state, cand, JL_PROJECTIONS, rng)

@@ -51,6 +51,22 @@ _DENSE_EIG_UP_TO = 300
 # many bases of 20 vectors.
 _EIG_TOL = 1e-10
 _EIG_RESTARTS = 250
+# H_e of many edges by whole-factor solves (``LogDetBlock.h_solve``) instead of a selected inversion
+# when the block's rows times the edges' columns stay within this many entries: a solve with those
+# right-hand sides then costs milliseconds, and selected inversion's compiled kernels would load
+# numba (0.7-0.9 s in a fresh process, posecrb.linalg.selinv). Solved in batches of this many entries.
+H_SOLVE_ENTRIES = 4_000_000
+
+
+def logdet_eye_plus(h: np.ndarray) -> np.ndarray:
+    """``logdet(I + H)`` for each symmetric positive semidefinite ``H`` of ``h`` (k, r, r): ``log1p`` for
+    r = 1, else twice the log-diagonal of the Cholesky factor of ``I + (H + H^T) / 2`` (at least I,
+    so the factorization exists), with numpy (no compiled kernel: no numba to load)."""
+    if h.shape[1] == 1:
+        return np.log1p(np.maximum(h[:, 0, 0], 0.0))
+    eye = np.eye(h.shape[1])
+    chol = np.linalg.cholesky(eye + 0.5 * (h + np.swapaxes(h, 1, 2)))
+    return 2.0 * np.log(np.diagonal(chol, axis1=1, axis2=2)).sum(axis=1)
 
 
 @dataclass(eq=False)
@@ -94,6 +110,21 @@ class LogDetBlock:
     def factor(self, x: np.ndarray) -> tuple[Factor, float]:
         return self.symbolic.factor_logdet(self.matrix(x), name=self.name)
 
+    def solves_suffice(self, edges: int) -> bool:
+        """Whether ``h_many`` takes ``edges`` edges' ``H_e`` from whole-factor solves (``H_SOLVE_ENTRIES``)."""
+        return self.size * edges * self.U.shape[2] <= H_SOLVE_ENTRIES
+
+    def h_many(self, factor: Factor, edges: np.ndarray) -> np.ndarray:
+        """``H_e = U_e^T M^{-1} U_e`` for many edges: by solves with the factor on small blocks
+        (``solves_suffice``), by one selected inversion otherwise. Both are exact up to rounding."""
+        if not self.solves_suffice(edges.size):
+            return self.h_selected(factor, edges)
+        r = self.U.shape[2]
+        if edges.size == 0:
+            return np.zeros((0, r, r))
+        batch = max(1, H_SOLVE_ENTRIES // (self.size * r))
+        return np.concatenate([self.h_solve(factor, edges[i:i + batch]) for i in range(0, edges.size, batch)])
+
     def h_selected(self, factor: Factor, edges: np.ndarray) -> np.ndarray:
         """``H_e = U_e^T M^{-1} U_e`` for many edges from one selected inversion."""
 
@@ -134,9 +165,10 @@ class LogDetBlock:
         """Factor of ``M + U_e U_e^T`` in place (CHOLMOD rank-r update)."""
         rows, U, valid = self.rows[e], self.U[e], self.valid[e]
         r = U.shape[1]
-        rr = np.repeat(rows[valid], r)
-        cc = np.tile(np.arange(r), int(valid.sum()))
-        c = sp.csc_matrix((U[valid].ravel(), (rr, cc)), shape=(self.size, r))
+        order = np.argsort(rows[valid])           # an edge's valid rows are distinct poses' rows
+        vals = U[valid][order]                    # (rows, r): column j of U_e at the sorted rows
+        c = sp.csc_matrix((vals.T.ravel(), np.tile(rows[valid][order], r), np.arange(r + 1) * order.size),
+                          shape=(self.size, r))
         factor.update_inplace(c)
 
     def h_projected(self, factor: Factor, x: np.ndarray, edges: np.ndarray, k: int,
@@ -179,12 +211,10 @@ class LogDetObjective:
         return self.evaluate(x).value
 
     def _h(self, state: ObjectiveState, edges: np.ndarray) -> list[np.ndarray]:
-        return [b.h_selected(f, edges) for b, f in zip(self.blocks, state.data)]
+        return [b.h_many(f, edges) for b, f in zip(self.blocks, state.data)]
 
     def gains(self, state: ObjectiveState, edges: np.ndarray) -> np.ndarray:
-        """Exact marginal gains ``sum_b mult_b logdet(I + H_be)`` (one selected inversion per block)."""
-        from ..linalg.pathchol import logdet_eye_plus  # noqa: PLC0415 -- lazy: start-up time (numba)
-
+        """Exact marginal gains ``sum_b mult_b logdet(I + H_be)`` (``LogDetBlock.h_many`` per block)."""
         return sum((b.mult * logdet_eye_plus(h) for b, h in zip(self.blocks, self._h(state, edges))),
                    np.zeros(edges.size))
 
@@ -194,8 +224,6 @@ class LogDetObjective:
 
     def gains_projected(self, state: ObjectiveState, edges: np.ndarray, k: int, rng: np.random.Generator) -> np.ndarray:
         """Marginal gains from the random-projection estimates of ``H_e`` (``LogDetBlock.h_projected``)."""
-        from ..linalg.pathchol import logdet_eye_plus  # noqa: PLC0415 -- lazy: start-up time (numba)
-
         return sum((b.mult * logdet_eye_plus(b.h_projected(f, state.x, edges, k, rng))
                     for b, f in zip(self.blocks, state.data)), np.zeros(edges.size))
 

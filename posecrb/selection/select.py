@@ -23,7 +23,15 @@ from ..core.graph import PoseGraph
 from ..solver.estimate import Estimate, get_estimate
 from .budget import EdgeSplit, parse_budget, split_edges
 from .certificate import RatioCertificate, ratio_certificate, submodular_bound, supergradient_bound
-from .greedy import GAINS, JL_FROM_CANDIDATES, greedy_fiedler, incremental_greedy, lazy_greedy, pick_strategy
+from .greedy import (
+    GAINS,
+    JL_FROM_CANDIDATES,
+    greedy_fiedler,
+    incremental_greedy,
+    lazy_greedy,
+    pick_engine,
+    pick_strategy,
+)
 from .objectives import OBJECTIVES, FiedlerObjective, LogDetObjective, ObjectiveState, make_objective
 from .relaxation import (
     POLISH_SOLVES,
@@ -151,6 +159,7 @@ def _greedy_logdet(p: _Problem, gains: str, strategy: str, engine: str, rng: np.
     elif mode == "jl" and strategy == "incremental":
         raise UsageError("random-projection gains (--jl) only seed the lazy greedy's queue; "
                          "the incremental greedy keeps every gain exact")
+    engine = pick_engine(engine, obj, p.cand.size, p.k)
     if strategy == "incremental":
         order, gstats = incremental_greedy(obj, p.base.copy(), p.cand, p.k, engine)
     else:
@@ -268,7 +277,7 @@ def select_edges(graph: PoseGraph, budget: str | int, *, objective: str = "tree"
                  fixed: str = "odometry", certify: bool = False, seed: int = 0, anchor: int | None = None,
                  estimate: str = "solve", gains: str = "auto", max_iter: int | None = None,
                  tol: float = 1e-3, fiedler_weight: str = "w", split: EdgeSplit | None = None,
-                 reference: Estimate | None = None, engine: str = "path", strategy: str = "auto",
+                 reference: Estimate | None = None, engine: str = "auto", strategy: str = "auto",
                  polish: int | None = None) -> SelectionResult:
     """Choose ``budget`` candidate edges maximising ``objective`` (``posecrb.selection``).
 
@@ -285,8 +294,10 @@ def select_edges(graph: PoseGraph, budget: str | int, *, objective: str = "tree"
     greedy): "incremental" (every gain exact at every step), "lazy" (priority queue) or "auto"
     (incremental; lazy with ``gains="jl"``). ``gains`` (lazy only): "exact" (selected
     inversion), "jl" (random projections seed the queue) or "auto" (jl above 50000 candidates).
-    ``engine``: "path" (posecrb.linalg.pathchol) or "cholmod" (CHOLMOD update_inplace and whole-factor
-    solves, for comparison). ``polish`` (fiedler relax): at most this many eigensolves of swap search
+    ``engine`` (log-det greedy): "path" (posecrb.linalg.pathchol's compiled kernels), "cholmod" (CHOLMOD
+    update_inplace and whole-factor solves, numpy for the rest: no numba to
+    load) or "auto" (cholmod on small problems, ``posecrb.selection.greedy.pick_engine``; path
+    otherwise). ``polish`` (fiedler relax): at most this many eigensolves of swap search
     after the rounding (``polish_fiedler``; default POLISH_SOLVES, 0 = none); the polished set is
     kept only if its recomputed lambda_2 is larger. ``max_iter``/``tol``: the relaxation's limits (default 100 for
     the log-dets, 20 for fiedler as MAC). ``split``: precomputed fixed/candidate edges.
