@@ -865,11 +865,11 @@ def test_selection_inverts_with_the_compiled_kernels(monkeypatch, objective, met
     assert all(isinstance(k, selinv._BlockKernels) for k in alone)
 
 
-@pytest.mark.parametrize("objective,method,certify", [("tree", "relax", False), ("tree", "greedy", True),
-                                                      ("fim", "greedy", False)])
-def test_small_selections_solve_instead_of_inverting(monkeypatch, objective, method, certify):
-    """Below the limits a selection takes every H_e from solves with the whole factor and runs the
-    CHOLMOD engine: no selected inversion, no compiled kernel, and the values of the inverting run."""
+@pytest.mark.parametrize("objective", ["tree", "fim"])
+def test_small_greedy_selections_solve_instead_of_inverting(monkeypatch, objective):
+    """Below the limits the greedy takes every H_e from solves with the whole factor and runs the
+    CHOLMOD engine: no selected inversion, no compiled kernel, and the values of the inverting run.
+    (The relaxation's gradient, evaluated at every iteration, keeps the selected inversion.)"""
     from posecrb.selection import greedy, objectives
 
     g = chain_graph(np.random.default_rng(41), n=12, extra=10, dim=2)
@@ -877,14 +877,14 @@ def test_small_selections_solve_instead_of_inverting(monkeypatch, objective, met
     kernels, _ = record_inversion_kernels(monkeypatch)
     compiled = []
     monkeypatch.setattr(greedy, "_compiled", lambda: compiled.append(1) or pytest.fail("compiled kernels loaded"))
-    small = select_edges(g, "4", objective=objective, method=method, certify=certify, reference=ref, max_iter=20)
+    small = select_edges(g, "4", objective=objective, reference=ref)
     assert kernels == [] and compiled == []
-    if method == "greedy":
-        assert small.stats["engine"] == "cholmod"
+    assert small.stats["engine"] == "cholmod"
     monkeypatch.undo()
     monkeypatch.setattr(objectives, "H_SOLVE_ENTRIES", 0)
     monkeypatch.setattr(greedy, "CHOLMOD_ENGINE_ENTRIES", 0)
-    large = select_edges(g, "4", objective=objective, method=method, certify=certify, reference=ref, max_iter=20)
+    large = select_edges(g, "4", objective=objective, reference=ref)
+    assert large.stats["engine"] == "path"
     assert small.selected.tolist() == large.selected.tolist()
     assert small.value == pytest.approx(dense_value(objective, g, small.kept_edges), rel=1e-10)
     assert small.upper_bound == pytest.approx(large.upper_bound, rel=1e-10)
