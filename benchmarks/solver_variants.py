@@ -14,6 +14,9 @@ baseline variant. Variants (keyword arguments of posecrb.solver.solve):
   theta=1       truncated CG stops at ||r|| <= ||r0|| min(kappa, ||r0||^1) (Manopt; default exponent 0.5)
   no-split      split_precond=False: after an escape from the first level, M_red's preconditioner
                 instead of the split one (K's factor in-plane, M_red's on the new column)
+  schur-base    base_precond="schur": SE-Sync's base preconditioner (Q + delta I)^-1, a factor of M_red(delta)
+  rotation-base base_precond="rotation": the rotation block's (C + delta I)^-1 (d rows per pose, no
+                translations), the default on 3D graphs of at least 10,000 poses
   r0=5          start the staircase at rank 5 (SE-Sync's default) instead of d + 1
   no-precond    precondition=False (the unpreconditioned trust region, for scale)
   no-cert-stop  certified_rel_decrease=None: never stop a level early when the preconditioner's
@@ -54,6 +57,8 @@ VARIANTS = {
     "theta=1": {"theta": 1.0},
     "no-precond": {"precondition": False},
     "no-split": {"split_precond": False},
+    "schur-base": {"base_precond": "schur"},
+    "rotation-base": {"base_precond": "rotation"},
     "no-cert-stop": {"certified_rel_decrease": None},
     "dec=1e-9": {"decrement_tol": 1e-9},
     "dec=1e-10": {"decrement_tol": 1e-10},
@@ -71,8 +76,11 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--sesync-compat", action="store_true", help="read 3D quaternions as SE-Sync does")
     ap.add_argument("--kernels", action="store_true", help="time the solver's kernel choices instead")
     args = ap.parse_args(argv)
+    files = suite_files(data_dir(args.data_dir), args.names or DEFAULT_NAMES)
+    if not files:
+        ap.error("no data directory: give --data-dir or set POSECRB_DATA")
     if args.kernels:
-        return kernels(suite_files(data_dir(args.data_dir), args.names or DEFAULT_NAMES), args.repeat)
+        return kernels(files, args.repeat)
     logging.getLogger("posecrb").setLevel(logging.ERROR)
     from posecrb import load
     from posecrb.solver import solve
@@ -81,7 +89,6 @@ def main(argv: list[str] | None = None) -> int:
     unknown = set(variants) - set(VARIANTS)
     if unknown:
         ap.error(f"unknown variants {sorted(unknown)}; choose from {sorted(VARIANTS)}")
-    files = suite_files(data_dir(args.data_dir), args.names or DEFAULT_NAMES)
     print_header("posecrb.solver.solve option variants (in-process)", None,
                  [f"median of {args.repeat} alternating rounds after one warm-up round; times in seconds"])
     print(f"{'dataset':24s} {'variant':14s} {'total':>7s} {'init':>6s} {'optim':>7s} {'verify':>6s} {'its':>4s} "

@@ -190,3 +190,26 @@ def test_select_engines_runs_both_engines_and_reports_the_choice(tmp_path, capsy
     cells = [c.strip() for c in row.strip("|").split("|")]
     assert cells[5] == "cholmod" and cells[8] == "yes" and cells[9] == "True, False"
     assert float(cells[6]) > 0 and float(cells[7]) > 0
+
+
+def test_solver_variants_runs_both_base_preconditioners_and_needs_data(tmp_path, capsys, monkeypatch):
+    """benchmarks/solver_variants.py on a small 3D graph: SE-Sync's and the rotation block's base
+    preconditioner, both certified at the same optimum; without data it stops with a usage error."""
+    import numpy as np
+
+    from posecrb.io import write_g2o
+
+    from .helpers import random_pose_graph
+
+    write_g2o(random_pose_graph(30, 3, np.random.default_rng(3), loop_closures=20, rot_noise=0.05,
+                                trans_noise=0.05)[0], tmp_path / "small3d.g2o")
+    module = _module("solver_variants")
+    assert module.main(["--repeat", "1", "--data-dir", str(tmp_path), "--variants", "schur-base,rotation-base",
+                        "small3d"]) == 0
+    rows = [line.split() for line in capsys.readouterr().out.splitlines() if line.startswith("small3d ")]
+    assert [r[1] for r in rows] == ["schur-base", "rotation-base"] and all(r[9] == "yes" for r in rows)
+    monkeypatch.delenv("POSECRB_DATA", raising=False)
+    monkeypatch.setattr(module, "data_dir", lambda arg: None)
+    with pytest.raises(SystemExit) as exc:
+        module.main(["--variants", "schur-base"])
+    assert exc.value.code == 2

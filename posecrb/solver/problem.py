@@ -119,6 +119,28 @@ def _column_fill(factor: Factor) -> float:
     return float(np.dot(counts, counts) / max(counts.sum(), 1.0))
 
 
+@dataclass(frozen=True, eq=False)
+class RotationBlockFactor:
+    """A Cholesky factor of ``C + s I``, the rotation block of M (``C = L(G^rho) + Sigma``, dn x dn)
+    without the translations' coupling: ``C + s I = Q + s I + V^T L(W^tau)^+ V >= Q + s I``.
+
+    The solver's base preconditioner of large 3D graphs (``posecrb.solver.solve``,
+    ``base_precond``): d rows per pose instead of M_red's d + 1, so on graphs with dense separators
+    its factorization takes about (d / (d + 1))^3 of M_red's flops and each solve reads a smaller
+    factor (docs/performance.md). ``threaded``: its solves share CHOLMOD's BLAS threads, as the
+    factorizations of such graphs do.
+    """
+
+    factor: Factor
+    shift: float
+    threaded: bool
+
+    def solve(self, W: np.ndarray) -> np.ndarray:
+        """``(C + s I)^{-1} W`` for W of shape (dn, k)."""
+        with solve_threads() if self.threaded else contextlib.nullcontext():
+            return np.asarray(self.factor(np.asarray(W, dtype=float)))
+
+
 @dataclass
 class Problem:
     """Sparse data of one pose graph in SE-Sync's simplified (translation-eliminated) form."""
@@ -352,6 +374,18 @@ class Problem:
             raise InternalError("M_red: pattern not analysed")
         with factorization_threads():
             return self._full_symbolic.factor(self.full_matrix(lam_blocks, shift), name=name)
+
+    def factor_rotation_block(self, shift: float, name: str) -> RotationBlockFactor:
+        """Cholesky of ``C + shift I`` (:class:`RotationBlockFactor`) with the pose graph's ordering
+        that M_red and the chordal initialisation share (``pose_order``); raises NotPositiveDefinite."""
+        n, d = self.n, self.d
+        C = (self._C_csc + shift * sp.identity(n * d, format="csc")).tocsc()
+        C.sort_indices()
+        symbolic = solver_symbolic(C, d, n, mode=self.factor_mode(d), pose_of_row=np.repeat(np.arange(n), d),
+                                   pose_order=self.pose_order())
+        with factorization_threads():
+            factor = symbolic.factor(C, name=name)
+        return RotationBlockFactor(factor, float(shift), symbolic.threaded)
 
     def schur_solve(self, factor: Factor, W: np.ndarray) -> np.ndarray:
         """(Q - Lambda + s I)^{-1} W, the rotation block of M_red(s)^{-1} [0; W]. For a large 3D graph

@@ -25,7 +25,7 @@ from ..linalg.cholesky import Factor
 from ..linalg.ordering import threaded_matrix
 from ..linalg.threads import cholmod_threads, solver_threads
 from .chordal import chordal_rotations
-from .problem import Problem
+from .problem import Problem, RotationBlockFactor
 from .rounding import anchor_estimate, recover_translations, round_rotations, se_objective
 from .staircase import RelaxedModel, escape, verify
 from .tangent import TangentSystem
@@ -155,6 +155,15 @@ class SolveResult(Result):
 # SE-Sync files' stay below 15).
 TANGENT_SWITCH_HVPS = 20
 
+# The base preconditioner (SolverOptions.base_precond): "schur", SE-Sync's (Q + delta I)^{-1} through a
+# factor of M_red(delta); "rotation", (C + delta I)^{-1} through a factor of the rotation block C alone
+# (posecrb.solver.problem.RotationBlockFactor); "auto", the rotation block on the 3D graphs whose
+# factorizations are threaded (threaded_matrix: from 10,000 poses, dense separators), where its factor
+# takes (3/4)^3 of M_red's flops and truncated CG needed as few or fewer products (3D grid of 21,952
+# poses: 17 instead of 25; docs/performance.md); SE-Sync's elsewhere, where factorizations are cheap and
+# the products decide, and the rotation block needed more of them on some graphs (cubicle: 79 instead of 32).
+BASE_PRECONDITIONERS = ("auto", "schur", "rotation")
+
 # TROptions fields a caller may set through SolverOptions.trust_region (max_iterations is a
 # SolverOptions field of its own).
 _TR_TUNING = frozenset(f.name for f in fields(TROptions)) - {"max_iterations"}
@@ -171,7 +180,10 @@ class SolverOptions:
     trust-region iterations per staircase level; ``certificate_tol``: accept
     lambda_min(Q - Lambda) >= -tol; ``seed``: of the verification's random start (the solver is
     deterministic); ``precondition`` / ``precond_max_cond``: the regularised base preconditioner
-    (Q + delta I)^{-1} and the cap on its condition number; ``adaptive_precond``: relative shift of
+    and the cap on its condition number; ``base_precond``: which one (``BASE_PRECONDITIONERS``:
+    "schur", SE-Sync's (Q + delta I)^{-1}; "rotation", (C + delta I)^{-1} of the rotation block C
+    without the translations' coupling; "auto", the default: "rotation" on 3D graphs of at least
+    10,000 poses, "schur" elsewhere, :func:`base_preconditioner_kind`); ``adaptive_precond``: relative shift of
     the (Q - Lambda + s I)^{-1} preconditioner (None: off), refactored when the last truncated-CG
     run needed more than ``refactor_hvps`` Hessian-vector products (None: at every accepted
     iterate); ``tangent_precond``: precondition the first staircase level with the exact inverse
@@ -196,6 +208,7 @@ class SolverOptions:
     seed: int = 0
     precondition: bool = True
     precond_max_cond: float = 1e6
+    base_precond: str = "auto"
     adaptive_precond: float | None = 1e-10
     refactor_hvps: int | None = 30
     tangent_precond: bool | None = None
@@ -203,6 +216,9 @@ class SolverOptions:
     trust_region: Mapping[str, Any] = field(default_factory=dict)
 
     def __post_init__(self) -> None:
+        if self.base_precond not in BASE_PRECONDITIONERS:
+            raise UsageError(f"unknown base preconditioner {self.base_precond!r}; "
+                             f"choose from {', '.join(BASE_PRECONDITIONERS)}")
         unknown = set(self.trust_region) - _TR_TUNING
         if unknown:
             raise UsageError(f"unknown trust-region option(s) {', '.join(sorted(unknown))}; "
@@ -276,15 +292,16 @@ def _solve(graph: PoseGraph, options: SolverOptions) -> SolveResult:
     precond = None
     tangent = None
     delta = 0.0
+    base_kind = base_preconditioner_kind(options.base_precond, d, n)
     if options.precondition:
-        # Regularised Schur-complement preconditioner (Q + delta I)^{-1}; delta caps the
+        # Regularised base preconditioner ((Q + delta I)^{-1} or (C + delta I)^{-1}); delta caps the
         # condition number near precond_max_cond (SE-Sync's regularised Cholesky, section 4.3).
         delta = problem.gershgorin_max() / options.precond_max_cond
         if options.tangent_precond or (options.tangent_precond is None and d == 2):
             if options.adaptive_precond is not None:
                 tangent = TangentSystem.build(problem)
         if tangent is None:
-            precond = _base_preconditioner(problem, delta)
+            precond = _base_preconditioner(problem, delta, base_kind)
     # 3D by default: the tangent system only after a truncated-CG run of more than
     # TANGENT_SWITCH_HVPS products at the first level (docs/performance.md)
     switch = (options.precondition and options.tangent_precond is None and d != 2
@@ -293,7 +310,8 @@ def _solve(graph: PoseGraph, options: SolverOptions) -> SolveResult:
                          None if options.adaptive_precond is None
                          else options.adaptive_precond * problem.gershgorin_max(),
                          refactor_hvps=options.refactor_hvps, tangent=tangent, tangent_fallback_shift=delta,
-                         base_factory=None if tangent is None else (lambda: _base_preconditioner(problem, delta)),
+                         base_factory=(None if tangent is None
+                                       else (lambda: _base_preconditioner(problem, delta, base_kind))),
                          tangent_factory=(lambda: TangentSystem.build(problem)) if switch else None,
                          tangent_switch_hvps=TANGENT_SWITCH_HVPS if switch else None,
                          split_escape=options.split_precond)
@@ -405,8 +423,24 @@ def _solve(graph: PoseGraph, options: SolverOptions) -> SolveResult:
         quaternions=graph.quaternions, times=times, rot=rot, trans=trans, ids=graph.ids.copy())
 
 
-def _base_preconditioner(problem: Problem, delta: float) -> Factor:
-    """The regularised Schur-complement preconditioner (Q + delta I)^{-1}: a factor of M_red(delta)."""
+def base_preconditioner_kind(requested: str, dim: int, poses: int) -> str:
+    """The base preconditioner ``requested`` (``BASE_PRECONDITIONERS``) stands for on a graph of
+    ``poses`` poses in dimension ``dim``: ``auto`` is "rotation" on the 3D graphs whose
+    factorizations are threaded (``posecrb.linalg.ordering.threaded_matrix``), "schur" otherwise."""
+    if requested not in BASE_PRECONDITIONERS:
+        raise UsageError(f"unknown base preconditioner {requested!r}; choose from {', '.join(BASE_PRECONDITIONERS)}")
+    if requested != "auto":
+        return requested
+    return "rotation" if dim == 3 and threaded_matrix(dim, poses, "solver") else "schur"
+
+
+def _base_preconditioner(problem: Problem, delta: float, kind: str) -> Factor | RotationBlockFactor:
+    """The regularised base preconditioner (``base_preconditioner_kind``): "schur", (Q + delta I)^{-1}
+    through a factor of M_red(delta) (SE-Sync's); "rotation", (C + delta I)^{-1} through a factor of
+    the rotation block alone."""
+    if kind == "rotation":
+        log.debug("base preconditioner: the rotation block's (C + %.3e I)^-1", delta)
+        return problem.factor_rotation_block(delta, name="preconditioner C + delta I")
     return problem.factor_full(None, delta, name="preconditioner M_red(delta)")
 
 

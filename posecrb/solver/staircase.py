@@ -38,13 +38,14 @@ import logging
 import math
 from collections.abc import Callable
 from dataclasses import dataclass
+from typing import TypeAlias
 
 import numpy as np
 
 from ..core.errors import InternalError, NotPositiveDefinite, SolverError
 from ..linalg.cholesky import Factor
 from ..linalg.lanczos import largest_eigenpair
-from .problem import Problem
+from .problem import Problem, RotationBlockFactor
 from .stiefel import (
     gram_eigh,
     hessian_blocks,
@@ -60,6 +61,10 @@ from .trust_region import State
 
 log = logging.getLogger("posecrb")
 
+# A base preconditioner factor: M_red(delta)'s (its rotation block of the inverse is (Q + delta I)^{-1})
+# or the rotation block's own (C + delta I), posecrb.solver.problem.RotationBlockFactor.
+BaseFactor: TypeAlias = "Factor | RotationBlockFactor"
+
 
 # The tangent preconditioner's factor is kept for the next iterate while truncated CG needs at most
 # this many products with it. Against refactoring at every iterate (0) it trades products for
@@ -72,9 +77,9 @@ TANGENT_REFACTOR_HVPS = 3
 class RelaxedModel:
     """f(Z) = tr(Z^T Q Z) on St(d, r)^n with gradient, Hessian and a Schur-complement preconditioner."""
 
-    def __init__(self, problem: Problem, precond_factor: Factor | None = None, adaptive_shift: float | None = None,
+    def __init__(self, problem: Problem, precond_factor: BaseFactor | None = None, adaptive_shift: float | None = None,
                  refactor_hvps: int | None = 30, tangent: TangentSystem | None = None,
-                 tangent_fallback_shift: float = 0.0, base_factory: Callable[[], Factor] | None = None,
+                 tangent_fallback_shift: float = 0.0, base_factory: Callable[[], BaseFactor] | None = None,
                  tangent_factory: Callable[[], TangentSystem] | None = None,
                  tangent_switch_hvps: int | None = None, split_escape: bool = True) -> None:
         self.problem = problem
@@ -248,8 +253,9 @@ class RelaxedModel:
         ``TANGENT_REFACTOR_HVPS`` products with it (trust_region's ``exact_decrement_tol``)."""
         return self._tangent_factor is not None and self._tangent_factor[0] is state.Z and self._tangent_exact
 
-    def _base(self) -> Factor | None:
-        """The base factor (Q + delta I)^{-1}, built by ``base_factory`` on first use."""
+    def _base(self) -> BaseFactor | None:
+        """The base factor ((Q + delta I)^{-1} through M_red, or the rotation block's (C + delta I)^{-1}),
+        built by ``base_factory`` on first use."""
         if self.base_factor is None and self._base_factory is not None:
             self.base_factor = self._base_factory()
             self._base_factory = None
@@ -260,9 +266,10 @@ class RelaxedModel:
         M_red(Lambda, s) with 0 <= s <= ``tol``: that successful Cholesky already proves
         ``Q - Lambda + s I > 0``, i.e. lambda_min(Q - Lambda) > -s >= -tol, the certificate
         test of :func:`verify` (the same matrix, a smaller or equal shift). Else None."""
-        if (self._factored_at is state.Z and self.factor_shift is not None
-                and 0.0 <= self.factor_shift <= tol):
-            return self.precond_factor, self.factor_shift
+        factor = self.precond_factor
+        if (self._factored_at is state.Z and self.factor_shift is not None and factor is not None
+                and not isinstance(factor, RotationBlockFactor) and 0.0 <= self.factor_shift <= tol):
+            return factor, self.factor_shift
         return None
 
     def certified(self, state: State) -> bool:
@@ -305,8 +312,16 @@ class RelaxedModel:
         parts = self._split_parts(state, gram)
         if parts is not None:
             return remove_vertical(state.Z, self._split_apply(state, R, parts), gram)
-        W = self.problem.schur_solve(self.precond_factor, R.reshape(n * d, r)).reshape(n, d, r)
+        W = self._precond_solve(R.reshape(n * d, r)).reshape(n, d, r)
         return remove_vertical(state.Z, project(state.Z, W, self._components(state)[0], scale=0.5), gram)
+
+    def _precond_solve(self, W: np.ndarray) -> np.ndarray:
+        """The preconditioner factor applied to W (dn, k): ``(Q - Lambda + s I)^{-1} W`` through a
+        factor of M_red, or ``(C + s I)^{-1} W`` through the rotation block's base factor."""
+        factor = self.precond_factor
+        if isinstance(factor, RotationBlockFactor):
+            return factor.solve(W)
+        return self.problem.schur_solve(factor, W)
 
     def _gram_of(self, state: State) -> tuple[np.ndarray, np.ndarray]:
         """gram_eigh of ``state``'s point, cached: tCG preconditions many vectors at one point."""
@@ -369,7 +384,7 @@ class RelaxedModel:
         n, d, _ = Z.shape
         inplane = self.tangent.apply(self._tangent_factor[1], Z, R, gauge=(parts.gauge, parts.gauge_scale))
         b = np.einsum("ndr,nr->nd", R, parts.normal[:, :, 0])
-        x = self.problem.schur_solve(self.precond_factor, b.reshape(n * d, 1)).reshape(n, d)
+        x = self._precond_solve(b.reshape(n * d, 1)).reshape(n, d)
         return inplane + 0.5 * x[:, :, None] * parts.normal[:, None, :, 0]
 
 
