@@ -119,7 +119,8 @@ def incremental_greedy(obj: LogDetObjective, x: np.ndarray, cand: np.ndarray, k:
                         engine: str = "path", refresh_every: int | None = None) -> tuple[np.ndarray, GreedyStats]:
     """Greedy with every candidate's gain kept exact at every step.
 
-    ``H_f = U_f^T M^{-1} U_f`` for all candidates comes from one selected inversion; adding e
+    ``H_f = U_f^T M^{-1} U_f`` for all candidates comes from ``LogDetBlock.h_many`` (solves with the
+    factor on small blocks, one selected inversion otherwise); adding e
     changes it by the Woodbury identity
 
         H_f <- H_f - C_f (I + H_e)^{-1} C_f^T,    C_f = U_f^T M^{-1} U_e,
@@ -127,8 +128,7 @@ def incremental_greedy(obj: LogDetObjective, x: np.ndarray, cand: np.ndarray, k:
     so one solve ``M^{-1} U_e`` with the current factor (then updated by U_e) and one compiled
     pass over the candidates replace re-evaluations: the argmax is the exact greedy choice (ties:
     the first edge in the file). Every ``refresh_every`` steps the factor is recomputed and every
-    H re-derived by selected inversion (by solves with the factor on the CHOLMOD engine's small
-    blocks, ``LogDetBlock.h_many``), so rounding in the updates cannot accumulate. ``engine``:
+    H re-derived the same way, so rounding in the updates cannot accumulate. ``engine``:
     ``ENGINES``, resolved by ``pick_engine``."""
 
     refresh_every = refresh_every or REFRESH_EVERY
@@ -138,7 +138,7 @@ def incremental_greedy(obj: LogDetObjective, x: np.ndarray, cand: np.ndarray, k:
     compiled = engine == "path"
     logdet = _compiled()[0].logdet_eye_plus if compiled else logdet_eye_plus
     state = obj.evaluate(x)
-    hs = [b.h_selected(f, cand) if compiled else b.h_many(f, cand) for b, f in zip(obj.blocks, state.data)]
+    hs = [b.h_many(f, cand) for b, f in zip(obj.blocks, state.data)]
     local = [(np.ascontiguousarray(b.U[cand]), np.ascontiguousarray(b.rows[cand]),
               np.ascontiguousarray(b.valid[cand])) for b in obj.blocks]
     eng = UpdateEngine(obj, state.data, engine)
@@ -187,7 +187,7 @@ def incremental_greedy(obj: LogDetObjective, x: np.ndarray, cand: np.ndarray, k:
             state = obj.evaluate(x)
             idx = np.flatnonzero(alive)
             for h, b, f in zip(hs, obj.blocks, state.data):
-                h[idx] = b.h_selected(f, cand[idx]) if compiled else b.h_many(f, cand[idx])
+                h[idx] = b.h_many(f, cand[idx])
             eng = UpdateEngine(obj, state.data, engine)
             refreshes += 1
             continue
