@@ -159,8 +159,9 @@ TANGENT_SWITCH_HVPS = 20
 # factor of M_red(delta); "rotation", (C + delta I)^{-1} through a factor of the rotation block C alone
 # (posecrb.solver.problem.RotationBlockFactor); "auto", the rotation block on the 3D graphs whose
 # factorizations are threaded (threaded_matrix: from 10,000 poses, dense separators), where its factor
-# takes (3/4)^3 of M_red's flops and truncated CG needed as few or fewer products (3D grid of 21,952
-# poses: 17 instead of 25; docs/performance.md); SE-Sync's elsewhere, where factorizations are cheap and
+# takes (3/4)^3 of M_red's flops and truncated CG needed fewer products on three of the four graphs
+# measured (3D grid of 21,952 poses: 17 instead of 25) and one more on the fourth (docs/performance.md);
+# SE-Sync's elsewhere, where factorizations are cheap and
 # the products decide, and the rotation block needed more of them on some graphs (cubicle: 79 instead of 32).
 BASE_PRECONDITIONERS = ("auto", "schur", "rotation")
 
