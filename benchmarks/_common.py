@@ -61,15 +61,17 @@ def dataset_args(description: str, repeat: int) -> tuple[argparse.Namespace, lis
 
 
 def process_parser(description: str, *, with_data_dir: bool = False, repeat: int | None = None,
-                   repeat_help: str = "timed rounds (median)") -> argparse.ArgumentParser:
-    """The arguments every whole-process benchmark takes: --posecrb and --threads, with
-    ``with_data_dir`` --data-dir (``data_dir``), with ``repeat`` --repeat K (default ``repeat``).
-    Each script adds its own arguments to the parser returned."""
+                   repeat_help: str = "timed rounds (median)", threads: int = 1) -> argparse.ArgumentParser:
+    """The arguments every whole-process benchmark takes: --posecrb and --threads (default
+    ``threads``; 0 leaves every pool at its own default), with ``with_data_dir`` --data-dir
+    (``data_dir``), with ``repeat`` --repeat K (default ``repeat``). Each script adds its own
+    arguments to the parser returned."""
     ap = argparse.ArgumentParser(description=description)
     ap.add_argument("--posecrb", default=None, help="command that runs posecrb [default: python -m posecrb "
                                                      "from this checkout]")
-    ap.add_argument("--threads", type=int, default=1,
-                    help="threads of every OpenMP/BLAS/numba pool of the measured programs [default: 1]")
+    ap.add_argument("--threads", type=int, default=threads,
+                    help="threads of every OpenMP/BLAS/numba pool of the measured programs, 0 = each pool's "
+                         f"own default (every core) [default: {threads}]")
     if with_data_dir:
         ap.add_argument("--data-dir", default=None,
                         help="directory of the g2o files [default: $POSECRB_DATA, else a datasets directory "

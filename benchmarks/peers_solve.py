@@ -72,13 +72,12 @@ def import_floor(env: dict, runs: int = 5) -> float:
 
 
 def main(argv: list[str] | None = None) -> int:
-    ap = process_parser(__doc__.splitlines()[0], with_data_dir=True)
+    ap = process_parser(__doc__.splitlines()[0], with_data_dir=True, threads=0)
     ap.add_argument("names", nargs="*")
     ap.add_argument("--pairs", type=int, default=3, help="timed rounds per dataset (median) [default: 3]")
     ap.add_argument("--sesync-compat", action=argparse.BooleanOptionalAction, default=True,
                     help="posecrb reads 3D quaternions as SE-Sync does [default: on]")
     ap.add_argument("--timeout", type=float, default=900.0, help="kill a run after this many seconds")
-    ap.set_defaults(threads=0)
     args = ap.parse_args(argv)
 
     files = suite_files(data_dir(args.data_dir), args.names)

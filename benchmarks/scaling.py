@@ -205,7 +205,7 @@ def markdown(records: list[dict], limit_note: str) -> str:
 
 
 def main(argv: list[str] | None = None) -> int:
-    ap = process_parser(__doc__.splitlines()[0], repeat=1)
+    ap = process_parser(__doc__.splitlines()[0], repeat=1, threads=0)
     ap.add_argument("--dims", default="2,3")
     ap.add_argument("--huge", action="store_true", help="add 10^6 (2D) and 10^5 (3D) poses")
     ap.add_argument("--sizes2", default=None, help="comma-separated 2D pose counts (overrides the defaults)")
@@ -221,7 +221,6 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--json", default=None, help="write the results as JSON")
     ap.add_argument("--markdown", action="store_true", help="also print the table as markdown")
     ap.add_argument("--child", default=None, help=argparse.SUPPRESS)
-    ap.set_defaults(threads=0)
     args, rest = ap.parse_known_args(argv)
     if args.child:
         print(json.dumps(flop_child(Path(rest[0])) if args.child == "flops" else dgemm_child()))

@@ -213,3 +213,14 @@ def test_solver_variants_runs_both_base_preconditioners_and_needs_data(tmp_path,
     with pytest.raises(SystemExit) as exc:
         module.main(["--variants", "schur-base"])
     assert exc.value.code == 2
+
+
+def test_process_parser_threads_default_is_what_help_says():
+    """The whole-process scripts' --threads default: one thread unless the script keeps every pool's
+    own default (0); --help prints the default the parser really has."""
+    common = _module("_common")
+    for default in (1, 0):
+        ap = common.process_parser("x", threads=default)
+        assert ap.parse_args([]).threads == default
+        assert f"[default: {default}]" in " ".join(ap.format_help().split())
+    assert common.process_parser("x").parse_args(["--threads", "2"]).threads == 2
