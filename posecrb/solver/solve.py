@@ -217,9 +217,7 @@ class SolverOptions:
     trust_region: Mapping[str, Any] = field(default_factory=dict)
 
     def __post_init__(self) -> None:
-        if self.base_precond not in BASE_PRECONDITIONERS:
-            raise UsageError(f"unknown base preconditioner {self.base_precond!r}; "
-                             f"choose from {', '.join(BASE_PRECONDITIONERS)}")
+        _check_base_precond(self.base_precond)
         unknown = set(self.trust_region) - _TR_TUNING
         if unknown:
             raise UsageError(f"unknown trust-region option(s) {', '.join(sorted(unknown))}; "
@@ -424,12 +422,16 @@ def _solve(graph: PoseGraph, options: SolverOptions) -> SolveResult:
         quaternions=graph.quaternions, times=times, rot=rot, trans=trans, ids=graph.ids.copy())
 
 
+def _check_base_precond(name: str) -> None:
+    if name not in BASE_PRECONDITIONERS:
+        raise UsageError(f"unknown base preconditioner {name!r}; choose from {', '.join(BASE_PRECONDITIONERS)}")
+
+
 def base_preconditioner_kind(requested: str, dim: int, poses: int) -> str:
     """The base preconditioner ``requested`` (``BASE_PRECONDITIONERS``) stands for on a graph of
     ``poses`` poses in dimension ``dim``: ``auto`` is "rotation" on the 3D graphs whose
     factorizations are threaded (``posecrb.linalg.ordering.threaded_matrix``), "schur" otherwise."""
-    if requested not in BASE_PRECONDITIONERS:
-        raise UsageError(f"unknown base preconditioner {requested!r}; choose from {', '.join(BASE_PRECONDITIONERS)}")
+    _check_base_precond(requested)
     if requested != "auto":
         return requested
     return "rotation" if dim == 3 and threaded_matrix(dim, poses, "solver") else "schur"
