@@ -192,6 +192,7 @@ def test_cli_json_and_out(shared_datasets, tmp_path):
     row = json.loads(r.output)
     assert set(row) == {"dataset", "dim", "poses", "edges", "anchor", "objective", "relaxation_value", "duality_gap",
                         "lambda_min", "certified", "reason", "rank", "iterations", "hessian_vector_products",
+                        "preconditioner_solves",
                         "quaternions", "saved", "times"}
     assert row["anchor"] == 2 and row["saved"] == str(out)
     assert row["quaternions"] == "normalize"

@@ -82,3 +82,52 @@ def test_auto_is_schur_on_small_graphs():
     schur = solve(graph, base_precond="schur")
     assert default.objective == schur.objective
     assert default.hessian_vector_products == schur.hessian_vector_products
+
+
+def _count_calls(monkeypatch, cls, name: str) -> list[int]:
+    """Count the calls of ``cls.name`` from now on (monkeypatched); the count is ``calls[0]``."""
+    calls = [0]
+    real = getattr(cls, name)
+
+    def counting(self, *args, **kwargs):
+        calls[0] += 1
+        return real(self, *args, **kwargs)
+
+    monkeypatch.setattr(cls, name, counting)
+    return calls
+
+
+def test_preconditioner_solves_count_every_application_of_the_rotation_block(monkeypatch):
+    from posecrb.solver.tangent import TangentSystem
+
+    rng = np.random.default_rng(12)
+    graph = random_pose_graph(40, 3, rng, loop_closures=30, rot_noise=0.1, trans_noise=0.1)[0]
+    rotation_solves = _count_calls(monkeypatch, RotationBlockFactor, "solve")
+    tangent_applies = _count_calls(monkeypatch, TangentSystem, "apply")
+    res = solve(graph, tangent_precond=False, base_precond="rotation", adaptive_precond=None)
+    # the rotation block's factor is used for nothing but preconditioning, and without the
+    # adaptive or tangent factors every application is the base one
+    assert res.preconditioner_solves == {"rotation": rotation_solves[0]}
+    assert rotation_solves[0] > 0 and tangent_applies[0] == 0
+    rotation_solves[0] = 0
+    schur = solve(graph, tangent_precond=False, base_precond="schur", adaptive_precond=None)
+    assert set(schur.preconditioner_solves) == {"schur"} and rotation_solves[0] == 0
+    # truncated CG preconditions its first residual, then one per product that does not end it
+    assert schur.preconditioner_solves["schur"] >= schur.iterations
+
+
+def test_preconditioner_solves_name_the_tangent_system_in_2d_and_nothing_without_one(monkeypatch):
+    from posecrb.solver.tangent import TangentSystem
+
+    rng = np.random.default_rng(13)
+    graph = random_pose_graph(40, 2, rng, loop_closures=30, rot_noise=0.1, trans_noise=0.1)[0]
+    tangent_applies = _count_calls(monkeypatch, TangentSystem, "apply")
+    res = solve(graph)
+    assert res.certified and res.preconditioner_solves.get("tangent", 0) > 0
+    assert set(res.preconditioner_solves) <= {"schur", "adaptive", "tangent", "split"}
+    # the split preconditioner applies K too, once per application
+    assert tangent_applies[0] == res.preconditioner_solves["tangent"] + res.preconditioner_solves.get("split", 0)
+    bare = solve(graph, precondition=False)
+    assert bare.preconditioner_solves == {} and bare.certified
+    assert bare.to_dict()["preconditioner_solves"] == {}
+    assert type(res).from_dict(res.to_dict()).preconditioner_solves == res.preconditioner_solves

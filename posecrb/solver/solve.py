@@ -27,7 +27,7 @@ from ..linalg.threads import cholmod_threads, solver_threads
 from .chordal import chordal_rotations
 from .problem import Problem, RotationBlockFactor
 from .rounding import anchor_estimate, recover_translations, round_rotations, se_objective
-from .staircase import RelaxedModel, escape, verify
+from .staircase import PRECONDITIONERS, RelaxedModel, escape, verify
 from .tangent import TangentSystem
 from .trust_region import TROptions, trust_region
 
@@ -76,6 +76,14 @@ class SolveResult(Result):
         Why it is (or is not) certified.
     rank, iterations, hessian_vector_products : int
         The staircase's last rank, trust-region iterations and Hessian-vector products.
+    preconditioner_solves : dict of str to int
+        How many times each preconditioner was applied (a solve with its factor: one per
+        truncated-CG residual and one per Newton decrement), by name: ``schur`` (SE-Sync's
+        ``(Q + delta I)^{-1}`` through a factor of M_red) or ``rotation`` (the rotation block's
+        ``(C + delta I)^{-1}``), whichever is the base one (``SolverOptions.base_precond``);
+        ``adaptive`` (``(Q - Lambda + s I)^{-1}``, refactored at an iterate); ``tangent`` (the
+        tangent space's inverse Hessian); ``split`` (after an escape). Empty without a
+        preconditioner (``precondition=False``).
     quaternions : str
         How the file's 3D quaternions were read (``"normalize"``, or ``"raw"`` as SE-Sync).
     saved : str or None
@@ -114,6 +122,7 @@ class SolveResult(Result):
     rank: int
     iterations: int
     hessian_vector_products: int
+    preconditioner_solves: dict[str, int] = field(default_factory=dict)
     quaternions: str = "normalize"
     saved: str | None = optional_field()
     times: dict[str, float] = field(default_factory=dict)
@@ -313,7 +322,7 @@ def _solve(graph: PoseGraph, options: SolverOptions) -> SolveResult:
                                        else (lambda: _base_preconditioner(problem, delta, base_kind))),
                          tangent_factory=(lambda: TangentSystem.build(problem)) if switch else None,
                          tangent_switch_hvps=TANGENT_SWITCH_HVPS if switch else None,
-                         split_escape=options.split_precond)
+                         split_escape=options.split_precond, base_kind=base_kind)
     model.certificate_tol = certificate_tol
     # The rank-r0 starting point is the rotations padded with r0 - d zero columns. Every step of the
     # trust region acts on the columns linearly or through d x d block products with Z_i, so the
@@ -419,6 +428,8 @@ def _solve(graph: PoseGraph, options: SolverOptions) -> SolveResult:
         duality_gap_status=gap_status,
         lambda_min=float(cert.lambda_min) if cert is not None else None, certified=certified, reason=reason,
         rank=r, iterations=iterations, hessian_vector_products=model.hvps,
+        preconditioner_solves={name: model.preconditioned[name] for name in PRECONDITIONERS
+                               if model.preconditioned[name]},
         quaternions=graph.quaternions, times=times, rot=rot, trans=trans, ids=graph.ids.copy())
 
 

@@ -36,6 +36,7 @@ from __future__ import annotations
 
 import logging
 import math
+from collections import Counter
 from collections.abc import Callable
 from dataclasses import dataclass
 from typing import TypeAlias
@@ -66,6 +67,15 @@ log = logging.getLogger("posecrb")
 BaseFactor: TypeAlias = "Factor | RotationBlockFactor"
 
 
+# The preconditioners truncated CG can apply, as the solve's result names them: the base factor
+# ("schur", SE-Sync's (Q + delta I)^{-1} through M_red(delta), or "rotation", the rotation block's
+# (C + delta I)^{-1}), "adaptive" ((Q - Lambda + s I)^{-1} through M_red refactored at an iterate,
+# or the certificate's factor kept past a saddle), "tangent" (the tangent space's K,
+# posecrb.solver.tangent) and "split" (after an escape: K on the first d columns, M_red's factor on
+# the new one).
+PRECONDITIONERS = ("schur", "rotation", "adaptive", "tangent", "split")
+
+
 # The tangent preconditioner's factor is kept for the next iterate while truncated CG needs at most
 # this many products with it. Against refactoring at every iterate (0) it trades products for
 # factorizations: fewer seconds on city10000 (0.50 -> 0.35 s), more on ais2klinik (0.36 -> 0.46 s,
@@ -81,8 +91,13 @@ class RelaxedModel:
                  refactor_hvps: int | None = 30, tangent: TangentSystem | None = None,
                  tangent_fallback_shift: float = 0.0, base_factory: Callable[[], BaseFactor] | None = None,
                  tangent_factory: Callable[[], TangentSystem] | None = None,
-                 tangent_switch_hvps: int | None = None, split_escape: bool = True) -> None:
+                 tangent_switch_hvps: int | None = None, split_escape: bool = True,
+                 base_kind: str = "schur") -> None:
         self.problem = problem
+        # The base factor's kind (posecrb.solver.solve.BASE_PRECONDITIONERS), and how many times
+        # each preconditioner (``PRECONDITIONERS``) has been applied: what the result reports.
+        self.base_kind = base_kind
+        self.preconditioned: Counter[str] = Counter()
         # Builds ``tangent`` at the first level once a truncated-CG run needed more than
         # ``tangent_switch_hvps`` products (where the tangent system's factorizations cost more than
         # the products they save unless there are many).
@@ -305,13 +320,16 @@ class RelaxedModel:
         gram = self._gram_of(state)
         R = remove_vertical(state.Z, R, gram)
         if tangent_factor is not None and self.tangent is not None:
+            self.preconditioned["tangent"] += 1
             # E maps into the tangent space: no projection needed, only the gauge removed
             return remove_vertical(state.Z, self.tangent.apply(tangent_factor, state.Z, R), gram)
         if self.precond_factor is None:
             raise InternalError("preconditioner factor missing")
         parts = self._split_parts(state, gram)
         if parts is not None:
+            self.preconditioned["split"] += 1
             return remove_vertical(state.Z, self._split_apply(state, R, parts), gram)
+        self.preconditioned[self.base_kind if self.precond_factor is self.base_factor else "adaptive"] += 1
         W = self._precond_solve(R.reshape(n * d, r)).reshape(n, d, r)
         return remove_vertical(state.Z, project(state.Z, W, self._components(state)[0], scale=0.5), gram)
 
