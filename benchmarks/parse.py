@@ -16,7 +16,6 @@ Usage: python benchmarks/parse.py [--repeat K] [--min-mb X] [--no-grid] [--data-
 from __future__ import annotations
 
 import argparse
-import hashlib
 import logging
 import os
 import platform
@@ -26,17 +25,18 @@ import numpy as np
 from _common import data_dir, median_time
 from grids import grid_file
 
+from posecrb.core.files import decode_utf8, read_input
+from posecrb.datasets import search as datasets
 from posecrb.io import FORMATS, load
 from posecrb.io.reader import parse
-from posecrb.io.text import decode_utf8, split_text
+from posecrb.io.text import split_text
 
 ARRAYS = ("ids", "src", "dst", "rot", "trans", "info", "vertex_rot", "vertex_trans", "edge_lines")
 
 
 def load_reference(path: Path):
-    data = path.read_bytes()
-    text = decode_utf8(data, str(path))
-    return parse(split_text(text), FORMATS, str(path), hashlib.sha256(data).hexdigest())
+    data = read_input(path)
+    return parse(split_text(decode_utf8(data.data, data.path)), FORMATS, data.path, data.sha256)
 
 
 def same_graph(a, b) -> bool:
@@ -62,7 +62,7 @@ def main() -> None:
     files: list[Path] = []
     directory = data_dir(args.data_dir)
     if args.names:
-        files = [Path(n) if os.path.isfile(n) else directory / n for n in args.names]
+        files = [datasets.resolve(n, directory) for n in args.names]
     elif directory is not None:
         found = sorted(p for p in directory.rglob("*") if p.suffix in (".g2o", ".graph", ".toro") and p.is_file())
         files = [p for p in found if p.stat().st_size >= args.min_mb * 1e6]
@@ -79,7 +79,7 @@ def main() -> None:
         t_ref = median_time(lambda: load_reference(path), args.repeat)
         g = load(path)
         same = same_graph(g, load_reference(path))
-        lines = path.read_bytes().count(b"\n")
+        lines = read_input(path).data.count(b"\n")
         print(f"{path.name:38s} {mb:6.2f} {lines:8d} {t_fast:8.3f} {mb / t_fast:6.1f} {t_ref:8.3f} "
               f"{mb / t_ref:6.1f} {t_ref / t_fast:7.2f}x {'yes' if same else 'NO'}")
 

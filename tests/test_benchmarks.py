@@ -224,3 +224,57 @@ def test_process_parser_threads_default_is_what_help_says():
         assert ap.parse_args([]).threads == default
         assert f"[default: {default}]" in " ".join(ap.format_help().split())
     assert common.process_parser("x").parse_args(["--threads", "2"]).threads == 2
+
+
+@pytest.mark.parametrize("script", sorted(p.name for p in BENCHMARKS.glob("[a-z]*.py")))
+def test_every_benchmark_script_starts_and_answers_help(script):
+    """`make bench` runs every script: each must at least import what it names and parse --help
+    (a renamed library function once broke one of them before any measurement started)."""
+    import subprocess
+
+    run = subprocess.run([sys.executable, str(BENCHMARKS / script), "--help"], capture_output=True, text=True,
+                         timeout=120, cwd=BENCHMARKS.parent)
+    assert run.returncode == 0, run.stderr[-2000:]
+    assert "usage:" in run.stdout.lower()
+
+
+def test_parse_benchmark_compares_both_tokenisers_on_a_file_given_by_name(tmp_path, capsys, monkeypatch):
+    """benchmarks/parse.py resolves a bare name in the data directory, reads it through the input
+    layer and finds the fast and the reference tokeniser's graphs the same."""
+    import numpy as np
+
+    from posecrb.io import write_g2o
+
+    from .helpers import random_pose_graph
+
+    write_g2o(random_pose_graph(40, 3, np.random.default_rng(5), loop_closures=10)[0], tmp_path / "tiny.g2o")
+    monkeypatch.setattr(sys, "argv", ["parse.py", "--repeat", "1", "--no-grid", "--data-dir", str(tmp_path), "tiny"])
+    _module("parse").main()
+    row = next(line for line in capsys.readouterr().out.splitlines() if line.startswith("tiny.g2o"))
+    assert row.split()[-1] == "yes"
+
+
+def test_accuracy_bound_norm_bound_dominates_the_exact_one_and_uses_the_true_norm():
+    """benchmarks/accuracy_bound.py: ``||A^{-1}||_2`` from Lanczos against dense numpy, and the norm
+    bound at least the exact one (every ``|(A^{-1})_ij| <= ||A^{-1}||_2``), with the same gamma."""
+    import numpy as np
+    import scipy.sparse as sp
+
+    from posecrb.linalg.accuracy import logdet_accuracy
+    from posecrb.linalg.cholesky import SymbolicCholesky
+
+    rng = np.random.default_rng(21)
+    n = 60
+    b = sp.random(n, n, density=0.08, random_state=rng) + sp.eye(n)
+    a = (b @ b.T + 1e-2 * sp.eye(n)).tocsc()
+    factor, logdet = SymbolicCholesky(a).factor_logdet(a)
+    bound, inv_norm, gamma = _module("accuracy_bound").norm_bound(factor, n)
+    dense = a.toarray()
+    eig = np.linalg.eigvalsh(dense)
+    reference = 1.0 / eig[0]
+    # ARPACK's tol: the Ritz value within a relative 1e-6 of the eigenvalue
+    assert inv_norm == pytest.approx(reference, rel=1e-6)
+    exact = logdet_accuracy(factor, logdet)
+    assert bound >= exact.error_bound * (1 - 1e-6)
+    lower = np.abs(factor.L().toarray())
+    assert bound == pytest.approx(gamma * float(lower.sum(axis=0) @ lower.sum(axis=0)) * reference, rel=1e-6)

@@ -1,0 +1,69 @@
+"""The FIM log-det's rounding-error bound: the exact sum over the factor's pattern against a norm bound.
+
+``posecrb.linalg.accuracy.logdet_accuracy`` bounds the error of ``log det A`` computed by Cholesky
+by ``gamma * sum_ij |(A^{-1})_ij| (|L| |L^T|)_ij`` (one selected inversion, about twice the
+factorization's flops). Bounding each ``|(A^{-1})_ij|`` by ``||A^{-1}||_2`` instead gives
+``gamma * || |L|^T 1 ||^2 * ||A^{-1}||_2``: one pass over L and a few dozen solves for the norm
+(Lanczos on ``A^{-1}``), so seconds where the selected inversion takes tens of seconds, but looser.
+For each file (the anchored paper FIM at the file's vertices, or at an odometry estimate for
+edge-only files, as ``posecrb bounds --estimate vertices`` factors it) this prints the log-det,
+both bounds, their ratio, the warning threshold (1e-6 |log det|: ``LOGDET_WARN``) and the
+seconds of each (median of --repeat after a warm-up; one run when a run takes more than 10 s).
+Usage: python benchmarks/accuracy_bound.py [--repeat K] [NAME ...]
+"""
+from __future__ import annotations
+
+import time
+
+import numpy as np
+from _common import dataset_args, median_time
+from fim import odometry_estimate
+from scipy.sparse.linalg import LinearOperator, eigsh
+
+from posecrb import load
+from posecrb.linalg.accuracy import LOGDET_WARN, logdet_accuracy
+from posecrb.models.paper.fim import fim_symbolic, paper_fim
+
+EPS = float(np.finfo(float).eps)
+
+
+def norm_bound(factor, n: int) -> tuple[float, float, float]:
+    """(gamma || |L|^T 1 ||^2 ||A^{-1}||_2, ||A^{-1}||_2, gamma) for the factor of an n x n matrix A;
+    ``||A^{-1}||_2`` is the largest eigenvalue of A^{-1} by Lanczos (ARPACK, relative 1e-6)."""
+    lower = factor.L().tocsc()
+    colcount = int(np.diff(lower.indptr).max())
+    gamma = (colcount + 2) * EPS
+    colsum = np.asarray(abs(lower).sum(axis=0)).ravel()        # |L|^T 1
+    inverse = LinearOperator((n, n), matvec=lambda v: factor.solve_A(v), dtype=float)
+    inv_norm = float(eigsh(inverse, k=1, which="LA", tol=1e-6, return_eigenvectors=False,
+                           v0=np.ones(n))[0])
+    return gamma * float(colsum @ colsum) * inv_norm, inv_norm, gamma
+
+
+def main() -> None:
+    args, files = dataset_args(__doc__.splitlines()[0], repeat=3)
+    print(f"{'dataset':30s} {'rows':>7s} {'log det':>14s} {'exact bound':>12s} {'norm bound':>11s} {'ratio':>9s} "
+          f"{'warn at':>9s} {'||A^-1||':>9s} {'exact s':>8s} {'norm s':>7s}")
+    for path in files:
+        g = load(path)
+        if g.n_components != 1:
+            print(f"{g.name:30s} disconnected, skipped")
+            continue
+        rot, trans = (g.vertex_rot, g.vertex_trans) if g.has_vertices else odometry_estimate(g)
+        fim = paper_fim(g, rot, trans)
+        factor, logdet = fim_symbolic(fim, "auto").factor_logdet(fim.matrix, name="paper FIM")
+        t0 = time.perf_counter()
+        exact = logdet_accuracy(factor, logdet, "paper FIM")
+        first = time.perf_counter() - t0
+        repeat = 1 if first > 10.0 else args.repeat
+        t_exact = first if repeat == 1 else median_time(lambda: logdet_accuracy(factor, logdet), repeat)
+        n = fim.matrix.shape[0]
+        bound, inv_norm, _ = norm_bound(factor, n)
+        t_norm = median_time(lambda: norm_bound(factor, n), 1 if first > 10.0 else repeat)
+        print(f"{g.name:30s} {n:7d} {logdet:14.6f} {exact.error_bound:12.3e} {bound:11.3e} "
+              f"{bound / exact.error_bound:9.3g} {LOGDET_WARN * max(1.0, abs(logdet)):9.3g} {inv_norm:9.3g} "
+              f"{t_exact:8.3f} {t_norm:7.3f}")
+
+
+if __name__ == "__main__":
+    main()
