@@ -278,3 +278,39 @@ def test_accuracy_bound_norm_bound_dominates_the_exact_one_and_uses_the_true_nor
     assert bound >= exact.error_bound * (1 - 1e-6)
     lower = np.abs(factor.L().toarray())
     assert bound == pytest.approx(gamma * float(lower.sum(axis=0) @ lower.sum(axis=0)) * reference, rel=1e-6)
+
+
+def test_orderings_counts_are_cholmods_and_a_chain_has_no_fill_under_amd(tmp_path, capsys):
+    """benchmarks/orderings.py --counts: CHOLMOD's analysis counts per matrix and ordering. A pose
+    chain's FIM and M_red are block tridiagonal (chordal), where minimum degree eliminates without
+    fill, so AMD's nnz(L) is exactly nnz(tril(A)); with loop closures every ordering has at least
+    that many and flops (sum of squared column counts) at least nnz(L)."""
+    import numpy as np
+
+    from posecrb.io import write_g2o
+    from posecrb.models.paper.fim import paper_fim
+
+    from .helpers import random_pose_graph
+
+    chain = random_pose_graph(30, 2, np.random.default_rng(1), loop_closures=0)[0]
+    loops = random_pose_graph(60, 3, np.random.default_rng(2), loop_closures=25)[0]
+    write_g2o(chain, tmp_path / "chain.g2o")
+    write_g2o(loops, tmp_path / "loops.g2o")
+    orderings = "amd,nesdis/poses,metis/poses,nesdis"
+    assert _module("orderings").main(["--counts", "--grids3", "", "--data-dir", str(tmp_path), "--orderings",
+                                      orderings, "--matrices", "FIM,Mred", "chain", "loops"]) == 0
+    rows = [[c.strip() for c in line.strip("|").split("|")] for line in capsys.readouterr().out.splitlines()
+            if line.startswith(("| chain |", "| loops |"))]
+    assert [(r[0], r[1]) for r in rows] == [("chain", "FIM"), ("chain", "Mred"), ("loops", "FIM"), ("loops", "Mred")]
+    fim = {"chain": paper_fim(chain, chain.vertex_rot, chain.vertex_trans).to_layout("poses").matrix,
+           "loops": paper_fim(loops, loops.vertex_rot, loops.vertex_trans).to_layout("poses").matrix}
+    for name, matrix, _, *cells in rows:
+        counts = [(float(c.split(" G / ")[0]) * 1e9, float(c.split(" G / ")[1].rstrip("M")) * 1e6) for c in cells]
+        assert len(counts) == 4 and all(fl >= lnz > 0 for fl, lnz in counts)
+        if matrix == "FIM":
+            a = fim[name]
+            tril = (a.nnz + a.shape[0]) // 2
+            # the cells carry 3 significant digits
+            assert all(lnz >= tril * (1 - 5e-3) for _, lnz in counts)
+            if name == "chain":
+                assert counts[0][1] == pytest.approx(tril, rel=5e-3)
