@@ -17,10 +17,9 @@ import time
 
 import numpy as np
 from _common import dataset_args, median_time
-from fim import odometry_estimate
+from fim import graphs_at_estimates
 from scipy.sparse.linalg import LinearOperator, eigsh
 
-from posecrb import load
 from posecrb.linalg.accuracy import LOGDET_WARN, logdet_accuracy
 from posecrb.models.paper.fim import fim_symbolic, paper_fim
 
@@ -44,12 +43,7 @@ def main() -> None:
     args, files = dataset_args(__doc__.splitlines()[0], repeat=3)
     print(f"{'dataset':30s} {'rows':>7s} {'log det':>14s} {'exact bound':>12s} {'norm bound':>11s} {'ratio':>9s} "
           f"{'warn at':>9s} {'||A^-1||':>9s} {'exact s':>8s} {'norm s':>7s}")
-    for path in files:
-        g = load(path)
-        if g.n_components != 1:
-            print(f"{g.name:30s} disconnected, skipped")
-            continue
-        rot, trans = (g.vertex_rot, g.vertex_trans) if g.has_vertices else odometry_estimate(g)
+    for g, rot, trans in graphs_at_estimates(files, 30):
         fim = paper_fim(g, rot, trans)
         factor, logdet = fim_symbolic(fim, "auto").factor_logdet(fim.matrix, name="paper FIM")
         t0 = time.perf_counter()

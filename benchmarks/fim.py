@@ -57,16 +57,22 @@ def odometry_estimate(g):
     return rot, trans
 
 
+def graphs_at_estimates(files, width: int):
+    """(graph, rotations, translations) of each connected file: its vertices, or an odometry
+    estimate for edge-only files; a disconnected one is a printed line (name padded to ``width``)."""
+    for f in files:
+        g = load(f)
+        if g.n_components != 1:
+            print(f"{g.name:{width}s} {g.n:6d} disconnected, skipped")
+            continue
+        yield (g, *((g.vertex_rot, g.vertex_trans) if g.has_vertices else odometry_estimate(g)))
+
+
 def main() -> None:
     args, files = dataset_args(__doc__.splitlines()[0], repeat=5)
     print(f"{'dataset':26s} {'n':>6s} {'size':>6s} {'build':>7s} {'logdet':>7s} {'b+ld':>7s} "
           f"{'blocks':>7s} {'crlb':>7s} {'GTSAM':>6s} {'speedup':>7s}")
-    for f in files:
-        g = load(f)
-        if g.n_components != 1:
-            print(f"{g.name:26s} {g.n:6d} disconnected, skipped")
-            continue
-        rot, trans = (g.vertex_rot, g.vertex_trans) if g.has_vertices else odometry_estimate(g)
+    for g, rot, trans in graphs_at_estimates(files, 26):
         t_build = median_time(lambda: paper_fim(g, rot, trans), args.repeat)
         fim = paper_fim(g, rot, trans)
         t_ld = median_time(lambda: fim_logdet(fim), args.repeat)
