@@ -337,6 +337,7 @@ def main(argv: list[str] | None = None) -> int:
     g2 = [int(x) for x in args.grids2.split(",") if x]
     items += [(f"grid3D-{n}", None, 3, n) for n in g3] + [(f"grid2D-{n}", None, 2, n) for n in g2]
     print_header("fill-reducing orderings: lb and FIM log-det factorizations (in-process, CHOLMOD)", None, [
+        "symbolic analyses only: CHOLMOD's counts, no timing" if args.counts else
         (f"median of {args.repeat} after a warm-up (one run above {args.slow:g} s); BLAS single-threaded; "
          "times in seconds; fill = nnz(L) / nnz(tril(A))")])
     table: list[dict] = []
