@@ -8,18 +8,19 @@ factorization's flops). Bounding each ``|(A^{-1})_ij|`` by ``||A^{-1}||_2`` inst
 For each file (the anchored paper FIM at the file's vertices, or at an odometry estimate for
 edge-only files, as ``posecrb bounds --estimate vertices`` factors it) this prints the log-det,
 both bounds, their ratio, the warning threshold (1e-6 |log det|: ``LOGDET_WARN``) and the
-seconds of each (median of --repeat after a warm-up; one run when a run takes more than 10 s).
+seconds of each, timed as ``--repeat auto`` times a stage (``posecrb.core.timing``: one run when
+it takes a second or more, else the median of the runs that fit in about 2 s); --repeat K: a
+warm-up and the median of K.
 Usage: python benchmarks/accuracy_bound.py [--repeat K] [NAME ...]
 """
 from __future__ import annotations
 
-import time
-
 import numpy as np
-from _common import dataset_args, median_time
+from _common import dataset_args
 from fim import graphs_at_estimates
 from scipy.sparse.linalg import LinearOperator, eigsh
 
+from posecrb.core.timing import timed
 from posecrb.linalg.accuracy import LOGDET_WARN, logdet_accuracy
 from posecrb.models.paper.fim import fim_symbolic, paper_fim
 
@@ -40,20 +41,16 @@ def norm_bound(factor, n: int) -> tuple[float, float, float]:
 
 
 def main() -> None:
-    args, files = dataset_args(__doc__.splitlines()[0], repeat=3)
+    args, files = dataset_args(__doc__.splitlines()[0], repeat=0)
+    runs = args.repeat or "auto"
     print(f"{'dataset':30s} {'rows':>7s} {'log det':>14s} {'exact bound':>12s} {'norm bound':>11s} {'ratio':>9s} "
           f"{'warn at':>9s} {'||A^-1||':>9s} {'exact s':>8s} {'norm s':>7s}")
     for g, rot, trans in graphs_at_estimates(files, 30):
         fim = paper_fim(g, rot, trans)
         factor, logdet = fim_symbolic(fim, "auto").factor_logdet(fim.matrix, name="paper FIM")
-        t0 = time.perf_counter()
-        exact = logdet_accuracy(factor, logdet, "paper FIM")
-        first = time.perf_counter() - t0
-        repeat = 1 if first > 10.0 else args.repeat
-        t_exact = first if repeat == 1 else median_time(lambda: logdet_accuracy(factor, logdet), repeat)
+        exact, t_exact = timed(lambda: logdet_accuracy(factor, logdet, "paper FIM"), runs)
         n = fim.matrix.shape[0]
-        bound, inv_norm, _ = norm_bound(factor, n)
-        t_norm = median_time(lambda: norm_bound(factor, n), 1 if first > 10.0 else repeat)
+        (bound, inv_norm, _), t_norm = timed(lambda: norm_bound(factor, n), runs)
         print(f"{g.name:30s} {n:7d} {logdet:14.6f} {exact.error_bound:12.3e} {bound:11.3e} "
               f"{bound / exact.error_bound:9.3g} {LOGDET_WARN * max(1.0, abs(logdet)):9.3g} {inv_norm:9.3g} "
               f"{t_exact:8.3f} {t_norm:7.3f}")
