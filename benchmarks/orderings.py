@@ -122,6 +122,15 @@ def _mred_expanded(p: np.ndarray, n: int, d: int) -> np.ndarray:
     return flat[flat >= 0]
 
 
+def _pose_order(pose_pattern, ordering: str, q: int | None, expand=None) -> np.ndarray:
+    """The matrix's rows in the order of the pose ordering ``ordering`` (``X/poses``: CHOLMOD's X
+    of ``pose_pattern``), expanded to each pose's ``q`` rows, or by ``expand``."""
+    from sksparse.cholmod import analyze
+
+    p = analyze(pose_pattern, ordering_method=ordering.split("/")[0]).P()
+    return _expanded(p, q) if expand is None else expand(p)
+
+
 def time_fim(fim, pose_pattern, ordering: str, repeat: int, slow: float, expand=None) -> Timing:
     """One analysis + factorization of the FIM (pose-major layout), or of the matrix ``fim`` with
     the pose-order expansion ``expand``, with ``ordering``."""
@@ -133,8 +142,7 @@ def time_fim(fim, pose_pattern, ordering: str, repeat: int, slow: float, expand=
     def run():
         t0 = time.perf_counter()
         if ordering.endswith("/poses"):
-            p = analyze(pose_pattern, ordering_method=ordering.split("/")[0]).P()
-            perm = _expanded(p, q) if expand is None else expand(p)
+            perm = _pose_order(pose_pattern, ordering, q, expand)
             ap = a[perm][:, perm].tocsc()
             sym = analyze(ap, ordering_method="natural")
         else:
@@ -158,11 +166,9 @@ def analysis_counts(a, pose_pattern, ordering: str, q: int | None, expand=None) 
     ``cholmod_analyze`` reports them (``Common->fl``, ``Common->lnz``). Pose orderings (``X/poses``)
     order ``pose_pattern`` and expand it to the matrix's rows, as ``time_fim`` does."""
     import _cholmod
-    from sksparse.cholmod import analyze
 
     if ordering.endswith("/poses"):
-        p = analyze(pose_pattern, ordering_method=ordering.split("/")[0]).P()
-        f = _cholmod.Factorization(a, perm=_expanded(p, q) if expand is None else expand(p))
+        f = _cholmod.Factorization(a, perm=_pose_order(pose_pattern, ordering, q, expand))
     else:
         f = _cholmod.Factorization(a, ordering)
     return f.flops, f.lnz
