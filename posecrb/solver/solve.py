@@ -322,7 +322,7 @@ def _solve(graph: PoseGraph, options: SolverOptions) -> SolveResult:
                                        else (lambda: _base_preconditioner(problem, delta, base_kind))),
                          tangent_factory=(lambda: TangentSystem.build(problem)) if switch else None,
                          tangent_switch_hvps=TANGENT_SWITCH_HVPS if switch else None,
-                         split_escape=options.split_precond, base_kind=base_kind)
+                         split_escape=options.split_precond)
     model.certificate_tol = certificate_tol
     # The rank-r0 starting point is the rotations padded with r0 - d zero columns. Every step of the
     # trust region acts on the columns linearly or through d x d block products with Z_i, so the

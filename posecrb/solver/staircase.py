@@ -91,12 +91,10 @@ class RelaxedModel:
                  refactor_hvps: int | None = 30, tangent: TangentSystem | None = None,
                  tangent_fallback_shift: float = 0.0, base_factory: Callable[[], BaseFactor] | None = None,
                  tangent_factory: Callable[[], TangentSystem] | None = None,
-                 tangent_switch_hvps: int | None = None, split_escape: bool = True,
-                 base_kind: str = "schur") -> None:
+                 tangent_switch_hvps: int | None = None, split_escape: bool = True) -> None:
         self.problem = problem
-        # The base factor's kind (posecrb.solver.solve.BASE_PRECONDITIONERS), and how many times
-        # each preconditioner (``PRECONDITIONERS``) has been applied: what the result reports.
-        self.base_kind = base_kind
+        # How many times each preconditioner (``PRECONDITIONERS``) has been applied: what the
+        # result reports.
         self.preconditioned: Counter[str] = Counter()
         # Builds ``tangent`` at the first level once a truncated-CG run needed more than
         # ``tangent_switch_hvps`` products (where the tangent system's factorizations cost more than
@@ -329,7 +327,9 @@ class RelaxedModel:
         if parts is not None:
             self.preconditioned["split"] += 1
             return remove_vertical(state.Z, self._split_apply(state, R, parts), gram)
-        self.preconditioned[self.base_kind if self.precond_factor is self.base_factor else "adaptive"] += 1
+        factor = self.precond_factor
+        self.preconditioned["adaptive" if factor is not self.base_factor
+                            else "rotation" if isinstance(factor, RotationBlockFactor) else "schur"] += 1
         W = self._precond_solve(R.reshape(n * d, r)).reshape(n, d, r)
         return remove_vertical(state.Z, project(state.Z, W, self._components(state)[0], scale=0.5), gram)
 
