@@ -16,7 +16,7 @@ from scipy.linalg import expm
 from scipy.spatial.transform import Rotation
 
 from posecrb.core.graph import PoseGraph
-from posecrb.core.noise import rotation_weight
+from posecrb.core.noise import rotation_weights
 from posecrb.lie import se as L
 from posecrb.lie.so import so2_exp, so3_exp
 from posecrb.sim.generators import random_graph, uniform_rotations
@@ -150,7 +150,7 @@ def dense_model_fisher(graph, rot, trans, anchor: int, h: float = 1e-6, with_err
         return np.concatenate(out)
 
     jac = central_jacobian(residual, rot, trans, [k for k in range(graph.n) if k != anchor], h)
-    w = rotation_weight(graph.kappa, d)
+    w = rotation_weights(graph.kappa, d)
     weights = np.concatenate([np.concatenate([np.full(d, t), np.full(dr, v)]) for t, v in zip(graph.tau, w)])
     f = jac.T @ (weights[:, None] * jac)
     if not with_error:

@@ -148,7 +148,7 @@ def test_table2_fit_reproduces_published_lower_bounds(shared_datasets):
     # The empirical w = 0.5515 kappa^2 reproduces Table II's lb to ~4-5 digits (docs/design.md#rotation-weights).
     published = {"tinyGrid3D": 2.4163e2, "smallGrid3D": 4.3815e3, "sphere2500": 9.9054e4, "torus3D": 2.4985e5}
     for name, lb in published.items():
-        b = compute_bounds(load(shared_datasets / f"{name}.g2o"), rotation_model="table2")
+        b = compute_bounds(load(shared_datasets / f"{name}.g2o"), rotation_weight="table2")
         assert b.lb == pytest.approx(lb, rel=3e-4), name
 
 
@@ -200,7 +200,7 @@ def test_lambda_min_below_double_precision_is_a_status_never_negative(dim):
     assert b.lambda_min_rot is None and b.lambda_min_rot_status.state == "unavailable"
     assert "double precision" in b.lambda_min_rot_status.reason
     lap_w = b.lambda_min_rot_lower
-    assert lap_w == tree_lambda_min_bound(g.n, g.src, g.dst, g.rotation_weight, 0) > 0
+    assert lap_w == tree_lambda_min_bound(g.n, g.src, g.dst, g.rotation_weights, 0) > 0
     assert np.isfinite(b.gap_bound) and b.gap_bound_status.state == "warning"
     # premise, independently: the rounding level of L_w exceeds that lower bound by far
     from posecrb.models.paper.bounds import weighted_laplacians

@@ -222,7 +222,7 @@ def test_library_import_changes_no_import_machinery():
 
 def test_option_choices_are_the_librarys():
     from posecrb.cli import options
-    from posecrb.core.noise import ROTATION_WEIGHT_MODELS
+    from posecrb.core.noise import ROTATION_WEIGHTS
     from posecrb.models import MODELS
     from posecrb.models.paper.fim import FIM_VARIANTS
     from posecrb.report.render import FORMATS
@@ -230,7 +230,7 @@ def test_option_choices_are_the_librarys():
     assert options.FORMATS == FORMATS
     assert options.MODELS == MODELS
     assert options.FIM_VARIANTS == FIM_VARIANTS
-    assert options.ROTATION_WEIGHT_MODELS == ROTATION_WEIGHT_MODELS
+    assert options.ROTATION_WEIGHTS == ROTATION_WEIGHTS
 
 
 def test_solve_of_weak_rotations_imports_no_bessel_functions(tmp_path):

@@ -55,7 +55,7 @@ def test_error_coordinates_match_the_fim_perturbation():
 
 def _dense_model_fim(g, rot, trans, anchor):
     """From scratch: body-frame Jacobians of translation and relative-rotation residuals."""
-    n, tau, w = g.n, g.tau, g.rotation_weight
+    n, tau, w = g.n, g.tau, g.rotation_weights
     f = np.zeros((6 * n, 6 * n))
     for k, (i, j) in enumerate(zip(g.src, g.dst)):
         u = rot[i].T @ (trans[j] - trans[i])

@@ -10,7 +10,7 @@ import numpy as np
 import pytest
 
 from posecrb.core.errors import DisconnectedGraph, NotPositiveDefinite
-from posecrb.core.noise import rotation_weight
+from posecrb.core.noise import rotation_weights
 from posecrb.models.paper.bounds import t_optimality
 from posecrb.models.paper.fim import FIM_VARIANTS, fim_logdet, fim_symbolic, paper_fim, trace_fim
 
@@ -49,7 +49,7 @@ def dense_reference(graph, rot, trans, anchor: int, h: float = 1e-6, with_error:
     f = jac.T @ (wdiag[:, None] * jac)
     rel = _fd_error(jac, wdiag, max(np.abs(residuals(graph, rot, trans)).max(), np.abs(graph.trans).max(),
                                     np.abs(trans).max()), h, f)
-    w = rotation_weight(graph.kappa, d)
+    w = rotation_weights(graph.kappa, d)
     pos = {k: t for t, k in enumerate(free)}
     for e in range(graph.m):
         i, j = graph.src[e], graph.dst[e]
@@ -101,7 +101,7 @@ def test_consistent_variant_is_the_fisher_information_of_the_model(dim, seed):
         # eq. (64) as printed is NOT the model's information once poses are rotated relative to
         # each other; the variants differ in the rotation coupling only (same trace)
         # (the off-diagonal difference is w (R_i^T R_j - I), on the scale of the rotation weights)
-        assert np.abs(eq64 - ref).max() > 0.1 * rotation_weight(g.kappa, 3).max()
+        assert np.abs(eq64 - ref).max() > 0.1 * rotation_weights(g.kappa, 3).max()
         assert np.abs(eq64 - ref).max() > 1e3 * rel * np.linalg.norm(ref, 2)
         k = (g.n - 1) * 3
         np.testing.assert_array_equal(got[:, :k], eq64[:, :k])   # same assembly code, same order
@@ -135,7 +135,7 @@ def test_psi_blocks_3d_match_eq63():
     rot, trans = g.vertex_rot, g.vertex_trans
     fim = paper_fim(g, rot, trans, anchor=0, variant="eq64")
     rb = fim.rotation_block().toarray()
-    w = rotation_weight(g.kappa, 3)
+    w = rotation_weights(g.kappa, 3)
     for k in range(1, g.n):
         psi = np.zeros((3, 3))
         lap = 0.0

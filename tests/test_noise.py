@@ -3,7 +3,7 @@ import mpmath as mp
 import numpy as np
 import pytest
 
-from posecrb.core.noise import isotropic_precisions, omega, rotation_weight
+from posecrb.core.noise import isotropic_precisions, omega, rotation_weights
 
 from .helpers import random_spd
 from .numerics import EPS, MARGIN, spd_condition
@@ -63,9 +63,9 @@ def test_omega_limits():
 
 def test_rotation_weights():
     k = np.array([0.5, 10.0, 1e4])
-    np.testing.assert_allclose(rotation_weight(k, 2), 2 * k)
-    np.testing.assert_allclose(rotation_weight(k, 3), omega(k) / 3)
-    np.testing.assert_allclose(rotation_weight(k, 3, "table2"), 0.5515 * k ** 2)
-    np.testing.assert_allclose(rotation_weight(k, 2, "table2"), 2 * k)
+    np.testing.assert_allclose(rotation_weights(k, 2), 2 * k)
+    np.testing.assert_allclose(rotation_weights(k, 3), omega(k) / 3)
+    np.testing.assert_allclose(rotation_weights(k, 3, "table2"), 0.5515 * k ** 2)
+    np.testing.assert_allclose(rotation_weights(k, 2, "table2"), 2 * k)
     with pytest.raises(ValueError):
-        rotation_weight(k, 3, "nope")
+        rotation_weights(k, 3, "nope")

@@ -9,8 +9,9 @@ from decimal import Decimal
 import pytest
 
 from posecrb.cli import main
+from posecrb.core.errors import ArgumentError
 from posecrb.evaluation.published import PAPER_NAME, TABLE_II
-from posecrb.evaluation.tables import HEADERS, failed, published_settings, table_rows
+from posecrb.evaluation.tables import HEADERS, TableSettings, failed, published_settings, table_rows
 from posecrb.report.latex import tex_number as _tex_number
 
 from .numerics import EPS
@@ -168,11 +169,25 @@ def test_out_dir_has_every_format_and_run_record(shared_datasets, capfd, tmp_pat
         assert run["datasets"][name] == {"path": str(path), "sha256": hashlib.sha256(path.read_bytes()).hexdigest(),
                                          "status": "ok"}
         assert rows[name]["sha256"] == run["datasets"][name]["sha256"]
-    assert run["settings"] == {"repeat": 1, "rotation_model": "eq59", "data_dir": None, "solver": {},
+    assert run["settings"] == {"repeat": 1, "rotation_weight": "eq59", "data_dir": None, "solver": {},
                                "fim_variant": "consistent", "ordering": "auto"}
     import numpy
 
     assert run["versions"]["numpy"] == numpy.__version__
+    assert TableSettings.from_record(run["settings"]) == TableSettings(repeat=1)
+
+
+def test_run_records_before_the_rename_still_read():
+    """run.json of 0.2 names the rotation weight rotation_model: read as rotation_weight, with a warning."""
+    old = {"repeat": 1, "rotation_model": "table2", "data_dir": None, "solver": {}, "fim_variant": "eq64",
+           "ordering": "auto"}
+    with pytest.warns(DeprecationWarning, match="rotation_weight"):
+        settings = TableSettings.from_record(old)
+    assert settings.rotation_weight == "table2" and settings.as_published
+    with pytest.raises(ArgumentError, match="unknown keys"):
+        TableSettings.from_record({"rotation_wieght": "eq59"})
+    with pytest.raises(ArgumentError):
+        TableSettings.from_record(["eq59"])
 
 
 def test_requested_missing_dataset_is_a_row_and_exit_one(shared_datasets, capfd):

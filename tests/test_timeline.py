@@ -11,7 +11,7 @@ import pytest
 
 from posecrb import load
 from posecrb.core.errors import UsageError
-from posecrb.core.noise import rotation_weight
+from posecrb.core.noise import rotation_weights
 from posecrb.evaluation.evaluate import EvaluationSettings, evaluate
 from posecrb.incremental import TimelineResult, timeline
 from posecrb.models.paper.bounds import compute_bounds
@@ -36,7 +36,7 @@ def dense_matrices(g, variant="consistent"):
     """Reduced L_tau, L_w, the ub matrix L_w (x) I + blkdiag(Psi) (anchor: pose 0), and the FIM at
     the graph's vertices, dense, one edge at a time from the paper's definitions."""
     n, d, dr = g.n, g.dim, g.rot_dim
-    tau, w = g.tau, rotation_weight(g.kappa, d)
+    tau, w = g.tau, rotation_weights(g.kappa, d)
     lt, lw = np.zeros((n, n)), np.zeros((n, n))
     psi = np.zeros((n, dr, dr))
     for e in range(g.m):

@@ -268,7 +268,7 @@ def bounds(source: Source, *, anchor: int | None = None, repeat: int | str = 1, 
     idx = graph.anchor_index(ids[0] if ids else None)
     given = arg.resolve_estimate(graph, estimate) if arg.is_pose_object(estimate) else None
     spec = "none" if given is not None else arg.estimate_spec(estimate, allow_none=True)
-    settings = EvaluationSettings(anchor=idx, rotation_model=rotation_weight, fim_variant=variant, repeat=repeat,
+    settings = EvaluationSettings(anchor=idx, rotation_weight=rotation_weight, fim_variant=variant, repeat=repeat,
                                   estimate=spec, solver={"anchor": idx} if spec == "solve" else {},
                                   ordering=ordering)
     m = evaluate(graph, settings, estimate=given)
@@ -297,7 +297,7 @@ def _bounds_result(m: DatasetMetrics, times: dict[str, float], runs: dict[str, i
             all_runs["solve"] = 1
     return BoundsResult(
         dataset=g.name, path=g.path, sha256=g.sha256, dim=g.dim, poses=g.n, edges=g.m, components=g.n_components,
-        anchor=b.anchor_id, rotation_weight=b.rotation_model, lb=b.lb, ub=b.ub, ub_status=b.ub_status,
+        anchor=b.anchor_id, rotation_weight=b.rotation_weight, lb=b.lb, ub=b.ub, ub_status=b.ub_status,
         ub_lambda=b.ub_lambda, lambda_inf=b.lambda_inf, lambda_min_rot=b.lambda_min_rot,
         lambda_min_rot_status=b.lambda_min_rot_status, lambda_min_rot_lower=b.lambda_min_rot_lower,
         gap_bound=b.gap_bound, gap_bound_status=b.gap_bound_status, t_opt_graph=b.t_opt_graph,

@@ -104,7 +104,7 @@ def timeline(source: Source, *, estimate: EstimateSpec = "solve", every: int = 1
         poses = None if arg.estimate_spec(estimate, allow_none=True) == "none" else \
             arg.resolve_estimate(graph, arg.estimate_spec(estimate))
     res = compute_timeline(graph, estimate=poses, every=every, start=start, stop=stop,
-                           rotation_model=rotation_weight, fim_variant=variant)
+                           rotation_weight=rotation_weight, fim_variant=variant)
     if target is not None:
         from ..report.plots import plot_timeline  # noqa: PLC0415 -- matplotlib, only for a figure
 

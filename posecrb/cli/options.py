@@ -29,7 +29,7 @@ OptionDecorator = Callable[[Callable[..., Any]], Callable[..., Any]]
 FORMATS = ("table", "json", "csv", "markdown")              # posecrb.report.render.FORMATS
 MODELS = ("paper", "sed")                                    # posecrb.models.MODELS
 FIM_VARIANTS = ("eq64", "consistent")                        # posecrb.models.paper.fim.FIM_VARIANTS
-ROTATION_WEIGHT_MODELS = ("eq59", "table2")                  # posecrb.core.noise.ROTATION_WEIGHT_MODELS
+ROTATION_WEIGHTS = ("eq59", "table2")                        # posecrb.core.noise.ROTATION_WEIGHTS
 
 _PLAIN_NUMBER = re.compile(r"[+-]?(?:[0-9]+\.?[0-9]*|\.[0-9]+)(?:[eE][+-]?[0-9]+)?")
 INT64_MAX = 2 ** 63 - 1
@@ -214,7 +214,7 @@ estimate_option = make_estimate_option()
 def make_rotation_weight_option(default: str | None = "eq59") -> OptionDecorator:
     """``--rotation-weight``; ``default=None`` lets a command tell "not given" from eq59 (shown as the default)."""
     return click.option(
-        "--rotation-weight", "rotation_model", type=click.Choice(ROTATION_WEIGHT_MODELS), default=default,
+        "--rotation-weight", "rotation_weight", type=click.Choice(ROTATION_WEIGHTS), default=default,
         show_default=default is not None,
         help="Paper model, 3D rotation weight: eq. (59), or table2 = 0.5515*kappa^2, an EMPIRICAL fit "
              "reproducing the paper's printed Table II (not eq. 59)." + ("" if default else "  [default: eq59]"))

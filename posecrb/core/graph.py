@@ -14,7 +14,7 @@ from functools import cached_property
 import numpy as np
 
 from .errors import ArgumentError, ComponentSummary, DisconnectedGraph, UsageError
-from .noise import isotropic_precisions, rotation_weight
+from .noise import isotropic_precisions, rotation_weights
 
 _INT64_MAX = 2 ** 63 - 1
 
@@ -165,9 +165,9 @@ class PoseGraph(PoseDimensions):
         return self._precisions[1]
 
     @cached_property
-    def rotation_weight(self) -> np.ndarray:
+    def rotation_weights(self) -> np.ndarray:
         """Edge weight of the rotation Laplacian in the paper's coordinates (eq. 39-41, 59)."""
-        return rotation_weight(self.kappa, self.dim)
+        return rotation_weights(self.kappa, self.dim)
 
     # ---- topology ----------------------------------------------------------
     @cached_property

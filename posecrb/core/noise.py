@@ -23,7 +23,7 @@ from .errors import UsageError
 TABLE2_FIT = 0.5515
 
 
-ROTATION_WEIGHT_MODELS = ("eq59", "table2")
+ROTATION_WEIGHTS = ("eq59", "table2")
 
 
 def isotropic_precisions(info: np.ndarray, dim: int) -> tuple[np.ndarray, np.ndarray]:
@@ -125,20 +125,20 @@ def omega(kappa: np.ndarray | float) -> np.ndarray:
     return out if out.ndim else out[()]
 
 
-def rotation_weight(kappa: np.ndarray, dim: int, model: str = "eq59") -> np.ndarray:
+def rotation_weights(kappa: np.ndarray, dim: int, rule: str = "eq59") -> np.ndarray:
     """Edge weight of the rotation Laplacian L_w in the paper's tangent coordinates.
 
     2D: ``w = 2 kappa`` (eq. 39-41). 3D: ``w = omega(kappa) / 3`` (eq. 58-63,
-    coordinates along ``E_k = G_k / sqrt 2``). ``model="table2"`` uses the
+    coordinates along ``E_k = G_k / sqrt 2``). ``rule="table2"`` uses the
     empirical fit ``w = 0.5515 kappa^2`` that reproduces the paper's printed
     Table II (3D only; 2D is unchanged because Table I follows eq. 41).
     """
     kappa = np.asarray(kappa, dtype=float)
-    if model not in ROTATION_WEIGHT_MODELS:
-        raise UsageError(f"unknown rotation weight model {model!r}; choose from {ROTATION_WEIGHT_MODELS}")
+    if rule not in ROTATION_WEIGHTS:
+        raise UsageError(f"unknown rotation weight {rule!r}; choose from {ROTATION_WEIGHTS}")
     if dim == 2:
         return 2.0 * kappa
-    if model == "table2":
+    if rule == "table2":
         return TABLE2_FIT * kappa * kappa
     return omega(kappa) / 3.0
 

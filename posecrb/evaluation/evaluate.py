@@ -31,7 +31,7 @@ class EvaluationSettings:
     values never depend on it beyond rounding)."""
 
     anchor: int = 0
-    rotation_model: str = "eq59"
+    rotation_weight: str = "eq59"
     fim_variant: str = "consistent"
     repeat: Repeat = 1
     estimate: str = "solve"
@@ -68,7 +68,7 @@ def evaluate(graph: PoseGraph, settings: EvaluationSettings, *, step: Callable[[
     ``error`` with what was computed so far; ``"raise"`` lets it through."""
     say = step or (lambda s: None)
     say("bounds")
-    b = compute_bounds(graph, settings.anchor, settings.rotation_model, settings.repeat,
+    b = compute_bounds(graph, settings.anchor, settings.rotation_weight, settings.repeat,
                        ordering=settings.ordering)
     used = dict(b.ordering)
     if settings.estimate == "none" and estimate is None:
@@ -78,7 +78,7 @@ def evaluate(graph: PoseGraph, settings: EvaluationSettings, *, step: Callable[[
         say("solve")
         est = estimate if estimate is not None else get_estimate(graph, settings.estimate, **settings.solver)
         say("fim")
-        m_build = measure(lambda: paper_fim(graph, est.rot, est.trans, settings.anchor, settings.rotation_model,
+        m_build = measure(lambda: paper_fim(graph, est.rot, est.trans, settings.anchor, settings.rotation_weight,
                                             variant=settings.fim_variant), settings.repeat)
         fim = m_build.value
 

@@ -18,16 +18,17 @@ from __future__ import annotations
 import logging
 import os
 import shlex
-from collections.abc import Callable, Iterable, Sequence
+import warnings
+from collections.abc import Callable, Iterable, Mapping, Sequence
 from concurrent.futures import ProcessPoolExecutor, as_completed
-from dataclasses import asdict, dataclass, field
+from dataclasses import asdict, dataclass, field, fields
 from functools import partial
 from typing import Any
 
 import numpy as np
 
 from ..core import provenance
-from ..core.errors import DatasetNotFound, InternalError, PosecrbError, UsageError, status_of
+from ..core.errors import ArgumentError, DatasetNotFound, InternalError, PosecrbError, UsageError, status_of
 from ..core.status import log_status, put
 from ..core.timing import Repeat, timed
 from ..datasets import search as datasets
@@ -46,11 +47,11 @@ FAILED_STATUSES = ("parse error", "not positive definite", "uncertified", "disco
 
 @dataclass(frozen=True)
 class TableSettings:
-    """``rotation_model`` / ``fim_variant``: the model's quantities by default (eq. 59, the model's
+    """``rotation_weight`` / ``fim_variant``: the model's quantities by default (eq. 59, the model's
     Fisher information); ``published()`` gives the settings that reproduce the printed Table II."""
 
     repeat: Repeat = 1
-    rotation_model: str = "eq59"
+    rotation_weight: str = "eq59"
     data_dir: str | None = None
     solver: dict = field(default_factory=dict)
     fim_variant: str = "consistent"
@@ -58,12 +59,32 @@ class TableSettings:
 
     @property
     def as_published(self) -> bool:
-        return self.rotation_model == "table2" and self.fim_variant == "eq64"
+        return self.rotation_weight == "table2" and self.fim_variant == "eq64"
+
+    @classmethod
+    def from_record(cls, settings: Mapping[str, Any]) -> TableSettings:
+        """The settings of a ``tables --out`` run record (``run.json``'s ``settings``).
+
+        Records written before 0.3 name the rotation weight ``rotation_model``: it is read as
+        ``rotation_weight``, with a ``DeprecationWarning``. Unknown keys are an ``ArgumentError``."""
+        if not isinstance(settings, Mapping):
+            raise ArgumentError("settings", type(settings).__name__, "is not a mapping (run.json's settings)", sep=": ")
+        values = dict(settings)
+        if "rotation_model" in values:
+            warnings.warn("run.json: the setting 'rotation_model' is now 'rotation_weight' (read as such); "
+                          "records written by posecrb 0.3 and later use the new key", DeprecationWarning, stacklevel=2)
+            old = values.pop("rotation_model")
+            values.setdefault("rotation_weight", old)
+        known = {f.name for f in fields(cls)}
+        unknown = sorted(set(values) - known)
+        if unknown:
+            raise ArgumentError("settings", f"{{... {len(values)} keys}}", f"has unknown keys {unknown}", sep=": ")
+        return cls(**values)
 
 
 def published_settings(**kwargs: Any) -> TableSettings:
     """Eq. (64) as printed with the empirical Table II rotation weight (``posecrb tables --as-published``)."""
-    return TableSettings(rotation_model="table2", fim_variant="eq64", **kwargs)
+    return TableSettings(rotation_weight="table2", fim_variant="eq64", **kwargs)
 
 
 def dataset_names(names: Sequence[str] | None = None, data_dir: str | None = None) -> list[str]:
@@ -101,9 +122,9 @@ def dataset_row(name: str, settings: TableSettings,
             row["dataset"] = graph.name
         row.update(path=str(path), sha256=graph.sha256, dim=graph.dim,
                    poses=graph.n, edges=graph.m)
-        m = evaluate(graph, EvaluationSettings(rotation_model=settings.rotation_model, fim_variant=settings.fim_variant,
-                                               repeat=settings.repeat, solver=settings.solver,
-                                               ordering=settings.ordering),
+        m = evaluate(graph, EvaluationSettings(rotation_weight=settings.rotation_weight,
+                                               fim_variant=settings.fim_variant, repeat=settings.repeat,
+                                               solver=settings.solver, ordering=settings.ordering),
                      step=step, errors="keep")
         b = m.bounds
         row.update(lb=b.lb)
@@ -128,7 +149,7 @@ def dataset_row(name: str, settings: TableSettings,
         put(row, "fim_logdet", ld, m.fim_logdet_status)
         if not m.fim_logdet_status.ok:
             log.warning("%s: %s", name, m.fim_logdet_status.message("FIM log-det"))
-        row.update(fim_variant=m.fim.variant, rotation_weight=settings.rotation_model,
+        row.update(fim_variant=m.fim.variant, rotation_weight=settings.rotation_weight,
                    fim_time=m.times["fim_logdet"], fim_build_time=m.times["fim_build"])
         row.update(gap_ub_rel=None if b.ub is None else (b.ub - b.lb) / b.lb,
                    gap_fim_rel=(ld - b.lb) / b.lb if m.fim_logdet_status.available else None,
@@ -271,13 +292,13 @@ def _belongs_missing(name: str, dim: int) -> bool:
     return entry is None or entry.dim == dim
 
 
-def footnote(table: int, rotation_model: str, fim_variant: str = "consistent") -> str | None:
+def footnote(table: int, rotation_weight: str, fim_variant: str = "consistent") -> str | None:
     """The note printed once, under Table II: how its numbers relate to the printed table."""
     if table != 2:
         return None
-    if rotation_model == "table2" and fim_variant == "eq64":
+    if rotation_weight == "table2" and fim_variant == "eq64":
         return TABLE_II_PUBLISHED_FOOTNOTE
-    if rotation_model == "table2":
+    if rotation_weight == "table2":
         return TABLE_II_FIT_FOOTNOTE.format(variant="model's (consistent)" if fim_variant == "consistent"
                                             else "eq. (64) as printed")
     return TABLE_II_FOOTNOTE

@@ -176,7 +176,7 @@ def _evaluate(context: dict, keep_mask: np.ndarray) -> dict:
     anchor = context["anchor"]
     x = keep_mask.astype(float)
     tree = tree_objective(graph, anchor).value(x)
-    lam = FiedlerObjective(graph, graph.rotation_weight, anchor).value(x)
+    lam = FiedlerObjective(graph, graph.rotation_weights, anchor).value(x)
     pruned = pruned_graph(graph, np.flatnonzero(keep_mask))
     fim = paper_fim(pruned, ref.rot, ref.trans, anchor, variant="consistent")
     f, ld = SymbolicCholesky(fim.matrix).factor_logdet(fim.matrix, "pruned graph FIM")

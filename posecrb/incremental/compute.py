@@ -40,7 +40,7 @@ import numpy as np
 
 from ..core.errors import ArgumentError, UsageError
 from ..core.graph import PoseGraph
-from ..core.noise import rotation_weight
+from ..core.noise import rotation_weights
 from ..core.status import OK, worst
 from .result import ClosureTable, TimelineResult, monotonicity
 from .schedule import Schedule, schedule
@@ -182,7 +182,7 @@ def _step_range(n: int, start: int | None, stop: int | None, every: int) -> tupl
 
 
 def timeline(graph: PoseGraph, *, estimate: str | Estimate | None = "solve", every: int = 1,
-             start: int | None = None, stop: int | None = None, rotation_model: str = "eq59",
+             start: int | None = None, stop: int | None = None, rotation_weight: str = "eq59",
              fim_variant: str = "consistent") -> TimelineResult:
     """D- and T-optimality of every prefix of ``graph`` as it grows pose by pose (module docstring).
 
@@ -199,7 +199,7 @@ def timeline(graph: PoseGraph, *, estimate: str | Estimate | None = "solve", eve
         steps through all).
     start, stop : int, optional
         The range, in numbers of poses (2..n); default the whole graph.
-    rotation_model : {"eq59", "table2"}
+    rotation_weight : {"eq59", "table2"}
         3D rotation weight, as for ``posecrb bounds``.
     fim_variant : {"consistent", "eq64"}
         The FIM's rotation Laplacian (posecrb.models.paper.fim); the same in 2D.
@@ -234,7 +234,7 @@ def timeline(graph: PoseGraph, *, estimate: str | Estimate | None = "solve", eve
         raise UsageError(f"fim_variant must be one of {FIM_VARIANTS}, got {fim_variant!r}")
     first, last = _step_range(graph.n, start, stop, every)
     tau = graph.tau
-    w = rotation_weight(graph.kappa, graph.dim, rotation_model)
+    w = rotation_weights(graph.kappa, graph.dim, rotation_weight)
     est = _resolve_estimate(graph, estimate)
     t_est = time.perf_counter() - t0
     sch = schedule(graph)
@@ -317,7 +317,7 @@ def timeline(graph: PoseGraph, *, estimate: str | Estimate | None = "solve", eve
     est_info = None if est is None else est.to_dict()
     return TimelineResult(
         dataset=graph.name, path=graph.path, sha256=graph.sha256, dim=d, n_poses=n, n_edges=graph.m,
-        anchor=int(graph.ids[0]), rotation_weight=rotation_model,
+        anchor=int(graph.ids[0]), rotation_weight=rotation_weight,
         fim_variant=fim_variant if est is not None else None, estimate=est_info,
         every=every, first=first + 1, last=last + 1,
         poses=keep + 1, pose=graph.ids[keep].astype(np.int64), edges=sch.edges[keep],

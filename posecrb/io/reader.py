@@ -17,7 +17,7 @@ import numpy as np
 
 from ..core.errors import ParseError, UsageError
 from ..core.graph import PoseGraph
-from ..core.noise import isotropic_precisions, rotation_weight
+from ..core.noise import isotropic_precisions, rotation_weights
 from .records import SKIPPED_TAGS, Format, RecordKind
 from .text import MAX_INFORMATION, MAX_TRANSLATION, PRECISION_RANGE, Tokens, check_magnitude, fmt_number
 
@@ -81,7 +81,7 @@ def _check_precisions(path: str, lines: np.ndarray, tag: str, ends: tuple, info:
         small = kappa < 1e-3
         if small.any():
             with np.errstate(all="ignore"):
-                w[small] = rotation_weight(np.where(kappa[small] > 0, kappa[small], 1.0), dim)
+                w[small] = rotation_weights(np.where(kappa[small] > 0, kappa[small], 1.0), dim)
         checks.append(("rotation weight omega(kappa)/3 (eq. 59)", w))
     for what, v in checks:
         bad = np.flatnonzero(~((v >= lo) & (v <= hi)))

@@ -54,7 +54,7 @@ def model_fim(graph: PoseGraph, estimate: Estimate, *, model: str = "paper", anc
     rot, trans = estimate.rot, estimate.trans
     if model == "paper":
         idx = graph.anchor_index(anchor)
-        fim = paper_fim(graph, rot, trans, anchor=idx, rotation_model=rotation_weight, variant=fim_variant)
+        fim = paper_fim(graph, rot, trans, anchor=idx, rotation_weight=rotation_weight, variant=fim_variant)
         times = {"fim_build": fim.build_time}
         t0 = time.perf_counter()
         sym, choice = fim_symbolic_choice(fim, ordering)
@@ -141,7 +141,7 @@ def model_crlb(graph: PoseGraph, estimate: Estimate, *, model: str = "paper", an
         if poses is not True and poses:
             for p in poses:
                 graph.index_of(p, "poses")
-        res = paper_crlb(graph, rot, trans, anchor=idx, per_pose=poses, rotation_model=rotation_weight,
+        res = paper_crlb(graph, rot, trans, anchor=idx, per_pose=poses, rotation_weight=rotation_weight,
                          variant=fim_variant, ordering=ordering)
         acc = _unavailable(res.accuracy)
         curv = res.curvature_status if acc.available else acc

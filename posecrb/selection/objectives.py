@@ -34,7 +34,7 @@ import scipy.sparse as sp
 
 from ..core.errors import InternalError, NumericalError, UsageError
 from ..core.graph import PoseGraph
-from ..core.noise import isotropic_precisions, rotation_weight
+from ..core.noise import isotropic_precisions, rotation_weights
 from ..linalg.cholesky import Factor, SymbolicCholesky
 from ..linalg.lanczos import largest_eigenpair
 from ..linalg.laplacian import laplacian, reduced_index
@@ -231,14 +231,14 @@ class LogDetObjective:
                     for b, f in zip(self.blocks, state.data)), np.zeros(edges.size))
 
 
-def tree_objective(graph: PoseGraph, anchor: int = 0, rotation_model: str = "eq59") -> LogDetObjective:
+def tree_objective(graph: PoseGraph, anchor: int = 0, rotation_weight: str = "eq59") -> LogDetObjective:
     """eq. (75) lower bound ``d logdet L_tau + d_r logdet L_w`` as a function of edge weights.
 
     When ``w = c tau`` on every edge (uniform noise, e.g. city10000) ``L_w = c L_tau`` and the
     objective is ``(d + d_r) logdet L_tau + d_r (n - 1) log c``: one factor instead of two."""
 
     tau, kappa = isotropic_precisions(graph.info, graph.dim)
-    w = rotation_weight(kappa, graph.dim, rotation_model)
+    w = rotation_weights(kappa, graph.dim, rotation_weight)
     d, dr, n1 = graph.dim, graph.rot_dim, graph.n - 1
     red = reduced_index(graph.n, anchor)
     rows = np.stack([red[graph.src], red[graph.dst]], axis=1)
@@ -261,7 +261,7 @@ def tree_objective(graph: PoseGraph, anchor: int = 0, rotation_model: str = "eq5
 
 
 def edge_information_factors(graph: PoseGraph, rot: np.ndarray, trans: np.ndarray, anchor: int = 0,
-                             variant: str = "consistent", rotation_model: str = "eq59"
+                             variant: str = "consistent", rotation_weight: str = "eq59"
                              ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Per edge, the rows and columns ``U_e`` with ``F = sum_e U_e U_e^T`` (anchored FIM, "poses" layout).
 
@@ -275,7 +275,7 @@ def edge_information_factors(graph: PoseGraph, rot: np.ndarray, trans: np.ndarra
 
     d, dr, q = graph.dim, graph.rot_dim, graph.q
     tau = graph.tau
-    w = graph.rotation_weight if rotation_model == "eq59" else rotation_weight(graph.kappa, d, rotation_model)
+    w = graph.rotation_weights if rotation_weight == "eq59" else rotation_weights(graph.kappa, d, rotation_weight)
     ri, dmat = rotation_jacobians(graph, rot, trans)
     m = graph.m
     u = np.zeros((m, 2 * q, q))
@@ -375,17 +375,17 @@ class FiedlerObjective:
 
 
 def make_objective(graph: PoseGraph, objective: str, anchor: int = 0, estimate: Estimate | None = None,
-                   fiedler_weight: str = "w", rotation_model: str = "eq59") -> LogDetObjective | FiedlerObjective:
+                   fiedler_weight: str = "w", rotation_weight: str = "eq59") -> LogDetObjective | FiedlerObjective:
     """The objective as a function of edge weights (all m edges)."""
     if objective == "tree":
-        return tree_objective(graph, anchor, rotation_model)
+        return tree_objective(graph, anchor, rotation_weight)
     if objective == "fim":
         if estimate is None:
             raise UsageError("the fim objective needs an estimate")
         return fim_objective(graph, estimate.rot, estimate.trans, anchor)
     if objective == "fiedler":
         if fiedler_weight == "w":
-            weights = rotation_weight(graph.kappa, graph.dim, rotation_model)
+            weights = rotation_weights(graph.kappa, graph.dim, rotation_weight)
         elif fiedler_weight == "kappa":
             weights = graph.kappa
         else:

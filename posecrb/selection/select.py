@@ -132,7 +132,7 @@ def _prepare(graph: PoseGraph, budget: str | int, objective: str, fixed: str, an
     base[split.fixed] = 1.0
     times["setup"] = time.perf_counter() - t0 - times.get("estimate", 0.0)
     problem = _Problem(graph=graph, split=split, k=k, anchor=anchor, obj=obj, base=base,
-                       w_rot=graph.rotation_weight if fiedler_weight == "w" else graph.kappa,
+                       w_rot=graph.rotation_weights if fiedler_weight == "w" else graph.kappa,
                        max_iter=max_iter if max_iter is not None else (20 if obj.kind == "fiedler" else 100),
                        estimate=est_info, times=times)
     t0 = time.perf_counter()

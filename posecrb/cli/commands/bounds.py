@@ -40,7 +40,7 @@ HEADERS = {"times.lb": "lb time [s]", "times.ub": "ub time [s]", "ub_lambda": "u
 @ordering_option
 @data_dir_option
 @format_option()
-def command(files, anchor, repeat, rotation_model, estimate, fim_variant, ordering, data_dir, fmt):
+def command(files, anchor, repeat, rotation_weight, estimate, fim_variant, ordering, data_dir, fmt):
     """D-optimality of each FILE: FIM log-det at an estimate and its graph-only bounds (one
     Table I/II row per file).
 
@@ -58,7 +58,7 @@ def command(files, anchor, repeat, rotation_model, estimate, fim_variant, orderi
     rows, failures = [], []
     for f in files:
         try:
-            res = bounds(f, anchor=anchor, repeat=repeat, rotation_weight=rotation_model, estimate=estimate,
+            res = bounds(f, anchor=anchor, repeat=repeat, rotation_weight=rotation_weight, estimate=estimate,
                          fim_variant=fim_variant, ordering=ordering, data_dir=data_dir)
             log_statuses(log, res.dataset, res.statuses())
             rows.append(res.to_dict())

@@ -36,7 +36,7 @@ log = logging.getLogger("posecrb")
 @ordering_option
 @data_dir_option
 @format_option()
-def command(file, model, quotient, anchors, poses, estimate_source, rotation_model, fim_variant, frame, ordering,
+def command(file, model, quotient, anchors, poses, estimate_source, rotation_weight, fim_variant, frame, ordering,
             data_dir, fmt):
     """Cramér-Rao lower bound of FILE at an estimate: exact trace, MSE bound, per-pose blocks.
 
@@ -58,7 +58,7 @@ def command(file, model, quotient, anchors, poses, estimate_source, rotation_mod
     --ordering: the factorization's fill-reducing ordering (cost only; JSON key ordering).
     """
     res = crlb(file, model=model, quotient=quotient, anchor=list(anchors), poses=poses, estimate=estimate_source,
-               rotation_weight=rotation_model, fim_variant=fim_variant, frame=frame, ordering=ordering,
+               rotation_weight=rotation_weight, fim_variant=fim_variant, frame=frame, ordering=ordering,
                data_dir=data_dir)
     log_statuses(log, res.dataset, res.statuses())
     row, per_rows = res.to_dict(), res.pose_rows()

@@ -36,7 +36,7 @@ log = logging.getLogger("posecrb")
                    "unless present. With --model sed --frame body it is comparable with a GTSAM Hessian.")
 @data_dir_option
 @format_option()
-def command(file, model, estimate_source, anchor, rotation_model, fim_variant, frame, ordering, save, data_dir, fmt):
+def command(file, model, estimate_source, anchor, rotation_weight, fim_variant, frame, ordering, save, data_dir, fmt):
     """Fisher information matrix of FILE at an estimate: size, nnz, log-det, trace, rank.
 
     paper: anchored FIM of eq. (42) (2D) / (64) (3D), rows [translations; rotations]
@@ -51,7 +51,7 @@ def command(file, model, estimate_source, anchor, rotation_model, fim_variant, f
     log-det, rank and nullity do not. JSON: frame, coordinates_description, ordering (the
     log-det factorization's fill-reducing ordering, --ordering: cost only).
     """
-    res = fim(file, model=model, estimate=estimate_source, anchor=anchor, rotation_weight=rotation_model,
+    res = fim(file, model=model, estimate=estimate_source, anchor=anchor, rotation_weight=rotation_weight,
               fim_variant=fim_variant, frame=frame, ordering=ordering, save=save, data_dir=data_dir)
     log_statuses(log, res.dataset, res.statuses())
     row = res.to_dict()

@@ -60,7 +60,7 @@ def _shown(rows: list[dict], tables: Sequence[int], compare: bool, settings: Tab
             (log.warning if explicit else log.info)("%s: no %dD dataset, not printed", TITLES[t].split(":")[0],
                                                      2 if t in (1, 3) else 3)
             continue
-        note = footnote(t, settings.rotation_model, settings.fim_variant)
+        note = footnote(t, settings.rotation_weight, settings.fim_variant)
         out.append((t, trs, cols, note if note not in seen else None))
         seen.add(note)
     return out
@@ -113,7 +113,7 @@ def _render(rows: list[dict], tables: Sequence[int], fmt: str, compare: bool, se
               help="Dask scheduler address (tcp://host:8786) of an existing cluster (its workers need posecrb "
                    "and the datasets at the same paths); without it a LocalCluster of --jobs workers is started.")
 @data_dir_option
-def command(all_, tables, names, repeat, jobs, fmt, out_dir, compare_paper, rotation_model, as_published,
+def command(all_, tables, names, repeat, jobs, fmt, out_dir, compare_paper, rotation_weight, as_published,
             plot_path, ordering, executor, scheduler, data_dir):
     """Rebuild the paper's Tables I-IV: FIM log-det at the certified optimum, ub and lb with their
     times (I/II) and the construction time of the whole FIM vs the weighted Laplacians (III/IV).
@@ -133,11 +133,11 @@ def command(all_, tables, names, repeat, jobs, fmt, out_dir, compare_paper, rota
     explicit = bool(tables)
     tables = sorted(set(tables)) or [1, 2, 3, 4]
     if as_published:
-        if rotation_model not in (None, "table2"):
+        if rotation_weight not in (None, "table2"):
             raise click.UsageError("--as-published uses --rotation-weight table2 (the fit to the printed Table II)")
         settings = published_settings(repeat=repeat, data_dir=data_dir, ordering=ordering)
     else:
-        settings = TableSettings(repeat=repeat, rotation_model=rotation_model or "eq59", data_dir=data_dir,
+        settings = TableSettings(repeat=repeat, rotation_weight=rotation_weight or "eq59", data_dir=data_dir,
                                  ordering=ordering)
     if scheduler and executor != "dask":
         raise click.UsageError("--scheduler needs --executor dask")
@@ -194,7 +194,7 @@ def command(all_, tables, names, repeat, jobs, fmt, out_dir, compare_paper, rota
         from ...report.plots import plot_tables  # noqa: PLC0415 -- matplotlib, only for --plot
 
         try:
-            note = f"3D rotation weight: {settings.rotation_model}, FIM: {settings.fim_variant}"
+            note = f"3D rotation weight: {settings.rotation_weight}, FIM: {settings.fim_variant}"
             log.info("wrote %s", plot_tables(rows, plot_path, note=note))
         except ValueError as exc:
             log.warning("no figure written: %s", exc)

@@ -72,7 +72,7 @@ def _show_summary(res: TimelineResult) -> None:
                    "closures marked.")
 @data_dir_option
 @format_option()
-def command(file, estimate, every, start, stop, rotation_model, fim_variant, plot_path, data_dir, fmt):
+def command(file, estimate, every, start, stop, rotation_weight, fim_variant, plot_path, data_dir, fmt):
     """D- and T-optimality of every prefix of FILE as the graph grows: lb, ub, t_opt_graph and the FIM
     log-det per step, computed incrementally, and the gain of every loop closure.
 
@@ -84,7 +84,7 @@ def command(file, estimate, every, start, stop, rotation_model, fim_variant, plo
     monotonicity of each metric raw and per dimension, the top 10 loop closures); json, csv and
     markdown give every row.
     """
-    res = timeline(file, estimate=estimate, every=every, start=start, stop=stop, rotation_weight=rotation_model,
+    res = timeline(file, estimate=estimate, every=every, start=start, stop=stop, rotation_weight=rotation_weight,
                    fim_variant=fim_variant, plot=plot_path, data_dir=data_dir)
     log_statuses(log, res.dataset, res.statuses())
     uncertified = res.estimate is not None and res.estimate.get("certified") is False

@@ -27,7 +27,7 @@ import scipy.sparse as sp
 
 from ...core.errors import NotPositiveDefinite
 from ...core.graph import PoseGraph
-from ...core.noise import isotropic_precisions, rotation_weight
+from ...core.noise import isotropic_precisions, rotation_weights
 from ...core.status import OK, Status, put
 from ...core.timing import Repeat, measure
 from ...linalg.cholesky import Factor, SymbolicCholesky
@@ -53,10 +53,10 @@ class WeightedLaplacians:
     w: np.ndarray
 
 
-def weighted_laplacians(graph: PoseGraph, anchor: int = 0, rotation_model: str = "eq59") -> WeightedLaplacians:
+def weighted_laplacians(graph: PoseGraph, anchor: int = 0, rotation_weight: str = "eq59") -> WeightedLaplacians:
     """Build L_tau and L_w from the information matrices (weights computed here, vectorised)."""
     tau, kappa = isotropic_precisions(graph.info, graph.dim)
-    w = rotation_weight(kappa, graph.dim, rotation_model)
+    w = rotation_weights(kappa, graph.dim, rotation_weight)
     l_tau = reduced_laplacian(graph.n, graph.src, graph.dst, tau, anchor)
     l_w = reduced_laplacian(graph.n, graph.src, graph.dst, w, anchor)
     return WeightedLaplacians(anchor, l_tau, l_w, tau, w)
@@ -84,7 +84,7 @@ def source_terms(graph: PoseGraph, tau: np.ndarray, anchor: int = 0) -> tuple[np
     return flat.reshape(n1, 3, 3), xi
 
 
-def t_optimality(graph: PoseGraph, anchor: int = 0, rotation_model: str = "eq59") -> tuple[float, float]:
+def t_optimality(graph: PoseGraph, anchor: int = 0, rotation_weight: str = "eq59") -> tuple[float, float]:
     """(eq. 73, eq. 72): graph-only T-optimality and its approximation with the measured p_ij.
 
     ``trace(L_tau (x) I_d) + trace(L_w (x) I_dr)`` over the non-anchor poses, straight from the edge
@@ -92,7 +92,7 @@ def t_optimality(graph: PoseGraph, anchor: int = 0, rotation_model: str = "eq59"
     ``sum_{i != anchor} sum_{j in V_i^+} tau_ij ||p_ij||^2`` (``trace(Psi_(i,j))`` in 3D too, Appendix D).
     """
     tau = graph.tau
-    w = rotation_weight(graph.kappa, graph.dim, rotation_model)
+    w = rotation_weights(graph.kappa, graph.dim, rotation_weight)
     ends = (graph.src != anchor).astype(float) + (graph.dst != anchor)
     t_graph = float(graph.dim * np.dot(tau, ends) + graph.rot_dim * np.dot(w, ends))
     psi = tau * np.einsum("ma,ma->m", graph.trans, graph.trans) * (graph.src != anchor)
@@ -218,7 +218,7 @@ class GraphBounds:
     dim: int
     anchor: int                   # internal index
     anchor_id: int                # id as in the file
-    rotation_model: str
+    rotation_weight: str
     logdet_l_tau: float
     logdet_l_w: float
     lb: float
@@ -241,7 +241,7 @@ class GraphBounds:
     def to_row(self) -> dict:
         """The bounds' part of a ``bounds`` row (keys and order of the command's JSON); a number
         that is not ok carries ``<key>_status`` (``posecrb.core.status.put``). Times are not in it."""
-        row: dict = {"anchor": self.anchor_id, "rotation_weight": self.rotation_model, "lb": self.lb}
+        row: dict = {"anchor": self.anchor_id, "rotation_weight": self.rotation_weight, "lb": self.lb}
         put(row, "ub", self.ub, self.ub_status)
         row.update({"ub_lambda": self.ub_lambda, "lambda_inf": self.lambda_inf})
         put(row, "lambda_min_rot", self.lambda_min_rot, self.lambda_min_rot_status)
@@ -252,7 +252,7 @@ class GraphBounds:
         return row
 
 
-def compute_bounds(graph: PoseGraph, anchor: int | None = None, rotation_model: str = "eq59",
+def compute_bounds(graph: PoseGraph, anchor: int | None = None, rotation_weight: str = "eq59",
                    repeat: Repeat = 1, *, ordering: str = "auto") -> GraphBounds:
     """All graph-only metrics; ``anchor`` is an internal index (default 0 = smallest id).
 
@@ -269,7 +269,7 @@ def compute_bounds(graph: PoseGraph, anchor: int | None = None, rotation_model: 
     graph.require_connected()
     anchor = 0 if anchor is None else int(anchor)
     d, dr = graph.dim, graph.rot_dim
-    m_lap = measure(lambda: weighted_laplacians(graph, anchor, rotation_model), repeat)
+    m_lap = measure(lambda: weighted_laplacians(graph, anchor, rotation_weight), repeat)
     lap = m_lap.value
 
     n_p = graph.n - 1
@@ -334,10 +334,10 @@ def compute_bounds(graph: PoseGraph, anchor: int | None = None, rotation_model: 
     if gap is not None and not np.isfinite(gap):
         gap, gap_status = None, Status.unavailable(f"log(1 + lambda_inf / lambda_min) overflows "
                                                    f"(lambda_inf {lam_inf:.3g}, lower bound {lower:.3g})")
-    t_graph, t_approx = t_optimality(graph, anchor, rotation_model)
+    t_graph, t_approx = t_optimality(graph, anchor, rotation_weight)
     total_degree = int(graph.degree.sum() - graph.degree[anchor])
     return GraphBounds(
-        dim=d, anchor=anchor, anchor_id=int(graph.ids[anchor]), rotation_model=rotation_model,
+        dim=d, anchor=anchor, anchor_id=int(graph.ids[anchor]), rotation_weight=rotation_weight,
         logdet_l_tau=float(ld_tau), logdet_l_w=float(ld_w),
         lb=d * float(ld_tau) + dr * float(ld_w), ub=None if ld_psi is None else d * float(ld_tau) + float(ld_psi),
         ub_lambda=d * float(ld_tau) + dr * float(ld_w_lam), lambda_inf=lam_inf,

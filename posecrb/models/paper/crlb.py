@@ -291,7 +291,7 @@ def crlb_from_fim(fim: PaperFim, graph: PoseGraph, per_pose: bool | Sequence[int
 
 
 def paper_crlb(graph: PoseGraph, rot: np.ndarray, trans: np.ndarray, anchor: int = 0,
-               per_pose: bool | Sequence[int] = False, rotation_model: str = "eq59",
+               per_pose: bool | Sequence[int] = False, rotation_weight: str = "eq59",
                variant: str = "consistent", *, ordering: str = "auto") -> PaperCrlb:
     """CRLB of the paper model at the estimate ``(rot, trans)`` with pose ``anchor``
     (internal index) fixed: 2D eq. (67), 3D eq. (68). ``per_pose``: True for every pose,
@@ -300,7 +300,7 @@ def paper_crlb(graph: PoseGraph, rot: np.ndarray, trans: np.ndarray, anchor: int
     Carlo MSE reaches in 3D) or ``"eq64"`` (as printed); see ``posecrb.models.paper.fim.paper_fim``.
     Raises DisconnectedGraph / NotPositiveDefinite."""
     t0 = time.perf_counter()
-    fim = paper_fim(graph, rot, trans, anchor=anchor, rotation_model=rotation_model, layout="blocks",
+    fim = paper_fim(graph, rot, trans, anchor=anchor, rotation_weight=rotation_weight, layout="blocks",
                     variant=variant)
     t_build = time.perf_counter() - t0
     res = crlb_from_fim(fim, graph, per_pose, ordering=ordering)

@@ -60,7 +60,7 @@ import scipy.sparse as sp
 
 from ...core.errors import UsageError
 from ...core.graph import PoseDimensions, PoseGraph
-from ...core.noise import rotation_weight as _rotation_weight
+from ...core.noise import rotation_weights
 from ...linalg.cholesky import SymbolicCholesky
 from ...linalg.laplacian import reduced_index
 from ...linalg.ordering import OrderingChoice, ordered_symbolic
@@ -90,7 +90,7 @@ class PaperFim(PoseDimensions):
     anchor_id: int               # its id in the file
     pose_ids: np.ndarray         # (n_p,) ids of the free poses, in row order
     layout: str
-    rotation_model: str
+    rotation_weight: str
     variant: str = "consistent"
     build_time: float = field(default=0.0)
 
@@ -172,12 +172,12 @@ def rotation_jacobians(graph: PoseGraph, rot: np.ndarray, trans: np.ndarray) -> 
 
 
 def paper_fim(graph: PoseGraph, rot: np.ndarray, trans: np.ndarray, anchor: int = 0,
-              rotation_model: str = "eq59", layout: str = "blocks", variant: str = "consistent") -> PaperFim:
+              rotation_weight: str = "eq59", layout: str = "blocks", variant: str = "consistent") -> PaperFim:
     """Anchored paper FIM (eq. 42 in 2D, eq. 64 in 3D) at the estimate ``(rot, trans)``.
 
     ``rot`` (n, d, d) and ``trans`` (n, d) are world poses ``X_i = (R_i, x_i)`` in the graph's
     internal order; ``anchor`` is an internal index (``graph.anchor_index(id)``).
-    ``rotation_model`` picks the rotation weight: ``"eq59"`` (default, eq. 39-41 / 59) or
+    ``rotation_weight`` picks the rotation weight: ``"eq59"`` (default, eq. 39-41 / 59) or
     ``"table2"`` (the empirical fit that reproduces Table II, see docs/design.md#fim-variants).
     ``variant`` picks the rotation Laplacian (module docstring): ``"consistent"`` (default) is
     the Fisher information of the model in the body-frame coordinates that eq. (52)-(54) and
@@ -197,7 +197,7 @@ def paper_fim(graph: PoseGraph, rot: np.ndarray, trans: np.ndarray, anchor: int 
     d, dr, n = graph.dim, graph.rot_dim, graph.n
     npf = n - 1
     tau = graph.tau
-    w = graph.rotation_weight if rotation_model == "eq59" else _rotation_weight(graph.kappa, d, rotation_model)
+    w = graph.rotation_weights if rotation_weight == "eq59" else rotation_weights(graph.kappa, d, rotation_weight)
     red = reduced_index(n, anchor)
     ri, rj = red[graph.src], red[graph.dst]
     _, dmat = rotation_jacobians(graph, rot, trans)
@@ -243,7 +243,7 @@ def paper_fim(graph: PoseGraph, rot: np.ndarray, trans: np.ndarray, anchor: int 
     mat.sum_duplicates()
     pose_ids = np.delete(graph.ids, anchor)
     fim = PaperFim(matrix=mat, dim=d, anchor=int(anchor), anchor_id=int(graph.ids[anchor]), pose_ids=pose_ids,
-                   layout="blocks", rotation_model=rotation_model, variant=variant,
+                   layout="blocks", rotation_weight=rotation_weight, variant=variant,
                    build_time=time.perf_counter() - t0)
     if layout != "blocks":
         fim = fim.to_layout(layout)
