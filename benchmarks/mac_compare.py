@@ -302,10 +302,11 @@ print(json.dumps(out))
 
 
 def quality(names: list[str], budgets: list[str], mac_py: str, env: dict) -> None:
-    from posecrb.experiments.sparsify import _evaluate, trajectory_error
+    from posecrb.experiments.sparsify import _evaluate
     from posecrb.selection import FiedlerObjective, parse_budget, select_edges, split_edges
     from posecrb.solver import solve
     from posecrb.solver.estimate import Estimate
+    from posecrb.verification.trajectory import trajectory_error
 
     def slam(graph, context, keep_idx):
         keep = np.zeros(graph.m, dtype=bool)

@@ -9,7 +9,7 @@ import pytest
 import posecrb
 
 ORDER = ["core", "lie", "io", "datasets", "linalg", "solver", "models", "sim", "selection", "incremental",
-         "experiments", "evaluation", "report", "api", "cli"]
+         "verification", "experiments", "evaluation", "report", "api", "cli"]
 ROOT = Path(posecrb.__file__).resolve().parent
 
 

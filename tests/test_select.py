@@ -692,7 +692,7 @@ def test_small_grid_fim_value_is_the_consistent_fim_logdet(shared_datasets):
 def test_alignment_and_trajectory_errors_closed_forms():
     from scipy.spatial.transform import Rotation
 
-    from posecrb.experiments.sparsify import align, trajectory_error
+    from posecrb.verification.trajectory import align, trajectory_error
 
     rng = np.random.default_rng(0)
     n = 9

@@ -50,6 +50,7 @@ from ..selection import (
 from ..sim.montecarlo import Task, make_tasks, run_tasks, seed_record
 from ..solver import SolverOptions, solve
 from ..solver.estimate import from_solve_result
+from ..verification.trajectory import trajectory_error
 
 DEFAULT_BUDGETS = tuple(f"{p}%" for p in range(10, 101, 10))
 QUICK_BUDGETS = ("20%", "50%")
@@ -90,54 +91,6 @@ def parse_methods(spec: str | Sequence[str], objective: str = "tree") -> list[tu
     if not out:
         raise UsageError("--methods needs at least one method")
     return out
-
-
-# ---------------------------------------------------------------- trajectory errors
-def _angles(r: np.ndarray) -> np.ndarray:
-    """Rotation angles of (k, d, d) rotations, robust at 0 and pi: atan2(sin, cos)."""
-    d = r.shape[-1]
-    skew = r - np.swapaxes(r, -1, -2)
-    sin = np.sqrt(np.einsum("kab,kab->k", skew, skew)) / (2.0 * np.sqrt(2.0))
-    cos = (np.trace(r, axis1=1, axis2=2) - (d - 2)) / 2.0
-    return np.arctan2(sin, cos)
-
-
-def align(trans: np.ndarray, ref: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Rigid (R, t) minimising sum ||R p_i + t - q_i||^2 (Horn / Umeyama, no scale, det R = +1)."""
-    mp, mq = trans.mean(0), ref.mean(0)
-    cov = (ref - mq).T @ (trans - mp)
-    u, _, vt = np.linalg.svd(cov)
-    s = np.eye(trans.shape[1])
-    s[-1, -1] = np.sign(np.linalg.det(u @ vt)) or 1.0
-    rot = u @ s @ vt
-    return rot, mq - rot @ mp
-
-
-@dataclass(frozen=True)
-class TrajectoryError:
-    ate_trans: float      # RMSE of aligned positions
-    ate_rot_deg: float    # RMSE of the aligned orientations' angles
-    rpe_trans: float      # RMSE over consecutive poses of the relative-translation error
-    rpe_rot_deg: float    # RMSE over consecutive poses of the relative-rotation angle
-
-
-def trajectory_error(rot: np.ndarray, trans: np.ndarray, ref_rot: np.ndarray, ref_trans: np.ndarray
-                     ) -> TrajectoryError:
-    """ATE after rigid alignment and RPE (delta = 1 pose, in id order) of an estimate against a reference."""
-    ra, ta = align(trans, ref_trans)
-    pos = trans @ ra.T + ta
-    ate_t = float(np.sqrt(np.mean(np.sum((pos - ref_trans) ** 2, axis=1))))
-    rel = np.swapaxes(ref_rot, 1, 2) @ (ra[None] @ rot)
-    ate_r = float(np.degrees(np.sqrt(np.mean(_angles(rel) ** 2))))
-    r_est = np.swapaxes(rot[:-1], 1, 2) @ rot[1:]
-    t_est = np.einsum("kba,kb->ka", rot[:-1], trans[1:] - trans[:-1])
-    r_ref = np.swapaxes(ref_rot[:-1], 1, 2) @ ref_rot[1:]
-    t_ref = np.einsum("kba,kb->ka", ref_rot[:-1], ref_trans[1:] - ref_trans[:-1])
-    err_r = np.swapaxes(r_ref, 1, 2) @ r_est
-    err_t = np.einsum("kba,kb->ka", r_ref, t_est - t_ref)
-    rpe_t = float(np.sqrt(np.mean(np.sum(err_t ** 2, axis=1))))
-    rpe_r = float(np.degrees(np.sqrt(np.mean(_angles(err_r) ** 2))))
-    return TrajectoryError(ate_t, ate_r, rpe_t, rpe_r)
 
 
 # ---------------------------------------------------------------- one selection and its consequences
