@@ -59,7 +59,8 @@ class PreconditionerSettings:
 
     Examples
     --------
-    >>> PreconditionerSettings(base="rotation").base
+    >>> from posecrb.solver import PreconditionerSettings, SolverOptions
+    >>> SolverOptions(preconditioner_settings=PreconditionerSettings(base="rotation")).preconditioner_settings.base
     'rotation'
     """
 
@@ -125,6 +126,7 @@ class SolverOptions:
 
     Examples
     --------
+    >>> from posecrb.solver import SolverOptions
     >>> SolverOptions.from_keywords(anchor=3, theta=1.0).trust_region
     {'theta': 1.0}
     >>> SolverOptions(preconditioner="base").preconditioner_settings.base

@@ -53,6 +53,7 @@ class RelaxedProblem:
     >>> import numpy as np
     >>> from posecrb.sim.generators import grid
     >>> from posecrb.solver.problem import Problem
+    >>> from posecrb.solver.relaxed import RelaxedProblem
     >>> from posecrb.solver.stiefel import random_point
     >>> relaxed = RelaxedProblem(Problem.from_graph(grid(2, 3)))
     >>> state = relaxed.evaluate(random_point(9, 2, 3, np.random.default_rng(0)))
