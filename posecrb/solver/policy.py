@@ -93,43 +93,35 @@ class PreconditionerPolicy:
         last truncated-CG run; ``converging``: the trust region's last step decreased f by at most
         its ``certified_rel_decrease`` (only there can a factorization at s alone succeed after an
         escape, and certify the point)."""
-        if self.adaptive is None or self.base is None:
+        base, adaptive, tangent = self.base, self.adaptive, self.tangent
+        if adaptive is None or base is None:
             return
-        first_level = state.Z.shape[2] == self.problem.d
-        if self.tangent is not None and first_level and self._tangent_on(last_hvps):
-            self._prepare_tangent(state, last_hvps)
+        if tangent is not None and state.Z.shape[2] == self.problem.d and self._tangent_on(tangent, last_hvps):
+            self._prepare_tangent(tangent, base, state, last_hvps)
             return
         if self._saddle_factor_in_use and (self.split is None or self.split.frame(state) is None):
             # The split no longer applies, and the saddle's factor is a poor (Q - Lambda + s I)^{-1}
             # here: refactor past the saddle.
             self._saddle_factor_in_use = False
             self._refactor_next = True
-            self.adaptive.forget()
-        if self.adaptive.tried_at(state):
+            adaptive.forget()
+        if adaptive.tried_at(state):
             return
         if (self.refactor_hvps is not None and not self._refactor_next
                 and (last_hvps is None or last_hvps <= self.refactor_hvps)):
             return
-        if self._refactor_next and self._saddle_factor is not None and self._adopt_saddle_factor(state):
+        if (self._refactor_next and self._saddle_factor is not None
+                and self._adopt_saddle_factor(adaptive, self._saddle_factor, state)):
             return
-        self._refactor(state, converging)
+        self._refactor(adaptive, base, state, converging)
 
     def apply(self, state: State, R: np.ndarray) -> np.ndarray:
         """The preconditioned residual at ``state``, with the vertical directions removed."""
-        tangent_here = self.tangent is not None and self.tangent.at(state)
-        if self.current is None and not tangent_here:
+        part = self._pick(state)
+        if part is None:
             return R
         gram = state.gram
-        R = remove_vertical(state.Z, R, gram)
-        part: PreconditionerOperator
-        if tangent_here and self.tangent is not None:
-            part = self.tangent
-        elif self.split is not None and self.split.prepare(state, self.current):
-            part = self.split
-        else:
-            assert self.current is not None
-            part = self.current
-        return remove_vertical(state.Z, part.apply(state, R), gram)
+        return remove_vertical(state.Z, part.apply(state, remove_vertical(state.Z, R, gram)), gram)
 
     def exact(self, state: State) -> bool:
         """Whether the preconditioner at ``state`` is the inverse Hessian on the tangent space (the
@@ -160,7 +152,18 @@ class PreconditionerPolicy:
         return {name: count for name, count in counts.items() if count}
 
     # ---- the rules ------------------------------------------------------------------------------
-    def _tangent_on(self, last_hvps: int | None) -> bool:
+    def _pick(self, state: State) -> PreconditionerOperator | None:
+        """The preconditioner that applies at ``state``: the tangent one where it is factored there,
+        else the split one where it applies, else the base or adaptive factor in use (None: none)."""
+        if self.tangent is not None and self.tangent.at(state):
+            return self.tangent
+        if self.current is None:
+            return None
+        if self.split is not None and self.split.prepare(state, self.current):
+            return self.split
+        return self.current
+
+    def _tangent_on(self, tangent: TangentPreconditioner, last_hvps: int | None) -> bool:
         """Whether the tangent preconditioner applies at the first level, switching it on after a
         long truncated-CG run where it waits for one."""
         if self.tangent_switch_hvps is None:
@@ -169,60 +172,55 @@ class PreconditionerPolicy:
             log.debug("preconditioner: %d products in the last truncated CG, switching to the tangent space's",
                       last_hvps)
             self.tangent_switch_hvps = None
-            assert self.tangent is not None
-            self.tangent.build()
+            tangent.build()
             return True
         return False
 
-    def _prepare_tangent(self, state: State, last_hvps: int | None) -> None:
-        tangent = self.tangent
-        assert tangent is not None
+    def _prepare_tangent(self, tangent: TangentPreconditioner, base: BasePreconditioner, state: State,
+                         last_hvps: int | None) -> None:
         if tangent.at(state):
             return
         if tangent.factor is not None and last_hvps is not None and last_hvps <= TANGENT_REFACTOR_HVPS:
             tangent.carry_to(state)
             return
         if not tangent.prepare(state):
-            self.current = self._base()
+            base.prepare()
+            self.current = base
             log.debug("preconditioner: K not positive definite, using (Q + delta I)^-1")
 
-    def _adopt_saddle_factor(self, state: State) -> bool:
+    def _adopt_saddle_factor(self, adaptive: AdaptivePreconditioner, saddle: tuple[Factor, float],
+                             state: State) -> bool:
         """Take the saddle's factor of ``Q - Lambda + sigma I`` for the split's new column: it serves
         there as well as a new factor (its shift is past the negative curvature), one factorization
         fewer. False where the split does not apply or sigma is far past the curvature."""
-        assert self.adaptive is not None and self._saddle_factor is not None
-        factor, sigma = self._saddle_factor
+        factor, sigma = saddle
         self._saddle_factor = None
         if not (self.split is not None and self.split.possible(state)
-                and sigma <= self.adaptive.shift + PAST_SADDLE_SHIFTS[-1] * abs(self._lambda_hint)):
+                and sigma <= adaptive.shift + PAST_SADDLE_SHIFTS[-1] * abs(self._lambda_hint)):
             return False
         self._refactor_next = False
-        self.adaptive.adopt(state, factor, sigma)
-        self.current = self.adaptive
+        adaptive.adopt(state, factor, sigma)
+        self.current = adaptive
         self._saddle_factor_in_use = True
         return True
 
-    def _refactor(self, state: State, converging: bool) -> None:
+    def _refactor(self, adaptive: AdaptivePreconditioner, base: BasePreconditioner, state: State,
+                  converging: bool) -> None:
         """Factor ``(Q - Lambda + s I)`` at ``state``; after an escape past the saddle's curvature
         first (s alone only at a converging iterate), the base factor where none is positive definite."""
-        assert self.adaptive is not None
-        s = self.adaptive.shift
+        s = adaptive.shift
         shifts: tuple[float, ...] = (s,)
         if self._lambda_hint < 0:
             past_saddle = tuple(s + k * abs(self._lambda_hint) for k in PAST_SADDLE_SHIFTS)
             shifts = ((s,) if converging and not self._refactor_next else ()) + past_saddle
         self._refactor_next = False
         self._saddle_factor_in_use = False
-        if self.adaptive.prepare(state, shifts):
-            self.current = self.adaptive
+        if adaptive.prepare(state, shifts):
+            self.current = adaptive
         else:
-            self.current = self._base()
+            base.prepare()
+            self.current = base
             log.debug("preconditioner: Q - Lambda + s I not PD, using (Q + delta I)^-1")
-
-    def _base(self) -> BasePreconditioner:
-        assert self.base is not None
-        self.base.prepare()
-        return self.base
 
 
 def build_policy(problem: Problem, choice: Preconditioner, settings: PreconditionerSettings,

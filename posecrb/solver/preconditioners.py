@@ -90,25 +90,25 @@ class BasePreconditioner:
         self.applications = 0
 
     def prepare(self, state: State | None = None) -> bool:
+        self.built()
+        return True
+
+    def built(self) -> Factor | RotationBlockFactor:
+        """The factor, built on the first call."""
         if self.factor is None:
             if self.name == "rotation":
                 log.debug("base preconditioner: the rotation block's (C + %.3e I)^-1", self.delta)
                 self.factor = self.problem.factor_rotation_block(self.delta, name="preconditioner C + delta I")
             else:
                 self.factor = self.problem.factor_full(None, self.delta, name="preconditioner M_red(delta)")
-        return True
+        return self.factor
 
     def solve(self, W: np.ndarray) -> np.ndarray:
-        if self.factor is None:
-            self.prepare()
-        assert self.factor is not None
-        return _solve(self.problem, self.factor, W)
+        return _solve(self.problem, self.built(), W)
 
     def apply(self, state: State, R: np.ndarray) -> np.ndarray:
-        self.prepare()
-        assert self.factor is not None
         self.applications += 1
-        return _factor_apply(self.problem, self.factor, state, R)
+        return _factor_apply(self.problem, self.built(), state, R)
 
 
 class AdaptivePreconditioner:
