@@ -22,21 +22,11 @@ from posecrb.solver.staircase import _next_escape_step
 from posecrb.solver.stiefel import lift, random_point, retract
 from posecrb.solver.trust_region import TROptions, trust_region
 
-from .helpers import SESYNC_STOP, drop_edges, print_rounding, random_pose_graph, record_factor_full
+from .helpers import SESYNC_STOP, drop_edges, objective_loop, print_rounding, random_pose_graph, record_factor_full
 from .numerics import EPS, MARGIN, objective_atol, suboptimality_bound
 
 # SE-Sync C++ reference optima.
 REFERENCE = {"CSAIL": 31.703715992, "tinyGrid3D": 18.519386873, "smallGrid3D": 1025.3980207}
-
-
-def objective_loop(graph: PoseGraph, rot, trans) -> float:
-    """F(R, t) edge by edge, written independently of the package."""
-    total = 0.0
-    for e in range(graph.m):
-        i, j = graph.src[e], graph.dst[e]
-        total += graph.kappa[e] * np.sum((rot[j] - rot[i] @ graph.rot[e]) ** 2)
-        total += graph.tau[e] * np.sum((trans[j] - trans[i] - rot[i] @ graph.trans[e]) ** 2)
-    return float(total)
 
 
 @pytest.mark.parametrize("dim", [2, 3])

@@ -17,18 +17,8 @@ from posecrb.solver.problem import Problem
 from posecrb.solver.refine import refine, relaxed_gradient
 from posecrb.solver.rounding import pose_objective
 
-from .helpers import random_pose_graph
+from .helpers import objective_loop, random_pose_graph
 from .numerics import EPS, MARGIN, spd_condition
-
-
-def _loop_objective(graph: PoseGraph, rot: np.ndarray, trans: np.ndarray) -> float:
-    """F(R, t) edge by edge, written independently of the package."""
-    total = 0.0
-    for e in range(graph.m):
-        i, j = graph.src[e], graph.dst[e]
-        total += graph.kappa[e] * np.sum((rot[j] - rot[i] @ graph.rot[e]) ** 2)
-        total += graph.tau[e] * np.sum((trans[j] - trans[i] - rot[i] @ graph.trans[e]) ** 2)
-    return float(total)
 
 
 def _dense_translations(graph: PoseGraph, rot: np.ndarray) -> tuple[np.ndarray, float]:
@@ -65,9 +55,26 @@ def _dense_lambda(Q: np.ndarray, rot: np.ndarray) -> np.ndarray:
     return 0.5 * (blocks + np.swapaxes(blocks, 1, 2))
 
 
+def _dense_S(Q: np.ndarray, lam: np.ndarray) -> np.ndarray:
+    """Q - Lambda with Lambda's (n, d, d) blocks on the block diagonal."""
+    n, d = lam.shape[:2]
+    S = Q.copy()
+    for i in range(n):
+        S[i * d:(i + 1) * d, i * d:(i + 1) * d] -= lam[i]
+    return S
+
+
 def _graph(dim: int, seed: int, noise: float = 0.1):
     rng = np.random.default_rng(seed)
     return random_pose_graph(15, dim, rng, loop_closures=10, rot_noise=noise, trans_noise=noise)
+
+
+def _away_from_the_truth(dim: int, seed: int):
+    """(graph, problem, R, dense Q, its accuracy): a random graph and rotations 0.3 rad off its truth."""
+    graph, rot, _ = _graph(dim, seed)
+    problem = Problem.from_graph(graph)
+    Q, atol = _dense_Q(problem)
+    return graph, problem, _perturbed(rot, 0.3, np.random.default_rng(seed + 1)), Q, atol
 
 
 def _perturbed(rot: np.ndarray, sigma: float, rng: np.random.Generator) -> np.ndarray:
@@ -84,32 +91,26 @@ def test_objective_with_given_and_with_eliminated_translations(dim):
     R = _perturbed(rot, 0.2, rng)
     t = trans + 0.3 * rng.standard_normal(trans.shape)
     # given translations: the same sum of m non-negative terms in another order
-    assert pose_objective(problem, R, t) == pytest.approx(_loop_objective(graph, R, t), rel=MARGIN * graph.m * EPS)
+    assert pose_objective(problem, R, t) == pytest.approx(objective_loop(graph, R, t), rel=MARGIN * graph.m * EPS)
     # eliminated: the minimum over t, at the dense least-squares translations; the value is flat there,
     # so the solutions' difference (cond eps) enters squared, and the sums round at m eps
     t_star, cond = _dense_translations(graph, R)
-    reference = _loop_objective(graph, R, t_star)
+    reference = objective_loop(graph, R, t_star)
     got = pose_objective(problem, R)
     assert got == pytest.approx(reference, rel=MARGIN * (graph.m + cond) * EPS)
-    assert got <= pose_objective(problem, R, t) and got <= _loop_objective(graph, R, t)
+    assert got <= pose_objective(problem, R, t) and got <= objective_loop(graph, R, t)
 
 
 @pytest.mark.parametrize("dim", [2, 3])
 def test_lagrange_multipliers_and_certificate_product_are_the_dense_ones(dim):
-    graph, rot, _ = _graph(dim, 3)
-    problem = Problem.from_graph(graph)
-    R = _perturbed(rot, 0.3, np.random.default_rng(4))
-    Q, atol = _dense_Q(problem)
+    graph, problem, R, Q, atol = _away_from_the_truth(dim, 3)
     lam = lagrange_multipliers(problem, R)
     dn = problem.n * dim
     # each block sums dn products of Q's entries with entries of R (at most 1 in size)
     np.testing.assert_allclose(lam, _dense_lambda(Q, R), rtol=0, atol=dn * atol)
     np.testing.assert_array_equal(lam, np.swapaxes(lam, 1, 2))
-    S = Q.copy()
-    for i in range(problem.n):
-        S[i * dim:(i + 1) * dim, i * dim:(i + 1) * dim] -= lam[i]
     X = np.random.default_rng(5).standard_normal((dn, 2))
-    np.testing.assert_allclose(certificate_product(problem, lam, X), S @ X, rtol=0,
+    np.testing.assert_allclose(certificate_product(problem, lam, X), _dense_S(Q, lam) @ X, rtol=0,
                                atol=dn * atol * np.abs(X).max())
 
 
@@ -122,9 +123,7 @@ def test_dual_certificate_decides_lambda_min_as_the_dense_spectrum_does(dim):
     Q, atol = _dense_Q(problem)
     for R in (res.rot, _perturbed(res.rot, 0.3, np.random.default_rng(7))):
         cert = dual_certificate(problem, R, tol=1e-3)
-        S = Q.copy()
-        for i in range(problem.n):
-            S[i * dim:(i + 1) * dim, i * dim:(i + 1) * dim] -= cert.lam[i]
+        S = _dense_S(Q, cert.lam)
         exact = float(np.linalg.eigvalsh(0.5 * (S + S.T))[0])
         rounding = problem.n * dim * atol
         assert abs(exact + 1e-3) > rounding          # the dense reference decides the test
@@ -141,10 +140,7 @@ def test_dual_certificate_decides_lambda_min_as_the_dense_spectrum_does(dim):
 
 @pytest.mark.parametrize("dim", [2, 3])
 def test_relaxed_gradient_is_the_dense_one_and_vanishes_at_the_optimum(dim):
-    graph, rot, _ = _graph(dim, 8)
-    problem = Problem.from_graph(graph)
-    R = _perturbed(rot, 0.3, np.random.default_rng(9))
-    Q, atol = _dense_Q(problem)
+    graph, problem, R, Q, atol = _away_from_the_truth(dim, 8)
     lam = _dense_lambda(Q, R)
     Z = np.swapaxes(R, 1, 2)
     QZ = (Q @ Z.reshape(-1, dim)).reshape(Z.shape)
@@ -186,7 +182,7 @@ def test_refine_returns_a_perturbed_optimum_to_a_certified_critical_point(dim):
     assert np.all(np.linalg.det(out.rot) > 0)
     # where it ended: the objective with the optimal translations reported with it, a vanishing
     # gradient, the certified optimum's value (both stop at a Newton decrement of 1e-11 |f|)
-    assert out.objective == pytest.approx(_loop_objective(graph, out.rot, out.trans), rel=MARGIN * graph.m * EPS)
+    assert out.objective == pytest.approx(objective_loop(graph, out.rot, out.trans), rel=MARGIN * graph.m * EPS)
     assert out.gradient.relative_norm < 1e-5 * before.relative_norm
     assert out.objective == pytest.approx(res.objective, rel=1e-9)
     assert dual_certificate(problem, out.rot).certified
