@@ -276,10 +276,15 @@ def _numbers(table: _Table, rows: np.ndarray, cols: slice, what: str) -> tuple[n
 
 def _quanta(tok: np.ndarray) -> np.ndarray:
     """The quantum ``10^(exponent - decimals)`` of each number token (bytes): the unit of its last
-    written digit, so rounding to the written digits moved it by at most half of it. A token
-    without a decimal point or an exponent is an integer written exactly (quantum 0): writers of
-    floating-point values print one of them unless the value is an integer within their precision,
-    and a pose made of such integers (a signed permutation) is checked as exact."""
+    written digit, so rounding to the written digits moved it by at most half of it.
+
+    A token without a decimal point or an exponent is an integer written exactly (quantum 0):
+    writers of floating-point values print one of them unless the value is an integer within their
+    precision, and a pose made of such integers (a signed permutation) is checked as exact. Writers
+    of significant digits (C's ``%g``, GTSAM's ``writeG2o``) drop trailing zeros, so ``11.9`` may
+    stand for ``11.9000``: where no token of the file ends in a zero after its decimal point, every
+    token is taken to carry the digits most of them have (the 90th percentile of their significant
+    digits), and its quantum is the smaller of the two."""
     n = np.strings.str_len(tok)
     dot = np.strings.find(tok, b".")
     e = np.maximum(np.strings.find(tok, b"e"), np.strings.find(tok, b"E"))
@@ -289,8 +294,22 @@ def _quanta(tok: np.ndarray) -> np.ndarray:
     has = e >= 0
     if has.any():
         exponent[has] = np.strings.slice(tok[has], e[has] + 1, n[has]).astype(np.int64)
-    quantum = np.power(10.0, (exponent - decimals).astype(float))
-    return np.where((dot >= 0) | has, quantum, 0.0)
+    written = np.where((dot >= 0) | has, np.power(10.0, (exponent - decimals).astype(float)), 0.0)
+    mantissa = np.strings.slice(tok, 0, mantissa_end)
+    padded = (dot >= 0) & ~has & np.strings.endswith(mantissa, b"0")
+    if tok.size == 0 or padded.any():
+        return written
+    digits = np.strings.str_len(np.strings.lstrip(
+        np.strings.replace(np.strings.replace(np.strings.replace(mantissa, b".", b""), b"-", b""), b"+", b""), b"0"))
+    fractional = ((dot >= 0) | has) & (digits > 0)
+    if not fractional.any():
+        return written
+    significant = int(np.percentile(digits[fractional], 90))
+    value = np.abs(tok.astype(np.float64))
+    with np.errstate(divide="ignore"):
+        magnitude = np.floor(np.log10(np.where(value > 0, value, 1.0)))
+    implied = np.power(10.0, magnitude - significant + 1)
+    return np.where(fractional, np.minimum(written, implied), written)
 
 
 def _ids(table: _Table, rows: np.ndarray, what: str, column: int = 0) -> np.ndarray:
