@@ -28,6 +28,9 @@ from .judge import Judgement, Precision, judge
 from .result import VerifyResult
 from .trajectory import ALIGNMENT, trajectory_error
 
+# The keys (with a status) that need the certified optimum.
+_NEEDS_OPTIMUM = ("optimum_objective", "suboptimality", "relative_suboptimality", "refined_objective", "ate_trans",
+                  "ate_rot_deg", "rpe_trans", "rpe_rot_deg", "mahalanobis", "g2o_cost_optimum")
 # Where the refinement ends at the optimum's value within this fraction of it (beyond solve's own
 # certified duality gap), it reached the optimum's basin: the trust region stops at a Newton
 # decrement of 1e-11 F, and F is a sum of m positive terms rounded to about m eps relative.
@@ -59,7 +62,8 @@ def verify_estimate(graph: PoseGraph, estimate: Poses, *, anchor: int = 0, run_s
         "dataset": graph.name, "path": graph.path, "sha256": graph.sha256, "dim": graph.dim, "poses": graph.n,
         "edges": graph.m, "anchor": int(graph.ids[anchor]), "estimate": estimate.describe,
         "objective": at_estimate.objective, "gradient_norm": at_estimate.gradient_norm,
-        "lambda_min": at_estimate.certificate.lambda_min, "certificate": _certificate_dict(at_estimate, certificate_tol),
+        "lambda_min": at_estimate.certificate.lambda_min,
+        "certificate": _certificate_dict(at_estimate, certificate_tol),
         "alignment": ALIGNMENT, "g2o_cost": g2o_cost,
     }
     if not run_solve:
@@ -114,10 +118,8 @@ def _without_solve(keys: dict[str, Any], j: Judgement, times: dict[str, float], 
         reason = (f"{_not_certified_reason(j)}; without a solve (--no-solve) the optimum and the estimate's "
                   "basin are not known")
     times["total"] = time.perf_counter() - t0
-    none = dict.fromkeys(("optimum_objective", "suboptimality", "relative_suboptimality", "refined_objective", "ate_trans", "ate_rot_deg", "rpe_trans", "rpe_rot_deg", "mahalanobis", "g2o_cost_optimum", "refinement"))
-    statuses = {f"{k}_status": skipped for k in ("optimum_objective", "suboptimality", "relative_suboptimality",
-                                                  "refined_objective", "ate_trans", "ate_rot_deg", "rpe_trans",
-                                                  "rpe_rot_deg", "mahalanobis", "g2o_cost_optimum")}
+    none = dict.fromkeys(_NEEDS_OPTIMUM + ("refinement",))
+    statuses = {f"{k}_status": skipped for k in _NEEDS_OPTIMUM}
     return VerifyResult(**keys, **none, **statuses, verdict=verdict, verdict_reason=reason,
                         lower_bound=j.lower_bound, lower_bound_source="certificate at the estimate"
                         if j.lower_bound is not None else None, times=times)

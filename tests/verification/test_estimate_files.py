@@ -173,8 +173,8 @@ def test_a_2d_graph_takes_planar_rows_only(tmp_path):
     rows = _rows(g, "kitti")
     np.testing.assert_allclose(read_estimate_file(_write(tmp_path / "k.txt", rows)).poses_for(g).rot,
                                g.vertex_rot, atol=1e-14)
-    tilted = rows[:3] + [" ".join("%.17g" % x for x in np.hstack([Rotation.from_rotvec([0.1, 0, 0.2]).as_matrix(),
-                                                                  np.zeros((3, 1))]).ravel())] + rows[4:]
+    tilt = np.hstack([Rotation.from_rotvec([0.1, 0, 0.2]).as_matrix(), np.zeros((3, 1))])
+    tilted = rows[:3] + [" ".join(f"{x:.17g}" for x in tilt.ravel())] + rows[4:]
     with pytest.raises(ParseError, match="k2.txt:4: a 3D pose"):
         read_estimate_file(_write(tmp_path / "k2.txt", tilted)).poses_for(g)
 
