@@ -10,6 +10,7 @@
 
 Exit status 1 when a step fails. ``make bench`` and ``make bench-quick`` run this; the test suite
 runs ``--quick`` (tests/test_benchmarks.py), so CI fails on a broken benchmark.
+--bench REGEX runs only the asv benchmarks it matches (and the report).
 Usage: python benchmarks/run.py [--quick] [--out DIR] [--bench REGEX]
 """
 from __future__ import annotations
@@ -54,7 +55,8 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--quick", action="store_true", help="every benchmark once, on small inputs")
     ap.add_argument("--out", default=None, help="directory of the whole-process results and the report "
                                                 "[default: .bench, --quick: .bench/quick]")
-    ap.add_argument("--bench", default=None, help="only the asv benchmarks matching this regular expression")
+    ap.add_argument("--bench", default=None, help="only the asv benchmarks matching this regular expression "
+                                                  "(no whole-process comparison)")
     args = ap.parse_args(argv)
     out = Path(args.out or REPO / ".bench" / ("quick" if args.quick else ""))
     if importlib.util.find_spec("asv") is None:
@@ -68,7 +70,7 @@ def main(argv: list[str] | None = None) -> int:
     subprocess.run([*asv, "machine", "--yes"], env=env, cwd=REPO, check=False, stdout=subprocess.DEVNULL)
     ok = step("in-process suite (asv)", asv_argv(args.quick, args.bench), env)
     hyperfine_out = out / "hyperfine"
-    for script in SCRIPTS:
+    for script in SCRIPTS if args.bench is None else ():
         ok &= step(script, [sys.executable, str(BENCHMARKS / script), "--out", str(hyperfine_out),
                             *(["--quick"] if args.quick else [])], env)
     results = REPO / ".bench" / "asv" / "results"
