@@ -54,14 +54,14 @@ def startup(group: harness.Group) -> None:
 def goals(group: harness.Group) -> None:
     grid2, grid3 = ("grid2d-400", "grid3d-125") if group.options.quick else ("grid2d-100000", "grid3d-20000")
     for name in (grid2, grid3):
-        entry = group.compare(f"solve {name}", [Command("solve", posecrb_cli("solve", str(inputs.path(name)),
-                                                                        "--format", "json"))])
+        solve = Command("solve", posecrb_cli("solve", str(inputs.path(name)), "--format", "json"))
+        entry = group.compare(f"solve {name}", [solve])
         if entry:
             out = entry["outputs"]["solve"].json()
             entry["checks"].update(poses=out.get("poses"), certified=out.get("certified"), times=out.get("times"))
     entry = group.compare(f"bounds-vertices {grid3}", [
-        Command("bounds", posecrb_cli("bounds", str(inputs.path(grid3)), "--estimate", "vertices", "--format",
-                                      "json"))])
+        Command("bounds", posecrb_cli("bounds", str(inputs.path(grid3)), "--estimate", "vertices",
+                                      "--format", "json"))])
     if entry:
         out = entry["outputs"]["bounds"].json()
         entry["checks"].update(poses=out.get("poses"), times=out.get("times"))
@@ -69,12 +69,8 @@ def goals(group: harness.Group) -> None:
 
 def timeline(group: harness.Group) -> None:
     names = ("grid2d-400",) if group.options.quick else ("city10000", "sphere2500", "grid2d-100000")
-    for name in names:
-        try:
-            file = str(inputs.path(name))
-        except NotImplementedError as exc:
-            print(f"timeline: {exc}", file=sys.stderr)
-            continue
+    for name, path in harness.found("timeline", names):
+        file = str(path)
         group.compare(name, [
             Command("timeline", posecrb_cli("timeline", file, "--estimate", "none")),
             Command("bounds", posecrb_cli("bounds", file, "--estimate", "none", "--repeat", "1")),
@@ -98,11 +94,11 @@ def main(argv: list[str] | None = None) -> int:
     unknown = sorted(set(chosen) - set(GROUPS))
     if unknown:
         ap.error(f"unknown groups {unknown}; choose from {list(GROUPS)}")
-    if harness.hyperfine_binary() is None:
-        return harness.skip("commands", "hyperfine is not installed (Debian: apt-get install hyperfine)")
     run = {"startup": startup, "goals": goals, "timeline": timeline, "threads": threads}
     for name in chosen:
-        group = harness.Group(name, args)
+        group = harness.start(name, args)
+        if group is None:
+            break
         run[name](group)
         group.save()
     return 0

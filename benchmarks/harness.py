@@ -33,6 +33,7 @@ import shutil
 import subprocess
 import sys
 import tempfile
+from collections.abc import Iterator
 from dataclasses import dataclass, field
 from importlib.metadata import PackageNotFoundError, version
 from pathlib import Path
@@ -203,10 +204,24 @@ def write_json(path: Path, value: object) -> None:
     os.replace(fh.name, path)
 
 
-def skip(group: str, reason: str) -> int:
-    """Say why a script compares nothing here; exit status 0 (an absent peer is not an error)."""
-    print(f"{group}: skipped: {reason}", file=sys.stderr)
-    return 0
+def start(name: str, options: argparse.Namespace, missing: str = "") -> Group | None:
+    """The group of a script's comparisons; None, after saying why on stderr, when ``missing`` names
+    what is absent (a peer) or hyperfine is not installed: an absent program is not an error."""
+    if not missing and hyperfine_binary() is None:
+        missing = "hyperfine is not installed (Debian: apt-get install hyperfine)"
+    if missing:
+        print(f"{name}: skipped: {missing}", file=sys.stderr)
+        return None
+    return Group(name, options)
+
+
+def found(group: str, names: list[str]) -> Iterator[tuple[str, Path]]:
+    """(name, file) of each input that is here; an absent dataset is said on stderr and left out."""
+    for name in names:
+        try:
+            yield name, inputs.path(name)
+        except NotImplementedError as exc:
+            print(f"{group}: {exc}", file=sys.stderr)
 
 
 # ---- peers ------------------------------------------------------------------------------------

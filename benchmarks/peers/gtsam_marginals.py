@@ -55,28 +55,22 @@ def main(argv: list[str] | None = None) -> int:
     ap = harness.parser(__doc__.splitlines()[0])
     ap.add_argument("names", nargs="*", help="datasets or grids [default: sphere2500 torus3D]")
     args = harness.parse(ap, argv)
-    if importlib.util.find_spec("gtsam") is None:
-        return harness.skip("gtsam", "gtsam is not installed in this interpreter (pip install '.[gtsam]')")
-    if harness.hyperfine_binary() is None:
-        return harness.skip("gtsam", "hyperfine is not installed (Debian: apt-get install hyperfine)")
+    absent = "" if importlib.util.find_spec("gtsam") else "gtsam is not installed here (pip install '.[gtsam]')"
+    group = harness.start("gtsam", args, absent)
+    if group is None:
+        return 0
     names = args.names or ([inputs.GRID_3D_SMALL] if args.quick else ["sphere2500", "torus3D"])
-    group = harness.Group("gtsam", args)
     with tempfile.TemporaryDirectory(prefix="posecrb-gtsam-") as tmp:
-        for name in names:
-            try:
-                file = inputs.path(name)
-            except NotImplementedError as exc:
-                print(f"gtsam: {exc}", file=sys.stderr)
-                continue
+        for name, file in harness.found("gtsam", names):
             estimate, blocks = Path(tmp) / f"{name}-estimate.g2o", Path(tmp) / f"{name}-gtsam.npz"
             solved = harness.check_run(Command("solve", posecrb_cli("solve", str(file), "--out", str(estimate),
-                                                                 "--format", "json")))
+                                                                     "--format", "json")))
             if not solved.ok:
                 print(f"gtsam: {name}: the estimate failed: {solved.reason()}", file=sys.stderr)
                 continue
             entry = group.compare(name, [
-                Command("posecrb", posecrb_cli("crlb", str(estimate), "--model", "sed", "--frame", "body", "--estimate",
-                                           "vertices", "--poses", "all", "--format", "json")),
+                Command("posecrb", posecrb_cli("crlb", str(estimate), "--model", "sed", "--frame", "body",
+                                               "--estimate", "vertices", "--poses", "all", "--format", "json")),
                 Command("GTSAM", (sys.executable, "-c", GTSAM_SCRIPT, str(estimate), str(inputs.dimension(name)),
                                   str(blocks)))])
             if entry is None:

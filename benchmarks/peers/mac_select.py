@@ -81,26 +81,20 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("names", nargs="*", help="datasets or grids [default: intel city10000]")
     args = harness.parse(ap, argv)
     mac, why = harness.mac_python()
-    if mac is None:
-        return harness.skip("mac", why)
-    if harness.hyperfine_binary() is None:
-        return harness.skip("mac", "hyperfine is not installed (Debian: apt-get install hyperfine)")
+    group = harness.start("mac", args, why)
+    if group is None or mac is None:
+        return 0
     import posecrb
 
     names = args.names or ([inputs.GRID_2D_SMALL] if args.quick else ["intel", "city10000"])
-    group = harness.Group("mac", args)
     with tempfile.TemporaryDirectory(prefix="posecrb-mac-") as tmp:
-        for name in names:
-            try:
-                file = inputs.path(name)
-            except NotImplementedError as exc:
-                print(f"mac: {exc}", file=sys.stderr)
-                continue
+        for name, file in harness.found("mac", names):
             problem, pairs = Path(tmp) / f"{name}.npz", Path(tmp) / f"{name}-fixed.txt"
             candidates, k = write_problem(posecrb.load(file), problem, pairs, args.budget)
             entry = group.compare(name, [
-                Command("posecrb", posecrb_cli("select", str(file), "--budget", str(k), "--objective", "fiedler",
-                                           "--method", "relax", "--fixed", str(pairs), "--format", "json")),
+                Command("posecrb", posecrb_cli("select", str(file), "--budget", str(k), "--objective",
+                                               "fiedler", "--method", "relax", "--fixed", str(pairs), "--format",
+                                               "json")),
                 Command("MAC", (mac, "-c", MAC_SOLVE, str(problem)))])
             if entry is None:
                 continue

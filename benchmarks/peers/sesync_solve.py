@@ -68,22 +68,14 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("names", nargs="*", help="datasets or grids [default: SE-Sync's 16 files]")
     args = harness.parse(ap, argv)
     binary, why = harness.sesync_binary()
-    if binary is None:
-        return harness.skip("sesync", why)
-    if harness.hyperfine_binary() is None:
-        return harness.skip("sesync", "hyperfine is not installed (Debian: apt-get install hyperfine)")
+    group = harness.start("sesync", args, why)
+    if group is None:
+        return 0
     names = args.names or (["intel", inputs.GRID_3D_SMALL] if args.quick else list(inputs.SESYNC_DATASETS))
-    if args.grids:
-        names += list(inputs.GRIDS)
-    group = harness.Group("sesync", args)
-    for name in names:
-        try:
-            file = str(inputs.path(name))
-        except NotImplementedError as exc:
-            print(f"sesync: {exc}", file=sys.stderr)
-            continue
+    for name, path in harness.found("sesync", names + (list(inputs.GRIDS) if args.grids else [])):
+        file = str(path)
         ours = Command("posecrb", posecrb_cli("solve", file, "--sesync-compat", "--format", "json"))
-        entry = group.compare(name, [Command("SE-Sync", (binary, file)), ours])
+        entry = group.compare(name, [Command("SE-Sync", (str(binary), file)), ours])
         if entry is None:
             continue
         theirs = parse_sesync(entry["outputs"]["SE-Sync"].stdout)
