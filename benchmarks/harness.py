@@ -129,7 +129,7 @@ def parser(description: str) -> argparse.ArgumentParser:
     ap = argparse.ArgumentParser(description=description)
     ap.add_argument("--quick", action="store_true",
                     help="small inputs, one timed run, no warm-up: does every comparison still run?")
-    ap.add_argument("--runs", type=int, default=None, help="timed runs per command [default: 5; --quick: 1]")
+    ap.add_argument("--runs", type=int, default=None, help="timed runs per command [default: 3; --quick: 1]")
     ap.add_argument("--warmup", type=int, default=None, help="untimed runs first [default: 1; --quick: 0]")
     ap.add_argument("--threads", type=int, default=0,
                     help="threads of every OpenMP/BLAS/numba pool of the programs; 0 leaves each pool its "
@@ -141,9 +141,7 @@ def parser(description: str) -> argparse.ArgumentParser:
 
 def parse(ap: argparse.ArgumentParser, argv: list[str] | None) -> argparse.Namespace:
     args = ap.parse_args(argv)
-    if args.quick:
-        os.environ["POSECRB_BENCH"] = "quick"
-    args.runs = args.runs if args.runs is not None else (1 if args.quick else 5)
+    args.runs = args.runs if args.runs is not None else (1 if args.quick else 3)
     args.warmup = args.warmup if args.warmup is not None else (0 if args.quick else 1)
     if args.threads:
         os.environ.update({var: str(args.threads) for var in THREAD_VARS})
