@@ -108,7 +108,13 @@ class Group:
             self.comparisons.append(entry)
             print(f"{self.name} {label}: failed: {failed}", file=sys.stderr)
             return None
-        entry["hyperfine"] = hyperfine(commands, self.options)
+        try:
+            entry["hyperfine"] = hyperfine(commands, self.options)
+        except subprocess.CalledProcessError as exc:   # a timed run failed where the check run did not
+            entry["failed"] = {"hyperfine": f"exit {exc.returncode}"}
+            self.comparisons.append(entry)
+            print(f"{self.name} {label}: failed in hyperfine's runs (exit {exc.returncode})", file=sys.stderr)
+            return None
         entry["outputs"] = runs
         self.comparisons.append(entry)
         return entry

@@ -212,7 +212,7 @@ def goals(run: AsvRun, groups: dict[str, dict]) -> str:
         kind, name = label.split(" ", 1)
         checks = comparison.get("checks", {})
         wall = median(comparison, kind.split("-")[0])
-        poses = checks.get("poses")
+        poses = checks.get("poses") or (grid_poses(name) or (0, 0))[1]
         if kind == "solve":
             certified = bool(checks.get("certified"))
             rows.append([f"`solve` of the {name[4:6].upper()} grid of {poses:,} poses at most 15 s, certified",

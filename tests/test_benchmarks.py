@@ -98,6 +98,32 @@ def test_sesync_comparison_with_a_stand_in_peer(bench_env, monkeypatch):
     assert "| **sum** |  |  | " in text and report.seconds(total) in text
 
 
+@needs_hyperfine
+def test_a_comparison_that_fails_is_recorded_as_failed_not_timed(tmp_path):
+    """A command that fails in its check run, or only in hyperfine's timed runs, leaves a comparison
+    marked failed with the reason (no timing), and the report's row says so."""
+    import argparse
+
+    harness = _module("harness")
+    options = argparse.Namespace(runs=1, warmup=0, out=str(tmp_path / "out"), threads=0, quick=True)
+    group = harness.Group("sesync", options)
+    marker = tmp_path / "ran-once"
+    second_run_fails = ("import os, sys; p = sys.argv[1]; "
+                        "sys.exit(1) if os.path.exists(p) else open(p, 'w').close()")
+    ok = harness.Command("posecrb", (sys.executable, "-c", "pass"))
+    assert group.compare("flaky", [harness.Command("SE-Sync", (sys.executable, "-c", second_run_fails,
+                                                               str(marker))), ok]) is None
+    broken = harness.Command("SE-Sync", (sys.executable, "-c", "import sys; sys.exit('no such file')"))
+    assert group.compare("broken", [broken, ok]) is None
+    group.save()
+    saved = json.loads((tmp_path / "out" / "sesync.json").read_text())["comparisons"]
+    assert saved[0]["failed"] == {"hyperfine": "exit 1"} and "hyperfine" not in saved[0]
+    assert saved[1]["failed"] == {"SE-Sync": "exit 1: no such file"}
+    report = _module("report")
+    rows = report.sesync(report.read_groups(tmp_path / "out")).splitlines()
+    assert any(r.startswith("| broken | failed: SE-Sync: exit 1: no such file") for r in rows)
+
+
 FAKE_MAC = {
     "mac/__init__.py": "",
     "mac/utils/__init__.py": "",
