@@ -408,10 +408,11 @@ def plot(records: list[dict], path: Path) -> None:
             if not points:
                 continue
             xs = [p[0] for p in points]
-            axes[0][col].loglog(xs, [p[1] for p in points], "o-", label=label)
+            color = f"C{list(SCALING).index(label)}"   # one colour per call in every panel
+            axes[0][col].loglog(xs, [p[1] for p in points], "o-", label=label, color=color)
             mem = [(x, p[2] / 2**30) for x, p in zip(xs, points) if p[2]]
             if mem:
-                axes[1][col].loglog(*zip(*mem), "o-", label=label)
+                axes[1][col].loglog(*zip(*mem), "o-", label=label, color=color)
         axes[0][col].set_title(f"{dim}D grids: time of one call", fontsize=13)
         axes[1][col].set_title(f"{dim}D grids: peak memory of the process", fontsize=13)
         axes[0][col].set_ylabel("seconds", fontsize=12)
