@@ -64,11 +64,13 @@ class AsvRun:
         self.machine: dict = json.loads(machine.read_text()) if machine and machine.is_file() else {}
         self.values: dict[str, dict[tuple, float | None]] = {}
         self.started: list[float] = []
+        self.ended: list[float] = []
         columns = self.data.get("result_columns", [])
         for name, row in self.data.get("results", {}).items():
             fields = dict(zip(columns, row))
-            if isinstance(fields.get("started_at"), (int, float)):
+            if isinstance(fields.get("started_at"), (int, float)):   # ms since the epoch; duration in s
                 self.started.append(fields["started_at"])
+                self.ended.append(fields["started_at"] + 1000 * float(fields.get("duration") or 0))
             results = fields.get("result") or []
             params = [[ast.literal_eval(p) for p in values] for values in (fields.get("params") or [])]
             combos = list(itertools.product(*params)) if params else [()]
@@ -178,7 +180,7 @@ def provenance(run: AsvRun, groups: dict[str, dict]) -> str:
     lines = []
     if run:
         start, end = (datetime.datetime.fromtimestamp(t / 1000, datetime.UTC)
-                      for t in (min(run.started, default=0), max(run.started, default=0)))
+                      for t in (min(run.started, default=0), max(run.ended, default=0)))
         m = run.machine
         lines.append(f"* In-process suite (asv): {start:%Y-%m-%d %H:%M} to {end:%H:%M} UTC, commit "
                      f"{run.data.get('commit_hash', '?')[:7]}, machine {m.get('machine', '?')} ({m.get('cpu') or '?'}, "
