@@ -1,22 +1,30 @@
 """The documentation site builds with warnings as errors, offline, and its references are complete.
 
-One build (Sphinx, ``-W``, into a temporary directory) serves every test here; it is skipped only
-when Sphinx or one of the site's extensions is not installed (the ``docs`` extra).
+One build (Sphinx, ``-W``, into a temporary directory) serves the tests of the built site; they are
+skipped only when Sphinx or one of the site's extensions is not installed (the ``docs`` extra).
+The tests of the pages' sources (options that exist, public imports only, figures in use) need no
+build. Each checks one kind of defect a reader met on an earlier version of the site.
 """
 from __future__ import annotations
 
 import html
 import importlib.util
 import re
+import shlex
 import subprocess
 import sys
+from collections.abc import Iterator
+from html.parser import HTMLParser
 from pathlib import Path
 
 import click
 import pytest
+from markdown_it import MarkdownIt
 
 import posecrb
 from posecrb.cli import cli
+
+from .docblocks import page_blocks, page_paths
 
 ROOT = Path(__file__).resolve().parent.parent
 EXTENSIONS = ("sphinx", "myst_parser", "pydata_sphinx_theme", "numpydoc", "sphinx_click")
@@ -87,3 +95,199 @@ def test_every_page_is_built(site: Path) -> None:
              for p in (ROOT / "docs").rglob("*.md") if "_build" not in p.parts]
     missing = [str(p) for p in pages if not (site / p).is_file()]
     assert not missing, missing
+
+
+# ---- what a reader sees in the built site --------------------------------------------------------
+
+class _Text(HTMLParser):
+    """The text of a page as a browser shows it (no scripts, styles or comments)."""
+
+    def __init__(self) -> None:
+        super().__init__()
+        self.parts: list[str] = []
+        self._skip = 0
+
+    def handle_starttag(self, tag: str, attrs: list[tuple[str, str | None]]) -> None:
+        self._skip += tag in ("script", "style")
+
+    def handle_endtag(self, tag: str) -> None:
+        self._skip -= tag in ("script", "style") and self._skip > 0
+
+    def handle_data(self, data: str) -> None:
+        if not self._skip:
+            self.parts.append(data)
+
+
+def _pages(site: Path) -> list[Path]:
+    return sorted(p for p in site.rglob("*.html") if not {"_static", "_sources"} & set(p.relative_to(site).parts))
+
+
+def _visible_text(page: Path) -> str:
+    parser = _Text()
+    parser.feed(page.read_text(encoding="utf-8"))
+    return "".join(parser.parts)
+
+
+def test_no_dash_is_typeset_before_an_option_name(site: Path) -> None:
+    """``--data-dir`` shows as typed: an en- or em-dash glued to a name is a ``--`` that typography
+    turned into a dash (smartquotes), and breaks when copied."""
+    dash = re.compile(r"(?<![\w\u2013\u2014])[\u2013\u2014](?=[A-Za-z])")
+    found = {}
+    for page in _pages(site):
+        text = _visible_text(page)
+        hits = [text[max(0, m.start() - 20):m.end() + 15] for m in dash.finditer(text)]
+        if hits:
+            found[str(page.relative_to(site))] = hits[:3]
+    assert not found, f"dashes before names: {found}"
+
+
+def test_notes_for_the_tests_are_not_shown(site: Path) -> None:
+    """The line that keeps a block out of the docs tests is for the page's editors only."""
+    shown = [str(p.relative_to(site)) for p in _pages(site) if "Not run by the docs tests" in _visible_text(p)]
+    assert not shown, f"the docs tests' note is visible on {shown}"
+
+
+def test_internal_links_reach_their_targets(site: Path) -> None:
+    """Every link inside the site reaches an existing page and, with a ``#fragment``, an element
+    of that page (the pages' own links and the ``docs/<page>.md#anchor`` mentions turned into
+    links)."""
+    ids: dict[Path, set[str]] = {}
+    broken = []
+    for page in _pages(site):
+        for href in re.findall(r'<a [^>]*href="([^"]+)"', page.read_text(encoding="utf-8")):
+            href = html.unescape(href)
+            if re.match(r"[a-z]+:", href) or href.startswith("//"):
+                continue
+            path, _, fragment = href.partition("#")
+            target = (page.parent / path).resolve() if path else page
+            if target.is_dir():
+                target = target / "index.html"
+            if not target.is_file():
+                broken.append(f"{page.relative_to(site)}: {href}")
+                continue
+            if fragment and target.suffix == ".html":
+                if target not in ids:
+                    ids[target] = _ids(target)
+                if fragment not in ids[target]:
+                    broken.append(f"{page.relative_to(site)}: {href}")
+    assert not broken, f"links to nowhere: {sorted(set(broken))}"
+
+
+# ---- what the pages' sources say -----------------------------------------------------------------
+
+PAGES = page_paths()
+_CTX = click.Context(cli, info_name="posecrb")
+
+
+def _options(command: click.Command) -> set[str]:
+    return {o for p in command.params for o in (*p.opts, *p.secondary_opts)} | {"--help", "-h"}
+
+
+def _every_option(group: click.Command = cli, ctx: click.Context = _CTX) -> set[str]:
+    found = set(_options(group))
+    if isinstance(group, click.Group):
+        for name in group.list_commands(ctx):
+            sub = group.get_command(ctx, name)
+            assert sub is not None
+            found |= _every_option(sub, click.Context(sub, info_name=name, parent=ctx))
+    return found
+
+
+def _unknown_options(words: list[str]) -> list[str]:
+    """The options of ``posecrb WORDS...`` (the words after ``posecrb``) that its command does not
+    have, or the command that does not exist."""
+    command, ctx, path, i = cli, _CTX, ["posecrb"], 0
+    while isinstance(command, click.Group):
+        while i < len(words) and words[i].startswith("-"):
+            if not _is_option(words[i], _options(command)):
+                return [f"{' '.join(path)} {words[i]}"]
+            i += 1
+        if i == len(words) or not re.fullmatch(r"[a-z][a-z0-9-]*", words[i]):
+            return []                   # `posecrb --help`, `posecrb COMMAND`
+        sub = command.get_command(ctx, words[i])
+        if sub is None:
+            return [f"{' '.join(path)} {words[i]}: no such command"]
+        ctx, command = click.Context(sub, info_name=words[i], parent=ctx), sub
+        path.append(words[i])
+        i += 1
+    options = _options(command)
+    return [f"{' '.join(path)} {w}" for w in words[i:]
+            if re.fullmatch(r"--?[A-Za-z][\w-]*(=.*)?", w) and not _is_option(w, options)]
+
+
+def _is_option(word: str, options: set[str]) -> bool:
+    name = word.split("=")[0]
+    # a repeated short flag (-vv) is the count of one
+    return name in options or bool(re.fullmatch(r"-([a-z])\1+", name)) and name[:2] in options
+
+
+def _posecrb_invocations(text: str) -> Iterator[list[str]]:
+    """The words after ``posecrb`` of every posecrb command in a shell line (pipes and lists split)."""
+    for part in re.split(r"\|\||&&|;|\||\$\(|`", text.replace("\\\n", " ")):
+        try:
+            words = shlex.split(part, comments=True)
+        except ValueError:
+            words = part.split()
+        words = [w for w in words if not re.fullmatch(r"[A-Z_]+=\S*", w)]   # VAR=value prefixes
+        if words and words[0] == "posecrb":
+            yield words[1:]
+
+
+def _inline_code(page: Path) -> list[str]:
+    tokens = MarkdownIt("commonmark").parse(page.read_text(encoding="utf-8"))
+    return [c.content for t in tokens if t.type == "inline" for c in t.children or [] if c.type == "code_inline"]
+
+
+# Options of the benchmark scripts, which the performance page quotes by themselves.
+_OTHER_PROGRAMS = {ROOT / "docs" / "performance.md"}
+
+
+@pytest.mark.parametrize("page", PAGES, ids=[str(p.relative_to(ROOT)) for p in PAGES])
+def test_options_named_in_the_docs_exist(page: Path) -> None:
+    """Every ``posecrb`` command in a console block or in inline code names a command and options
+    that ``--help`` lists; an option quoted by itself (`--estimate vertices`) is one of some
+    command."""
+    unknown = []
+    for block in page_blocks(page):
+        if block.lang != "console":
+            continue
+        for line in block.text.replace("\\\n", " ").splitlines():
+            if line.startswith("$ "):
+                for words in _posecrb_invocations(line[2:]):
+                    unknown += _unknown_options(words)
+    every = _every_option()
+    for code in _inline_code(page):
+        for words in _posecrb_invocations(code):
+            unknown += _unknown_options(words)
+        m = re.fullmatch(r"(--[a-z][\w-]*)(?:[ =]\S+)?", code)
+        if m and page not in _OTHER_PROGRAMS and m[1] not in every:
+            unknown.append(f"`{code}`")
+    assert not unknown, f"{page.relative_to(ROOT)}: not in posecrb's --help: {unknown}"
+
+
+_POSECRB_NAME = re.compile(r"\bposecrb\.([A-Za-z_]\w*)")
+
+
+@pytest.mark.parametrize("page", PAGES, ids=[str(p.relative_to(ROOT)) for p in PAGES])
+def test_examples_use_only_the_public_api(page: Path) -> None:
+    """Code a reader copies uses ``posecrb.<name>`` for names of ``posecrb.__all__`` only: the
+    modules inside the package are internal and change without notice."""
+    private = []
+    for block in page_blocks(page):
+        if block.lang == "python":
+            code = [ln.lstrip()[4:] for ln in block.text.splitlines() if ln.lstrip().startswith((">>> ", "... "))]
+        elif block.lang == "console":
+            code = [ln for ln in block.text.splitlines() if ln.startswith("$ ") and "python" in ln]
+        else:
+            continue
+        for line in code:
+            m = re.match(r"\s*from\s+posecrb\s+import\s+\(?([\w ,]+)", line)
+            if m:
+                private += [f"{block.where}: posecrb.{n}" for n in re.findall(r"\w+", m[1])
+                            if n not in posecrb.__all__ and n != "as"]
+                continue
+            for m in re.finditer(r"(?:^|[;\"'\s])(?:from|import)\s+(posecrb(?:\.\w+)+)", line):
+                private.append(f"{block.where}: import of {m[1]}")
+            private += [f"{block.where}: posecrb.{m[1]}" for m in _POSECRB_NAME.finditer(line)
+                        if m[1] not in posecrb.__all__ and not re.search(r"(?:from|import)\s+posecrb\.", line)]
+    assert not private, f"internal names in examples: {private}"
