@@ -87,9 +87,11 @@ def _blocks(text: str) -> list[Block]:
     ("```sh\nls\n```\n", "'sh'"),
     ("```\nls\n```\n", "no language"),
     ("Para.\n\n    indented code\n", "indented code block"),
-    ("*Not run by the docs tests: needs a cluster.*\n\nText.\n", "not followed by a code block"),
-    ("*Not run by the docs tests: needs a cluster.*\n", "not followed by a code block"),
-    ("*Not run by the docs tests because it is slow.*\n\n```console\n$ ls\n```\n", "not in the form"),
+    ("<!-- Not run by the docs tests: needs a cluster. -->\n\nText.\n", "not followed by a code block"),
+    ("<!-- Not run by the docs tests: needs a cluster. -->\n", "not followed by a code block"),
+    ("<!-- Not run by the docs tests because it is slow. -->\n\n```console\n$ ls\n```\n", "not in the form"),
+    # the visible form of earlier versions showed the note to every reader
+    ("*Not run by the docs tests: needs a cluster.*\n\n```console\n$ ls\n```\n", "not in the form"),
     ("```{code-block} python\nx = 1\n```\n", "not allowed"),
     ("```python\nx = 1\n```\n", "must be a doctest"),
     ("```console\nls\n```\n", r"starts with a '\$ ' command"),
@@ -102,7 +104,7 @@ def test_conventions_are_enforced(text: str, message: str) -> None:
 
 
 def test_skip_line_skips_exactly_the_next_block() -> None:
-    blocks = _blocks("*Not run by the docs tests: needs a Dask cluster.*\n\n```console\n$ dask scheduler\n```\n\n"
+    blocks = _blocks("<!-- Not run by the docs tests: needs a Dask cluster. -->\n\n```console\n$ dask scheduler\n```\n\n"
                      "```console\n$ echo hi\nhi\n```\n")
     assert [b.skip for b in blocks] == ["needs a Dask cluster", None]
 
