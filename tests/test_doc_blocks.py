@@ -104,8 +104,8 @@ def test_conventions_are_enforced(text: str, message: str) -> None:
 
 
 def test_skip_line_skips_exactly_the_next_block() -> None:
-    blocks = _blocks("<!-- Not run by the docs tests: needs a Dask cluster. -->\n\n```console\n$ dask scheduler\n```\n\n"
-                     "```console\n$ echo hi\nhi\n```\n")
+    blocks = _blocks("<!-- Not run by the docs tests: needs a Dask cluster. -->\n\n"
+                     "```console\n$ dask scheduler\n```\n\n```console\n$ echo hi\nhi\n```\n")
     assert [b.skip for b in blocks] == ["needs a Dask cluster", None]
 
 
