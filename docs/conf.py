@@ -60,5 +60,6 @@ html_theme_options = {
     "show_toc_level": 2,
     "secondary_sidebar_items": [],
     "show_prev_next": True,
+    "github_url": "https://github.com/posecrb/posecrb",   # where the code is, on every page
 }
 html_sidebars = {"**": ["sidebar-nav-bs", "page-toc"]}   # thinned per page by posecrb_docs

@@ -173,6 +173,13 @@ def test_internal_links_reach_their_targets(site: Path) -> None:
     assert not broken, f"links to nowhere: {sorted(set(broken))}"
 
 
+def test_every_figure_is_shown_by_a_page(site: Path) -> None:
+    """A figure in docs/figures that no page shows is stale or forgotten."""
+    shown = {p.name for p in (site / "_images").iterdir()} if (site / "_images").is_dir() else set()
+    unused = [p.name for p in sorted((ROOT / "docs" / "figures").iterdir()) if p.name not in shown]
+    assert not unused, f"figures no page shows: {unused}"
+
+
 # ---- what the pages' sources say -----------------------------------------------------------------
 
 PAGES = page_paths()
@@ -263,6 +270,16 @@ def test_options_named_in_the_docs_exist(page: Path) -> None:
         if m and page not in _OTHER_PROGRAMS and m[1] not in every:
             unknown.append(f"`{code}`")
     assert not unknown, f"{page.relative_to(ROOT)}: not in posecrb's --help: {unknown}"
+
+
+def test_one_install_story() -> None:
+    """posecrb is not on PyPI: every page installs it from a clone (``pip install .``, with
+    ``'.[extra]'`` for the extras), none by name from a package index."""
+    by_name = re.compile(r"pip install\s+(?:-\S+\s+)*['\"]?posecrb(?:\[|==|>=|['\"\s]|$)", re.M)
+    files = [*PAGES, *sorted((ROOT / "examples").rglob("*.*")), ROOT / "CONTRIBUTING.md"]
+    offenders = [str(f.relative_to(ROOT)) for f in files if f.is_file() and by_name.search(f.read_text("utf-8"))]
+    assert not offenders, f"installs posecrb from an index: {offenders}"
+    assert "git clone https://github.com/posecrb/posecrb" in (ROOT / "docs" / "getting-started.md").read_text("utf-8")
 
 
 _POSECRB_NAME = re.compile(r"\bposecrb\.([A-Za-z_]\w*)")
