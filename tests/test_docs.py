@@ -183,6 +183,17 @@ def test_every_figure_is_shown_by_a_page(site: Path) -> None:
 # ---- what the pages' sources say -----------------------------------------------------------------
 
 PAGES = page_paths()
+
+
+@pytest.mark.parametrize("section", ["tutorials", "howto"])
+def test_section_index_describes_every_page(section: str) -> None:
+    """A section's index lists each of its pages with a line on what it shows, not a bare list."""
+    folder = ROOT / "docs" / section
+    index = (folder / "index.md").read_text(encoding="utf-8")
+    items = re.findall(r"^\* \*\*\[[^]]+\]\(([\w-]+)\.md\)\*\*: (\S.{10,})$", index, re.M)
+    described = {name for name, _ in items}
+    pages = {p.stem for p in folder.glob("*.md")} - {"index"}
+    assert pages <= described, f"docs/{section}/index.md does not describe {sorted(pages - described)}"
 _CTX = click.Context(cli, info_name="posecrb")
 
 
