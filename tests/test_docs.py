@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import html
 import importlib.util
+import json
 import re
 import shlex
 import subprocess
@@ -291,6 +292,46 @@ def test_one_install_story() -> None:
     offenders = [str(f.relative_to(ROOT)) for f in files if f.is_file() and by_name.search(f.read_text("utf-8"))]
     assert not offenders, f"installs posecrb from an index: {offenders}"
     assert "git clone https://github.com/posecrb/posecrb" in (ROOT / "docs" / "getting-started.md").read_text("utf-8")
+
+
+def _dotted(obj: object, key: str) -> object:
+    for part in key.split("."):
+        assert isinstance(obj, dict) and part in obj, f"no key {key}"
+        obj = obj[part]
+    return obj
+
+
+def test_bounds_columns_are_mapped_to_their_json_keys(tmp_path: Path) -> None:
+    """Getting started maps each column of the ``bounds`` table to its JSON key: on one graph,
+    every mapped column is in the table and shows the value of its key (times aside)."""
+    page = (ROOT / "docs" / "getting-started.md").read_text(encoding="utf-8")
+    table = page[page.index("| column | JSON key | what |"):].split("\n\n")[0].splitlines()[2:]
+    pairs = []
+    for row in table:
+        columns, keys = (c.strip() for c in row.strip("|").split("|")[:2])
+        names, key_names = columns.split(", "), re.findall(r"`([\w.]+)`", keys)
+        assert len(names) == len(key_names), row
+        pairs += zip(names, key_names)
+    graph = tmp_path / "g.g2o"
+
+    def posecrb_cli(*args: str) -> str:
+        return subprocess.run([sys.executable, "-m", "posecrb", *args], check=True, capture_output=True,
+                              text=True, cwd=tmp_path).stdout
+
+    posecrb_cli("datasets", "synth", "grid2d", "--poses", "16", "--noise", "0.01", "--seed", "3", "--out", str(graph))
+    row = json.loads(posecrb_cli("bounds", str(graph), "--estimate", "vertices", "--format", "json"))
+    header, _, values = posecrb_cli("bounds", str(graph), "--estimate", "vertices", "--format", "markdown").splitlines()
+    unescape = lambda cell: re.sub(r"\\(.)", r"\1", cell.strip())
+    shown = dict(zip(map(unescape, header.strip("|").split("|")), map(unescape, values.strip("|").split("|"))))
+    assert set(shown) == {name for name, _ in pairs}, "the table's columns and the mapped ones differ"
+    for name, key in pairs:
+        value = _dotted(row, key)
+        if key.startswith("times."):
+            continue
+        if isinstance(value, float):
+            assert float(shown[name]) == pytest.approx(value, rel=1e-4), (name, key)
+        else:
+            assert shown[name] == str(value), (name, key)
 
 
 _POSECRB_NAME = re.compile(r"\bposecrb\.([A-Za-z_]\w*)")
