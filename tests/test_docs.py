@@ -25,7 +25,7 @@ from markdown_it import MarkdownIt
 import posecrb
 from posecrb.cli import cli
 
-from .docblocks import page_blocks, page_paths
+from .docblocks import page_blocks, page_paths, parse_console
 
 ROOT = Path(__file__).resolve().parent.parent
 EXTENSIONS = ("sphinx", "myst_parser", "pydata_sphinx_theme", "numpydoc", "sphinx_click")
@@ -332,6 +332,38 @@ def test_bounds_columns_are_mapped_to_their_json_keys(tmp_path: Path) -> None:
             assert float(shown[name]) == pytest.approx(value, rel=1e-4), (name, key)
         else:
             assert shown[name] == str(value), (name, key)
+
+
+_MESSAGE = re.compile(r"^posecrb: (?:error|usage error|warning):")
+_CSV_HEADER = re.compile(r"[A-Za-z_][\w.]*(?:,[A-Za-z_][\w.]*)+")
+
+
+@pytest.mark.parametrize("page", PAGES, ids=[str(p.relative_to(ROOT)) for p in PAGES])
+def test_outputs_are_shown_verbatim(page: Path) -> None:
+    """Expected output elides (``...``) only what changes from run to run (times, paths, versions,
+    checksums), never a message's reason, part of a table row, or fields of a CSV row."""
+    elided = []
+    for block in page_blocks(page):
+        if block.lang != "console" or block.skip is not None:
+            continue
+        for command in parse_console(block):
+            fields = None
+            for line in command.expected:
+                where = f"{block.where} ({line.strip()[:60]})"
+                if _CSV_HEADER.fullmatch(line.strip()):
+                    fields = line.count(",")
+                elif fields is not None and "," in line and line.count(",") != fields:
+                    elided.append(f"{where}: a CSV row with other fields than its header")
+                if "..." not in line or line.strip() == "...":
+                    continue
+                if _MESSAGE.match(line):
+                    elided.append(f"{where}: a message elided")
+                elif re.match(r"\s*[│┃]", line):
+                    elided.append(f"{where}: a table row elided")
+                elif line.lstrip().startswith("|") and any(
+                        "..." in c and c.strip() != "..." for c in line.strip().strip("|").split("|")):
+                    elided.append(f"{where}: part of a table cell elided")
+    assert not elided, f"{page.relative_to(ROOT)}: output shown as a pattern: {elided}"
 
 
 _POSECRB_NAME = re.compile(r"\bposecrb\.([A-Za-z_]\w*)")
