@@ -166,7 +166,7 @@ def parse_console(block: Block) -> list[Command]:
             cmd = line[2:]
             while cmd.endswith("\\") and i + 1 < len(lines):
                 i += 1
-                cmd = cmd[:-1] + "\n" + lines[i]
+                cmd += "\n" + lines[i]      # bash reads the backslash-newline as a continuation
             commands.append(Command(block.line + 1 + first, cmd))
         elif not commands:
             if line.strip():

@@ -112,8 +112,13 @@ def test_skip_line_skips_exactly_the_next_block() -> None:
 def test_console_commands_and_exit_codes() -> None:
     (block,) = _blocks("```console\n$ echo a \\\n  b\na b\n$ false\n[exit 1]\n```\n")
     first, second = parse_console(block)
-    assert first.command == "echo a \n  b" and first.expected == ["a b"] and first.exit_code == 0
+    assert first.command == "echo a \\\n  b" and first.expected == ["a b"] and first.exit_code == 0
     assert second.command == "false" and second.expected == [] and second.exit_code == 1
+
+
+def test_continued_command_runs_as_one(tmp_path: Path) -> None:
+    (block,) = _blocks("```console\n$ echo a \\\n  b\na b\n```\n")
+    assert list(run_console(block, tmp_path)) == []
 
 
 def test_console_block_runs_and_reports_mismatches(tmp_path: Path) -> None:
