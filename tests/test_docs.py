@@ -119,6 +119,26 @@ class _Text(HTMLParser):
             self.parts.append(data)
 
 
+class _UnlinkedText(_Text):
+    """The visible text outside links and code."""
+
+    def __init__(self) -> None:
+        super().__init__()
+        self._out = 0
+
+    def handle_starttag(self, tag: str, attrs: list[tuple[str, str | None]]) -> None:
+        super().handle_starttag(tag, attrs)
+        self._out += tag in ("a", "code", "pre")
+
+    def handle_endtag(self, tag: str) -> None:
+        super().handle_endtag(tag)
+        self._out -= tag in ("a", "code", "pre") and self._out > 0
+
+    def handle_data(self, data: str) -> None:
+        if not self._out:
+            super().handle_data(data)
+
+
 def _pages(site: Path) -> list[Path]:
     return sorted(p for p in site.rglob("*.html") if not {"_static", "_sources"} & set(p.relative_to(site).parts))
 
@@ -146,6 +166,35 @@ def test_notes_for_the_tests_are_not_shown(site: Path) -> None:
     """The line that keeps a block out of the docs tests is for the page's editors only."""
     shown = [str(p.relative_to(site)) for p in _pages(site) if "Not run by the docs tests" in _visible_text(p)]
     assert not shown, f"the docs tests' note is visible on {shown}"
+
+
+def test_pages_named_in_running_text_are_links(site: Path) -> None:
+    """``see docs/performance.md`` in a docstring or a --help text is a link in the site."""
+    named = {}
+    for page in _pages(site):
+        parser = _UnlinkedText()
+        parser.feed(page.read_text(encoding="utf-8"))
+        hits = re.findall(r"docs/[\w/-]+\.md\S*", "".join(parser.parts))
+        if hits:
+            named[str(page.relative_to(site))] = hits[:3]
+    assert not named, f"pages named but not linked: {named}"
+
+
+def test_table_output_fits_the_column(site: Path) -> None:
+    """From a 1400 px window on, a code block's table rows fit the content column without
+    scrolling (posecrb_docs.TABLE_CHARS at the code font, WIDE_TABLE_CHARS at the smaller font of
+    wide tables); other long lines wrap (docs/_static/posecrb.css)."""
+    sys.path.insert(0, str(ROOT / "docs" / "_ext"))
+    from posecrb_docs import TABLE_CHARS, WIDE_TABLE_CHARS, table_rows
+    too_wide = []
+    block = re.compile(r'<div class="([^"]*)"><div class="highlight"><pre>(.*?)</pre>', re.S)
+    for page in _pages(site):
+        for m in block.finditer(page.read_text(encoding="utf-8")):
+            rows = table_rows(html.unescape(re.sub(r"<[^>]+>", "", m[2])))
+            limit = WIDE_TABLE_CHARS if "posecrb-wide" in m[1].split() else TABLE_CHARS
+            if rows and max(map(len, rows)) > limit:
+                too_wide.append(f"{page.relative_to(site)}: {max(map(len, rows))} > {limit}: {rows[0][:50]}")
+    assert not too_wide, f"tables wider than the column: {too_wide}"
 
 
 def test_internal_links_reach_their_targets(site: Path) -> None:

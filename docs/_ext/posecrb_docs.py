@@ -15,6 +15,8 @@ and anchor in the site.
 The one sidebar (conf.py) shows the section's pages and the page's contents; a page outside any
 section, or without sections of its own, gets only what it has, so no sidebar is an empty heading.
 
+Every figure links to its full-size image.
+
 A code block that shows a table (box drawing, or markdown's ``|---|`` rule) gets the class
 ``posecrb-table``: the site's CSS wraps long lines of other blocks and lets only tables scroll.
 """
@@ -135,18 +137,48 @@ def _ancestors(node: nodes.Node) -> list[nodes.Node]:
     return out
 
 
-_TABLE_LINE = re.compile(r"^\s*(?:[┏┃┡│└┌├╭╰]|\|?\s*-{3,}\s*\|)", re.M)
+_TABLE_ROW = re.compile(r"^\s*(?:[┏┃┡┗│└┌├╭╰]|\|)|\s\|\s|-{3}\|")
+# Characters of code per line in the content column at a 1400 px window (a 15 px scrollbar
+# included): 122 at the theme's code font (14 px), 148 at the smaller font of wide tables
+# (0.72rem); measured in Chromium. The limits keep a margin.
+TABLE_CHARS = 120
+WIDE_TABLE_CHARS = 145
+
+
+def table_rows(text: str) -> list[str]:
+    """The lines of a code block that belong to a printed table (box drawing or markdown pipes;
+    a ``$`` command line is not one, whatever it pipes through)."""
+    return [ln for ln in text.splitlines() if not ln.startswith("$ ") and _TABLE_ROW.search(ln)]
 
 
 class CodeTables(Transform):
-    """Class ``posecrb-table`` on code blocks that print a table, so that their columns stay aligned."""
+    """Class ``posecrb-table`` on code blocks that print a table: below a 1400 px window their
+    lines do not wrap, so that the columns stay aligned (the block scrolls instead). A table whose
+    rows are longer than the column holds at the normal font also gets ``posecrb-wide``, a
+    smaller font."""
 
     default_priority = 800
 
     def apply(self, **kwargs: Any) -> None:
         for block in self.document.findall(nodes.literal_block):
-            if _TABLE_LINE.search(block.astext()):
+            rows = table_rows(block.astext())
+            if rows:
                 block["classes"].append("posecrb-table")
+                if max(map(len, rows)) > TABLE_CHARS:
+                    block["classes"].append("posecrb-wide")
+
+
+class FullSizeFigures(Transform):
+    """Every figure links to its full-size image (Sphinx does so for an image with a scale): a
+    figure shrunk to a narrow column opens at its own size, legend readable, on a click."""
+
+    default_priority = 800
+
+    def apply(self, **kwargs: Any) -> None:
+        for image in self.document.findall(nodes.image):
+            sized = {"scale", "width", "height"} & set(image.attributes)
+            if not sized and not isinstance(image.parent, nodes.reference):
+                image["scale"] = 100
 
 
 def drop_empty_sidebars(app: Sphinx, pagename: str, templatename: str, context: dict[str, Any],
@@ -172,5 +204,6 @@ def setup(app: Sphinx) -> dict[str, Any]:
     app.add_directive("posecrb-api", PublicApi)
     app.add_transform(HtmlAnchors)
     app.add_transform(CodeTables)
+    app.add_transform(FullSizeFigures)
     app.add_post_transform(DocsPathLinks)
     return {"parallel_read_safe": True, "parallel_write_safe": True}
