@@ -101,50 +101,32 @@ def test_every_page_is_built(site: Path) -> None:
 # ---- what a reader sees in the built site --------------------------------------------------------
 
 class _Text(HTMLParser):
-    """The text of a page as a browser shows it (no scripts, styles or comments)."""
+    """The text of a page as a browser shows it (no scripts, styles or comments), leaving out what
+    is inside the tags ``outside`` (links, code)."""
 
-    def __init__(self) -> None:
+    def __init__(self, outside: tuple[str, ...] = ()) -> None:
         super().__init__()
         self.parts: list[str] = []
-        self._skip = 0
+        self._outside = ("script", "style", *outside)
+        self._depth = 0
 
     def handle_starttag(self, tag: str, attrs: list[tuple[str, str | None]]) -> None:
-        self._skip += tag in ("script", "style")
+        self._depth += tag in self._outside
 
     def handle_endtag(self, tag: str) -> None:
-        self._skip -= tag in ("script", "style") and self._skip > 0
+        self._depth -= tag in self._outside and self._depth > 0
 
     def handle_data(self, data: str) -> None:
-        if not self._skip:
+        if not self._depth:
             self.parts.append(data)
-
-
-class _UnlinkedText(_Text):
-    """The visible text outside links and code."""
-
-    def __init__(self) -> None:
-        super().__init__()
-        self._out = 0
-
-    def handle_starttag(self, tag: str, attrs: list[tuple[str, str | None]]) -> None:
-        super().handle_starttag(tag, attrs)
-        self._out += tag in ("a", "code", "pre")
-
-    def handle_endtag(self, tag: str) -> None:
-        super().handle_endtag(tag)
-        self._out -= tag in ("a", "code", "pre") and self._out > 0
-
-    def handle_data(self, data: str) -> None:
-        if not self._out:
-            super().handle_data(data)
 
 
 def _pages(site: Path) -> list[Path]:
     return sorted(p for p in site.rglob("*.html") if not {"_static", "_sources"} & set(p.relative_to(site).parts))
 
 
-def _visible_text(page: Path) -> str:
-    parser = _Text()
+def _visible_text(page: Path, outside: tuple[str, ...] = ()) -> str:
+    parser = _Text(outside)
     parser.feed(page.read_text(encoding="utf-8"))
     return "".join(parser.parts)
 
@@ -172,12 +154,23 @@ def test_pages_named_in_running_text_are_links(site: Path) -> None:
     """``see docs/performance.md`` in a docstring or a --help text is a link in the site."""
     named = {}
     for page in _pages(site):
-        parser = _UnlinkedText()
-        parser.feed(page.read_text(encoding="utf-8"))
-        hits = re.findall(r"docs/[\w/-]+\.md\S*", "".join(parser.parts))
+        hits = re.findall(r"docs/[\w/-]+\.md\S*", _visible_text(page, ("a", "code", "pre")))
         if hits:
             named[str(page.relative_to(site))] = hits[:3]
     assert not named, f"pages named but not linked: {named}"
+
+
+@pytest.mark.xfail(strict=True, reason="posecrb/incremental/result.py:152, TimelineResult's docstring, "
+                   "writes ``first``..``last``, which reST cannot parse: '``first`` to ``last``'")
+def test_no_raw_markup_in_the_reference(site: Path) -> None:
+    """Docstrings render: no reST markup (``literal``, :role:) shows as typed in the reference."""
+    raw = {}
+    for page in sorted((site / "reference").glob("*.html")):
+        text = _visible_text(page, ("code", "pre"))
+        hits = [text[max(0, m.start() - 30):m.end() + 30] for m in re.finditer(r"``|:(?:py:)?\w+:`", text)]
+        if hits:
+            raw[page.name] = hits[:3]
+    assert not raw, f"raw reST in the reference: {raw}"
 
 
 def test_table_output_fits_the_column(site: Path) -> None:

@@ -17,8 +17,10 @@ section, or without sections of its own, gets only what it has, so no sidebar is
 
 Every figure links to its full-size image.
 
-A code block that shows a table (box drawing, or markdown's ``|---|`` rule) gets the class
-``posecrb-table``: the site's CSS wraps long lines of other blocks and lets only tables scroll.
+A code block that prints a table (box drawing, or markdown's pipes) gets the class
+``posecrb-table``, and ``posecrb-wide`` when its rows need a smaller font to fit the column: the
+site's CSS (docs/_static/posecrb.css) wraps the long lines of other blocks, and keeps a table's
+columns aligned.
 """
 from __future__ import annotations
 
