@@ -300,7 +300,9 @@ def _inline_code(page: Path) -> list[str]:
 
 
 # Options of the benchmark scripts, which the performance page quotes by themselves.
-_OTHER_PROGRAMS = {ROOT / "docs" / "performance.md"}
+# Pages that quote the options of other programs by themselves: the benchmark scripts (the
+# performance page) and the study scripts the decision notes record.
+_OTHER_PROGRAMS = {ROOT / "docs" / "performance.md", *(ROOT / "docs" / "decisions").glob("*.md")}
 
 
 @pytest.mark.parametrize("page", PAGES, ids=[str(p.relative_to(ROOT)) for p in PAGES])
