@@ -1,16 +1,18 @@
-"""Noisy 2D/3D grid pose graphs for the scaling benchmarks, written as g2o files and cached.
+"""Noisy 2D/3D grid pose graphs (and 2D chains) for the scaling benchmarks, written as g2o files and cached.
 
 A grid of N poses is the full lattice of side ceil(N^(1/d)) (so 10^5 2D poses -> 317^2 = 100,489,
 2*10^4 3D poses -> 28^3 = 21,952) walked in boustrophedon order with a loop closure between every
 pair of lattice neighbours (posecrb.sim.generators.grid), measurements perturbed by the paper's noise model
 with translation std SIGMA and rotation angle std SIGMA (tau = 1/SIGMA^2, kappa = 1/(2 SIGMA^2),
 as `posecrb datasets synth --noise SIGMA`), noise drawn from numpy.random.default_rng(SEED).
-``--exact`` keeps the pose count as given (the walk is truncated).
+``--exact`` keeps the pose count as given (the walk is truncated). ``chain_file`` (``--chain``): a 2D
+chain of N poses, odometry only (unit steps, heading a random walk of 0.1 rad steps), with the same
+noise model: the longest sums of the timeline for its size.
 
 Files go to $POSECRB_BENCH_CACHE or ~/.cache/posecrb-bench (written to a temporary name and
 renamed by posecrb's g2o writer) and are reused when present.
 
-Usage: python benchmarks/grids.py DIM POSES [--sigma 0.05] [--seed 0] [--exact] [--cache-dir DIR]
+Usage: python benchmarks/grids.py DIM POSES [--sigma 0.05] [--seed 0] [--exact | --chain] [--cache-dir DIR]
 """
 from __future__ import annotations
 
@@ -70,6 +72,37 @@ def grid_file(dim: int, poses: int, sigma: float = DEFAULT_SIGMA, seed: int = 0,
     return path
 
 
+def chain_file(poses: int, sigma: float = DEFAULT_SIGMA, seed: int = 0,
+               directory: str | os.PathLike | None = None) -> Path:
+    """Path of the cached g2o file of a noisy 2D chain of ``poses`` poses, generated first when absent."""
+    out_dir = cache_dir(directory)
+    path = out_dir / f"chain2d_n{poses}_sigma{sigma:g}_seed{seed}.g2o"
+    if path.is_file():
+        return path
+    import numpy as np
+
+    from posecrb.core.graph import PoseGraph
+    from posecrb.core.noise import isotropic_information
+    from posecrb.io import write_g2o
+    from posecrb.lie.se import relative_poses
+    from posecrb.lie.so import so2_exp
+    from posecrb.sim.sampling import isotropic_noise
+
+    out_dir.mkdir(parents=True, exist_ok=True)
+    rng = np.random.default_rng(seed)
+    yaw = np.cumsum(rng.normal(0.0, 0.1, poses))
+    trans = np.cumsum(np.stack([np.cos(yaw), np.sin(yaw)], axis=1), axis=0)
+    src, dst = np.arange(poses - 1), np.arange(1, poses)
+    tau = np.full(poses - 1, 1.0 / sigma ** 2)
+    rot, rel = relative_poses(so2_exp(yaw), trans, src, dst)
+    rot, rel = isotropic_noise(rot, rel, tau, tau / 2.0, 2, rng)
+    graph = PoseGraph(dim=2, ids=np.arange(poses), src=src, dst=dst, rot=rot, trans=rel,
+                      info=isotropic_information(tau, tau / 2.0, 2), vertex_rot=so2_exp(yaw), vertex_trans=trans,
+                      format="synthetic")
+    write_g2o(graph, path)
+    return path
+
+
 def count_edges(path: Path) -> int:
     with open(path, "rb") as fh:
         return sum(1 for line in fh if line.startswith(b"EDGE"))
@@ -82,11 +115,18 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--sigma", type=float, default=DEFAULT_SIGMA)
     ap.add_argument("--seed", type=int, default=0)
     ap.add_argument("--exact", action="store_true", help="exactly POSES poses (truncated walk)")
+    ap.add_argument("--chain", action="store_true", help="a 2D chain of POSES poses instead (DIM must be 2)")
     ap.add_argument("--cache-dir", default=None)
     args = ap.parse_args(argv)
     t0 = time.perf_counter()
-    path = grid_file(args.dim, args.poses, args.sigma, args.seed, args.exact, args.cache_dir)
-    print(f"{path}  ({grid_poses(args.dim, args.poses, args.exact)} poses, {count_edges(path)} edges, "
+    if args.chain:
+        if args.dim != 2:
+            ap.error("--chain makes 2D chains")
+        path = chain_file(args.poses, args.sigma, args.seed, args.cache_dir)
+    else:
+        path = grid_file(args.dim, args.poses, args.sigma, args.seed, args.exact, args.cache_dir)
+    n = args.poses if args.chain else grid_poses(args.dim, args.poses, args.exact)
+    print(f"{path}  ({n} poses, {count_edges(path)} edges, "
           f"{path.stat().st_size / 2**20:.1f} MiB; {time.perf_counter() - t0:.2f} s)")
     return 0
 

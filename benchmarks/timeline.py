@@ -15,9 +15,13 @@ at one, and the load average before and after.
 
 Graphs: city10000 (2D), sphere2500 (3D) and the 2D grid of 10^5 poses of benchmarks/grids.py
 (317^2 = 100,489 poses, generated and cached on first use) unless named on the command line.
+``--chain N`` runs a noisy 2D chain of N poses instead (benchmarks/grids.py, cached; with any FILE
+named): ``--chain 2000000``
+is the case where the drift tolerance must follow the rounding of sums of millions of terms
+(docs/design.md#timeline); use ``--repeat 1`` there.
 
 Usage: python benchmarks/timeline.py [--repeat K] [--format json|table] [--data-dir DIR] [--posecrb CMD]
-                                     [--threads T] [FILE ...]
+                                     [--threads T] [--chain N] [FILE ...]
 """
 from __future__ import annotations
 
@@ -38,7 +42,7 @@ from _common import (
     process_parser,
     run_process,
 )
-from grids import grid_file
+from grids import chain_file, grid_file
 
 TARGET = 3.0
 
@@ -53,15 +57,18 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--format", default="table", choices=("json", "table"),
                     help="output format of both commands: table (their default; the timeline's summary) or "
                          "json (every row and loop closure) [default: table]")
+    ap.add_argument("--chain", type=int, action="append", default=[], metavar="N",
+                    help="a noisy 2D chain of N poses, instead of the default graphs (repeatable)")
     args = ap.parse_args(argv)
     env = child_env(args.threads)
     cmd = posecrb_command(args.posecrb)
-    if args.files:
+    if args.files or args.chain:
         files = [Path(f) for f in args.files]
     else:
         d = data_dir(args.data_dir)
         files = [p for p in ((d / "city10000.g2o") if d else None, (d / "sphere2500.g2o") if d else None) if p]
         files.append(grid_file(2, 100000))
+    files += [chain_file(n) for n in args.chain]
     print_header("posecrb timeline (every step, --estimate none) vs one bounds --estimate none --repeat 1, "
                  "whole process", args.threads,
                  [f"posecrb = {' '.join(cmd)}", f"median of {args.repeat} alternating rounds after one warm-up each"])
