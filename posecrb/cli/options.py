@@ -10,7 +10,7 @@ from typing import TYPE_CHECKING, Any
 import click
 
 from ..core.errors import UsageError
-from ..core.integers import INT64_MAX, INT64_MIN, IntegerError, check_int, parse_int, shown
+from ..core.integers import INT64_MAX, IntegerError, check_int, parse_int, shown
 from ..core.timing import AUTO, Repeat, Timing, measure
 from ..datasets import search as datasets
 from .paths import InputDir, InputFile
@@ -72,8 +72,7 @@ class PlainInt(click.IntRange):
     def convert(self, value, param, ctx):
         if isinstance(value, str):
             try:
-                value = parse_int(value, lo=INT64_MIN if self.min is None else self.min,
-                                  hi=INT64_MAX if self.max is None else self.max)
+                value = parse_int(value)          # int64 (no int() of thousands of digits); click checks the range
             except IntegerError as exc:
                 self.fail(f"{shown(value)} {exc}", param, ctx)
         return super().convert(value, param, ctx)
