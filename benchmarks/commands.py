@@ -10,7 +10,8 @@ Groups (each written to OUT/GROUP.json; ``--groups`` picks some):
             most 15 s, certified), ``posecrb bounds --estimate vertices --format json`` of the 3D grid
             (wall at most 1.5x the sum of the stage times it reports + 1.5 s).
   timeline  ``posecrb timeline FILE --estimate none`` against one ``posecrb bounds FILE --estimate
-            none --repeat 1`` (goal: at most 3x) on city10000, sphere2500 and the 2D grid of 10^5 poses.
+            none --repeat 1`` (goal: at most 3x) on city10000, sphere2500, the 2D grid of 10^5 poses
+            and the 2D chain of 2,000,000 poses (the longest sums the drift check compares).
   threads   ``posecrb solve`` of the 2D grid of 10^5 poses and ``posecrb fim --estimate vertices`` of
             the 3D grid of 2*10^4 poses as posecrb runs them (its own thread policy) against every
             BLAS/OpenMP pool held at one thread (OPENBLAS_NUM_THREADS=1 and the like).
@@ -68,7 +69,8 @@ def goals(group: harness.Group) -> None:
 
 
 def timeline(group: harness.Group) -> None:
-    names = ("grid2d-400",) if group.options.quick else ("city10000", "sphere2500", "grid2d-100000")
+    names = ("grid2d-400", "chain2d-2000") if group.options.quick else \
+        ("city10000", "sphere2500", "grid2d-100000", "chain2d-2000000")
     for name, path in harness.found("timeline", names):
         file = str(path)
         group.compare(name, [

@@ -13,6 +13,10 @@ every pair of lattice neighbours, measurement noise of std 0.05 in translation a
 (tau = 400, kappa = 200), seed 0. They are written once to ``$POSECRB_BENCH_CACHE`` (default
 ``~/.cache/posecrb-bench``) and reused. ``python benchmarks/suite/inputs.py grid3d-20000`` prints
 the path of one (generating it first).
+
+Chains (``chain2d-N``): a 2D odometry chain of N poses, unit steps with the heading a random walk of
+0.1 rad steps, the same noise model (std 0.05, seed 0): the longest sums the timeline's drift check
+compares for its size (the timeline of 2,000,000 poses against one ``bounds`` of the same file).
 """
 from __future__ import annotations
 
@@ -33,6 +37,7 @@ SESYNC_DATASETS = ("CSAIL", "MIT", "intel", "kitti_05", "manhattan", "kitti_02",
 EDGES_ONLY = frozenset({"CSAIL", "manhattan", "kitti_00", "kitti_02", "kitti_05"})
 
 _GRID = re.compile(r"^grid([23])d-(\d+)$")
+_CHAIN = re.compile(r"^chain2d-(\d+)$")
 
 
 def size() -> str:
@@ -113,13 +118,42 @@ def grid_file(dim: int, poses: int) -> Path:
     return path
 
 
+def chain_file(poses: int) -> Path:
+    """The cached g2o file of the noisy 2D chain of ``poses`` poses (module docstring), made first when
+    absent: measurements drawn with numpy alone (translation N(0, SIGMA^2), angle N(0, SIGMA^2)), the
+    information ``diag(1/SIGMA^2, 1/SIGMA^2, 1/SIGMA^2)`` written with every edge."""
+    import numpy as np
+
+    path = cache_dir() / f"chain2d_n{poses}_sigma{SIGMA:g}_seed{SEED}.g2o"
+    if path.is_file():
+        return path
+    rng = np.random.default_rng(SEED)
+    turn = rng.normal(0.0, 0.1, poses - 1)
+    dx = 1.0 + rng.normal(0.0, SIGMA, poses - 1)
+    dy = rng.normal(0.0, SIGMA, poses - 1)
+    dth = turn + rng.normal(0.0, SIGMA, poses - 1)
+    info = 1.0 / SIGMA ** 2
+    ids = np.arange(poses - 1)
+    rows = np.column_stack([ids, ids + 1, dx, dy, dth])
+    text = "\n".join(f"EDGE_SE2 {int(a)} {int(b)} {x:.17g} {y:.17g} {t:.17g} {info:g} 0 0 {info:g} 0 {info:g}"
+                     for a, b, x, y, t in rows.tolist())
+    path.parent.mkdir(parents=True, exist_ok=True)
+    tmp = path.with_name(f".{path.name}.{os.getpid()}.tmp")
+    tmp.write_text(text + "\n")
+    tmp.replace(path)
+    return path
+
+
 def path(name: str) -> Path:
-    """The file of an input: a grid (generated when absent) or a dataset of the data directory.
+    """The file of an input: a grid or a chain (generated when absent) or a dataset of the data directory.
 
     Raises ``NotImplementedError`` (asv's "skip this benchmark") for a dataset that is not there."""
     spec = grid_spec(name)
     if spec is not None:
         return grid_file(*spec)
+    chain = _CHAIN.match(name)
+    if chain is not None:
+        return chain_file(int(chain.group(1)))
     directory = data_dir()
     if directory is None:
         raise NotImplementedError(f"{name}: no data directory (set POSECRB_DATA)")
@@ -134,6 +168,8 @@ def dimension(name: str) -> int:
     spec = grid_spec(name)
     if spec is not None:
         return spec[0]
+    if _CHAIN.match(name):
+        return 2
     with open(path(name), "rb") as fh:
         for line in fh:
             if line.startswith(b"EDGE_SE3") or line.startswith(b"VERTEX_SE3"):

@@ -25,6 +25,7 @@ from ..linalg.cholesky import Factor
 from ..linalg.ordering import threaded_matrix
 from ..linalg.threads import cholmod_threads, solver_threads
 from .chordal import chordal_rotations
+from .poses import checked_poses
 from .problem import Problem, RotationBlockFactor
 from .rounding import anchor_estimate, recover_translations, round_rotations, se_objective
 from .staircase import PRECONDITIONERS, RelaxedModel, escape, verify
@@ -129,6 +130,12 @@ class SolveResult(Result):
     rot: np.ndarray = array_field()
     trans: np.ndarray = array_field()
     ids: np.ndarray = array_field()
+
+    def __post_init__(self) -> None:
+        # the one check of poses entering the library, also when ``load`` reads them from a file
+        rot, trans = checked_poses(self.rot, self.trans)
+        object.__setattr__(self, "rot", rot)
+        object.__setattr__(self, "trans", trans)
 
     def statuses(self) -> dict[str, Status]:
         """``{"certificate": ..., "duality gap": ...}``: a warning when the estimate is not certified,
