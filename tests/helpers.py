@@ -56,6 +56,16 @@ def random_pose_graph(n: int, dim: int, rng: np.random.Generator, *, loop_closur
     return graph, rot, trans
 
 
+def objective_loop(graph: PoseGraph, rot, trans) -> float:
+    """F(R, t) edge by edge, written independently of the package."""
+    total = 0.0
+    for e in range(graph.m):
+        i, j = graph.src[e], graph.dst[e]
+        total += graph.kappa[e] * np.sum((rot[j] - rot[i] @ graph.rot[e]) ** 2)
+        total += graph.tau[e] * np.sum((trans[j] - trans[i] - rot[i] @ graph.trans[e]) ** 2)
+    return float(total)
+
+
 def random_rotations(rng: np.random.Generator, k: int, dim: int) -> np.ndarray:
     if dim == 2:
         return so2_exp(rng.uniform(-np.pi, np.pi, k))

@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 
 from posecrb.solver.problem import Problem
-from posecrb.solver.staircase import RelaxedModel
+from posecrb.solver.relaxed import RelaxedProblem
 from posecrb.solver.stiefel import project, random_point, remove_vertical, retract
 
 from .helpers import random_pose_graph
@@ -61,7 +61,7 @@ def test_gradient_and_hessian_vs_finite_differences(dim):
     rng = np.random.default_rng(20 + dim)
     g, _, _ = random_pose_graph(10, dim, rng, rot_noise=0.2, trans_noise=0.3)
     p = Problem.from_graph(g)
-    model = RelaxedModel(p)
+    model = RelaxedProblem(p)
     r = dim + 1
     Z = random_point(g.n, dim, r, rng)
     s = model.evaluate(Z)

@@ -13,26 +13,20 @@ from posecrb.io import load
 from posecrb.lie.so import so2_exp, so_project
 from posecrb.sim.generators import uniform_rotations
 from posecrb.solver import solve
+from posecrb.solver.certificate import verify
+from posecrb.solver.policy import PreconditionerPolicy
+from posecrb.solver.preconditioners import AdaptivePreconditioner, BasePreconditioner
 from posecrb.solver.problem import Problem
-from posecrb.solver.staircase import RelaxedModel, _next_escape_step, verify
+from posecrb.solver.relaxed import RelaxedProblem
+from posecrb.solver.staircase import _next_escape_step
 from posecrb.solver.stiefel import lift, random_point, retract
 from posecrb.solver.trust_region import TROptions, trust_region
 
-from .helpers import SESYNC_STOP, drop_edges, print_rounding, random_pose_graph, record_factor_full
+from .helpers import SESYNC_STOP, drop_edges, objective_loop, print_rounding, random_pose_graph, record_factor_full
 from .numerics import EPS, MARGIN, objective_atol, suboptimality_bound
 
 # SE-Sync C++ reference optima.
 REFERENCE = {"CSAIL": 31.703715992, "tinyGrid3D": 18.519386873, "smallGrid3D": 1025.3980207}
-
-
-def objective_loop(graph: PoseGraph, rot, trans) -> float:
-    """F(R, t) edge by edge, written independently of the package."""
-    total = 0.0
-    for e in range(graph.m):
-        i, j = graph.src[e], graph.dst[e]
-        total += graph.kappa[e] * np.sum((rot[j] - rot[i] @ graph.rot[e]) ** 2)
-        total += graph.tau[e] * np.sum((trans[j] - trans[i] - rot[i] @ graph.trans[e]) ** 2)
-    return float(total)
 
 
 @pytest.mark.parametrize("dim", [2, 3])
@@ -59,7 +53,7 @@ def test_random_local_solves_never_beat_certified(dim):
     assert best.objective == pytest.approx(objective_loop(g, best.rot, best.trans), rel=MARGIN * g.m * EPS)
     assert best.duality_gap >= -1e-9 * max(1.0, best.objective)
     p = Problem.from_graph(g)
-    model = RelaxedModel(p)
+    model = RelaxedProblem(p)
     for seed in range(12):
         # local optimisation on SO(d)^n-sized Stiefel (r = d), from random rotations
         R0 = uniform_rotations(g.n, dim, np.random.default_rng(seed))
@@ -79,7 +73,7 @@ def test_certificate_iff_lambda_min_above_tolerance():
     rng = np.random.default_rng(7)
     g, _, _ = random_pose_graph(12, 2, rng, rot_noise=0.5, trans_noise=0.5)
     p = Problem.from_graph(g)
-    model = RelaxedModel(p)
+    model = RelaxedProblem(p)
     points = [model.evaluate(random_point(g.n, 2, 3, np.random.default_rng(s))) for s in range(3)]
     res = solve(g)
     points.append(model.evaluate(lift(np.ascontiguousarray(np.swapaxes(res.rot, 1, 2)), 3)))
@@ -92,7 +86,7 @@ def test_certificate_iff_lambda_min_above_tolerance():
             S[2 * i:2 * i + 2, 2 * i:2 * i + 2] -= state.lam[i]
         exact = np.linalg.eigvalsh(0.5 * (S + S.T))[0]
         for tol in (1e-6, 1e-3, 1e-1, 10.0):
-            cert = verify(p, state, tol, np.random.default_rng(0))
+            cert = verify(p, state.lam, tol, np.random.default_rng(0))
             assert cert.certified == (cert.lambda_min >= -tol)
             assert cert.certified == (exact >= -tol)
             if not cert.certified:
@@ -131,7 +125,7 @@ def test_escape_path_is_even_in_the_step(dim):
     a random graph at a random point (the odd part is rounding, not a^3)."""
     rng = np.random.default_rng(11)
     g, _, _ = random_pose_graph(15, dim, rng, rot_noise=0.3, trans_noise=0.3)
-    model = RelaxedModel(Problem.from_graph(g))
+    model = RelaxedProblem(Problem.from_graph(g))
     Zp = lift(random_point(g.n, dim, dim + 1, rng), dim + 2)
     direction = np.zeros_like(Zp)
     direction[:, :, dim + 1] = rng.standard_normal((g.n, dim))
@@ -284,7 +278,7 @@ def test_non_orthogonal_measurements_use_sesync_objective(dim):
     g = replace(g0, rot=_eigen_like(g0.rot, 1 + 0.02 * rng.standard_normal(g0.m)))
     p = Problem.from_graph(g)
     assert p.defect_edges.size == g.m
-    model = RelaxedModel(p)
+    model = RelaxedProblem(p)
     Z = random_point(g.n, dim, dim + 2, np.random.default_rng(1))
     state = model.evaluate(Z)
     assert state.f == pytest.approx(relaxed_value_dense(g, Z), rel=1e-12)
@@ -319,21 +313,29 @@ def test_zero_padding_stays_zero_so_the_first_level_runs_at_width_d(dim):
     R0 = np.ascontiguousarray(np.swapaxes(uniform_rotations(g.n, dim, rng), 1, 2))
     runs = []
     for width in (dim, dim + 1, dim + 2):
-        base = p.factor_full(None, p.gershgorin_max() / 1e6, name="base")
-        model = RelaxedModel(p, base, adaptive_shift=1e-10 * p.gershgorin_max(), refactor_hvps=2)
-        res = trust_region(model, lift(R0, width), TROptions(max_iterations=100))
+        policy = _adaptive_policy(p, refactor_hvps=2)
+        res = trust_region(RelaxedProblem(p), lift(R0, width), TROptions(max_iterations=100), preconditioner=policy)
         assert not np.any(res.state.Z[:, :, dim:])
         runs.append(res)
     for res in runs[1:]:
         assert (res.iterations, res.hvps) == (runs[0].iterations, runs[0].hvps)
         assert res.state.f == pytest.approx(runs[0].state.f, rel=MARGIN * g.m * EPS)
-        assert model.factorizations > 1       # the adaptive factor was rebuilt on the way
+        assert policy.adaptive is not None and policy.adaptive.factorizations > 1   # rebuilt on the way
 
 
-def _winding_saddle(**model_options):
+def _adaptive_policy(p: Problem, refactor_hvps: int | None = 30) -> PreconditionerPolicy:
+    """SE-Sync's base preconditioner (Q + delta I)^{-1} at delta = 1e-6 of the Gershgorin bound and
+    the adaptive (Q - Lambda + s I)^{-1} at s = 1e-10 of it, as solve builds them without the
+    tangent preconditioner."""
+    base = BasePreconditioner(p, p.gershgorin_max() / 1e6, "schur")
+    return PreconditionerPolicy(p, base=base, adaptive=AdaptivePreconditioner(p, 1e-10 * p.gershgorin_max()),
+                                refactor_hvps=refactor_hvps)
+
+
+def _winding_saddle(refactor_hvps: int | None = 30):
     """A 16-pose 2D cycle with zero relative motion, started from rotations that wind once around
-    it: the trust region stops at a saddle of the rank-2 problem. Returns (problem, s, base
-    factor, model, the saddle's state, its certificate)."""
+    it: the trust region stops at a saddle of the rank-2 problem. Returns (problem, s, the
+    relaxation, its preconditioner policy, the saddle's state, its certificate)."""
     n = 16
     src = np.arange(n)
     dst = (np.arange(n) + 1) % n
@@ -342,34 +344,34 @@ def _winding_saddle(**model_options):
     g = PoseGraph(dim=2, ids=np.arange(n), src=src, dst=dst, rot=np.tile(np.eye(2), (n, 1, 1)),
                   trans=np.zeros((n, 2)), info=info, format="synthetic")
     p = Problem.from_graph(g)
-    s = 1e-10 * p.gershgorin_max()
-    base = p.factor_full(None, p.gershgorin_max() / 1e6, name="base")
-    model = RelaxedModel(p, base, adaptive_shift=s, **model_options)
+    policy = _adaptive_policy(p, refactor_hvps)
+    relaxed = RelaxedProblem(p)
     winding = np.ascontiguousarray(np.swapaxes(so2_exp(2 * np.pi * np.arange(n) / n), 1, 2))
-    state = trust_region(model, lift(winding, 2), TROptions()).state
-    cert = verify(p, state, 1e-6, np.random.default_rng(0))
+    state = trust_region(relaxed, lift(winding, 2), TROptions(), preconditioner=policy).state
+    cert = verify(p, state.lam, 1e-6, np.random.default_rng(0))
     assert not cert.certified and cert.lambda_min < 0
-    return p, s, base, model, state, cert
+    assert policy.adaptive is not None
+    return p, policy.adaptive.shift, relaxed, policy, state, cert
 
 
 def test_preconditioner_after_escape_is_shifted_not_lambda_free():
     """At a saddle (Q - Lambda + s I indefinite) the rebuilt preconditioner is the inverse of
     Q - Lambda + (s + 2|lambda_min|) I, checked against a dense inverse, not (Q + delta I)^{-1}."""
-    p, s, base, model, state, cert = _winding_saddle()
+    p, s, _relaxed, policy, state, cert = _winding_saddle()
     n = p.n
     Sd = p.Q_product(np.eye(2 * n))
     for i in range(n):
         Sd[2 * i:2 * i + 2, 2 * i:2 * i + 2] -= state.lam[i]
     Sd = 0.5 * (Sd + Sd.T)
     assert np.linalg.eigvalsh(Sd)[0] + s < 0            # the plain adaptive factor cannot exist here
-    model.lambda_hint, model.refactor_next = cert.lambda_min, True
-    model.prepare(state)
-    assert model.precond_factor is not base
+    policy.after_escape(cert)
+    policy.prepare(state)
     shift = s + 2 * abs(cert.lambda_min)
+    assert policy.current is policy.adaptive and policy.adaptive.factor_shift == shift
     W = np.random.default_rng(3).standard_normal((2 * n, 2))
     want = np.linalg.solve(Sd + shift * np.eye(2 * n), W)
     cond = np.linalg.cond(Sd + shift * np.eye(2 * n))
-    np.testing.assert_allclose(p.schur_solve(model.precond_factor, W), want, rtol=0,
+    np.testing.assert_allclose(policy.adaptive.solve(W), want, rtol=0,
                                atol=MARGIN * cond * EPS * np.abs(want).max() * 2 * n)
 
 
@@ -377,17 +379,17 @@ def test_after_an_escape_the_unshifted_factorization_waits_for_a_converging_step
     """After an escape, prepare() tries Q - Lambda + s I (s alone) only once the trust region's step
     is converging; before that it starts at s + 2|lambda_hint|. The shifts asked of factor_full are
     recorded: asking for s first at every refactor of the level would fail here."""
-    p, s, _base, model, state, cert = _winding_saddle(refactor_hvps=5)
+    p, s, relaxed, policy, state, cert = _winding_saddle(refactor_hvps=5)
     calls = record_factor_full(monkeypatch)
     hint = abs(cert.lambda_min)
-    model.lambda_hint = cert.lambda_min
-    after = model.evaluate(state.Z.copy())       # a new point: prepare() acts once per point
-    model.prepare(after, last_hvps=50, converging=False)
+    policy.after_escape(cert)
+    after = relaxed.evaluate(state.Z.copy())       # a new point: prepare() acts once per point
+    policy.prepare(after, last_hvps=50, converging=False)
     asked = [shift for _, shift in calls]
     assert asked == [s + 2 * hint]               # indefinite at s here, and not converging: skipped
     calls.clear()
-    later = model.evaluate(state.Z.copy())
-    model.prepare(later, last_hvps=50, converging=True)
+    later = relaxed.evaluate(state.Z.copy())
+    policy.prepare(later, last_hvps=50, converging=True)
     asked = [shift for _, shift in calls]
     assert asked[0] == s                         # converging: s first, which may certify the point
     assert asked[1:] == [s + 2 * hint][:len(asked) - 1]

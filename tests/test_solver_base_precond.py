@@ -7,8 +7,10 @@ import pytest
 
 from posecrb.core.errors import UsageError
 from posecrb.linalg.ordering import AUTO_ND_MIN_POSES, AUTO_ND_MIN_POSES_2D
+from posecrb.solver import PreconditionerSettings, SolverOptions, solve
+from posecrb.solver.options import BASE_PRECONDITIONERS
+from posecrb.solver.preconditioners import base_preconditioner_kind
 from posecrb.solver.problem import Problem, RotationBlockFactor
-from posecrb.solver.solve import BASE_PRECONDITIONERS, SolverOptions, base_preconditioner_kind, solve
 from posecrb.solver.trust_region import TROptions
 
 from .helpers import random_pose_graph, record_factor_full
@@ -39,13 +41,15 @@ def test_auto_takes_the_rotation_block_on_large_3d_graphs_only():
     for kind in ("schur", "rotation"):
         assert base_preconditioner_kind(kind, 3, 10) == kind
         assert base_preconditioner_kind(kind, 2, 10 ** 6) == kind
-    assert SolverOptions().base_precond == "auto" and set(BASE_PRECONDITIONERS) == {"auto", "schur", "rotation"}
+    assert SolverOptions().preconditioner_settings.base == "auto"
+    assert set(BASE_PRECONDITIONERS) == {"auto", "schur", "rotation"}
     with pytest.raises(UsageError, match="base preconditioner"):
         base_preconditioner_kind("cholesky", 3, 10)
     with pytest.raises(UsageError, match="base preconditioner"):
-        SolverOptions(base_precond="cholesky")
+        PreconditionerSettings(base="cholesky")
     with pytest.raises(UsageError, match="base preconditioner"):
-        solve(random_pose_graph(5, 3, np.random.default_rng(0))[0], base_precond="C")
+        solve(random_pose_graph(5, 3, np.random.default_rng(0))[0],
+              preconditioner_settings=PreconditionerSettings(base="C"))
 
 
 @pytest.mark.parametrize("dim", [2, 3])
@@ -62,10 +66,10 @@ def test_both_base_preconditioners_reach_the_same_certified_optimum(dim, monkeyp
 
     monkeypatch.setattr(Problem, "factor_rotation_block", recording)
     # the base preconditioner serves the whole first level where the tangent one is off
-    schur = solve(graph, tangent_precond=False, base_precond="schur")
+    schur = solve(graph, preconditioner="base", preconditioner_settings=PreconditionerSettings(base="schur"))
     assert not built and calls[0][0] == "preconditioner M_red(delta)"
     calls.clear()
-    rotation = solve(graph, tangent_precond=False, base_precond="rotation")
+    rotation = solve(graph, preconditioner="base", preconditioner_settings=PreconditionerSettings(base="rotation"))
     assert len(built) == 1
     assert "preconditioner M_red(delta)" not in [name for name, _ in calls]
     assert schur.certified and rotation.certified
@@ -79,7 +83,7 @@ def test_auto_is_schur_on_small_graphs():
     rng = np.random.default_rng(8)
     graph = random_pose_graph(30, 3, rng, loop_closures=20, rot_noise=0.1, trans_noise=0.1)[0]
     default = solve(graph)
-    schur = solve(graph, base_precond="schur")
+    schur = solve(graph, preconditioner_settings=PreconditionerSettings(base="schur"))
     assert default.objective == schur.objective
     assert default.hessian_vector_products == schur.hessian_vector_products
 
@@ -104,13 +108,15 @@ def test_preconditioner_solves_count_every_application_of_the_rotation_block(mon
     graph = random_pose_graph(40, 3, rng, loop_closures=30, rot_noise=0.1, trans_noise=0.1)[0]
     rotation_solves = _count_calls(monkeypatch, RotationBlockFactor, "solve")
     tangent_applies = _count_calls(monkeypatch, TangentSystem, "apply")
-    res = solve(graph, tangent_precond=False, base_precond="rotation", adaptive_precond=None)
+    res = solve(graph, preconditioner="base",
+                preconditioner_settings=PreconditionerSettings(base="rotation", adaptive_shift=None))
     # the rotation block's factor is used for nothing but preconditioning, and without the
     # adaptive or tangent factors every application is the base one
     assert res.preconditioner_solves == {"rotation": rotation_solves[0]}
     assert rotation_solves[0] > 0 and tangent_applies[0] == 0
     rotation_solves[0] = 0
-    schur = solve(graph, tangent_precond=False, base_precond="schur", adaptive_precond=None)
+    schur = solve(graph, preconditioner="base",
+                  preconditioner_settings=PreconditionerSettings(base="schur", adaptive_shift=None))
     assert set(schur.preconditioner_solves) == {"schur"} and rotation_solves[0] == 0
     # truncated CG preconditions its first residual, then one per product that does not end it
     assert schur.preconditioner_solves["schur"] >= schur.iterations
@@ -127,7 +133,7 @@ def test_preconditioner_solves_name_the_tangent_system_in_2d_and_nothing_without
     assert set(res.preconditioner_solves) <= {"schur", "adaptive", "tangent", "split"}
     # the split preconditioner applies K too, once per application
     assert tangent_applies[0] == res.preconditioner_solves["tangent"] + res.preconditioner_solves.get("split", 0)
-    bare = solve(graph, precondition=False)
+    bare = solve(graph, preconditioner="none")
     assert bare.preconditioner_solves == {} and bare.certified
     assert bare.to_dict()["preconditioner_solves"] == {}
     assert type(res).from_dict(res.to_dict()).preconditioner_solves == res.preconditioner_solves

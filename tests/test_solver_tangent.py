@@ -5,10 +5,18 @@ import numpy as np
 import pytest
 
 from posecrb.core.errors import NotPositiveDefinite
+from posecrb.solver import PreconditionerSettings, SolverOptions, solve
+from posecrb.solver.certificate import Certificate
+from posecrb.solver.policy import PreconditionerPolicy
+from posecrb.solver.preconditioners import (
+    AdaptivePreconditioner,
+    BasePreconditioner,
+    SplitPreconditioner,
+    TangentPreconditioner,
+)
 from posecrb.solver.problem import Problem
-from posecrb.solver.solve import SolverOptions, solve
-from posecrb.solver.staircase import RelaxedModel
-from posecrb.solver.stiefel import gram_eigh, lift, remove_vertical
+from posecrb.solver.relaxed import RelaxedProblem
+from posecrb.solver.stiefel import lift, remove_vertical
 from posecrb.solver.tangent import TangentSystem, so_basis
 from posecrb.solver.trust_region import TROptions
 
@@ -46,23 +54,35 @@ def _dense_S(problem: Problem, lam: np.ndarray | None, r: int) -> np.ndarray:
 
 def _optimum(graph) -> np.ndarray:
     """The certified optimum's rotations in the solver's row layout (n, d, d): Z_i = R_i^T."""
-    res = solve(graph, tangent_precond=False)
+    res = solve(graph, preconditioner="base")
     assert res.certified
     return np.ascontiguousarray(np.swapaxes(res.rot, 1, 2))
 
 
+def _tangent_policy(problem: Problem, shift: float, *, system: TangentSystem | None = None, switch: int | None = None,
+                    refactor_hvps: int | None = 30) -> PreconditionerPolicy:
+    """The policy with the tangent preconditioner (from the start, or after a truncated-CG run of
+    more than ``switch`` products) at shift ``shift``, its fallback and the base factor at 1.0,
+    the adaptive factor at ``shift`` and the split after an escape."""
+    tangent = TangentPreconditioner(problem, shift, 1.0, system)
+    return PreconditionerPolicy(problem, base=BasePreconditioner(problem, 1.0, "schur"),
+                                adaptive=AdaptivePreconditioner(problem, shift), tangent=tangent,
+                                tangent_switch_hvps=switch, split=True, refactor_hvps=refactor_hvps)
+
+
 def _model_at_optimum(rng: np.random.Generator, poses: int, dim: int, loop_closures: int):
-    """(problem, model, state, s): a random graph's problem, a model with the tangent preconditioner
-    at shift s = 1e-10 of the Gershgorin bound, and its state at the certified first-level optimum,
-    where the model's K with Lambda is factored."""
+    """(problem, relaxation, policy, state, s): a random graph's problem and relaxation, the policy
+    with the tangent preconditioner at shift s = 1e-10 of the Gershgorin bound, refactoring the
+    adaptive one at every point it prepares, and the state at the certified first-level optimum,
+    where the policy's K with Lambda is factored."""
     graph = random_pose_graph(poses, dim, rng, loop_closures=loop_closures, rot_noise=0.05, trans_noise=0.05)[0]
     problem = Problem.from_graph(graph)
     shift = 1e-10 * problem.gershgorin_max()
-    model = RelaxedModel(problem, problem.factor_full(None, 1.0, name="base"), shift,
-                         tangent=TangentSystem.build(problem), tangent_fallback_shift=1.0)
-    state = model.evaluate(_optimum(graph))
-    model.prepare(state)
-    return problem, model, state, shift
+    policy = _tangent_policy(problem, shift, system=TangentSystem.build(problem), refactor_hvps=None)
+    relaxed = RelaxedProblem(problem)
+    state = relaxed.evaluate(_optimum(graph))
+    policy.prepare(state)
+    return problem, relaxed, policy, state, shift
 
 
 @pytest.mark.parametrize("dim", [2, 3])
@@ -72,7 +92,7 @@ def test_apply_is_the_dense_inverse_on_the_tangent_space(dim, with_lambda):
     graph = random_pose_graph(14, dim, rng, loop_closures=8, rot_noise=0.05, trans_noise=0.05)[0]
     problem = Problem.from_graph(graph)
     system = TangentSystem.build(problem)
-    model = RelaxedModel(problem)
+    model = RelaxedProblem(problem)
     # Without Lambda any point will do (Q + s I is positive definite); with it, the optimum, where
     # S = Q - Lambda is positive semidefinite.
     if with_lambda:
@@ -95,15 +115,16 @@ def test_apply_is_the_dense_inverse_on_the_tangent_space(dim, with_lambda):
 
 @pytest.mark.parametrize("dim", [2, 3])
 def test_preconditioner_inverts_the_riemannian_hessian(dim):
-    """At the optimum, P(Hess[v]) = v for every horizontal tangent v: the model's own
+    """At the optimum, P(Hess[v]) = v for every horizontal tangent v: the relaxation's own
     Hessian-vector product (an independent code path) undone, up to the shift's effect."""
     rng = np.random.default_rng(3 + dim)
-    problem, model, state, shift = _model_at_optimum(rng, 16, dim, loop_closures=10)
+    problem, relaxed, policy, state, shift = _model_at_optimum(rng, 16, dim, loop_closures=10)
     Z = state.Z
-    gram = gram_eigh(Z)
     G = so_basis(dim)
-    v = remove_vertical(Z, np.einsum("na,axy,nyc->nxc", rng.standard_normal((problem.n, G.shape[0])), G, Z), gram)
-    back = model.precondition(state, model.hvp(state, v))
+    v = remove_vertical(Z, np.einsum("na,axy,nyc->nxc", rng.standard_normal((problem.n, G.shape[0])), G, Z),
+                        state.gram)
+    back = policy.apply(state, relaxed.hvp(state, v))
+    assert policy.solves() == {"tangent": 1}
     # 2 E^T S E's eigenvalues past the gauge's k zeros bound how much the shift moves the result
     E = _dense_E(Z)
     H = 2.0 * E.T @ _dense_S(problem, state.lam, dim) @ E
@@ -118,8 +139,8 @@ def test_preconditioner_inverts_the_riemannian_hessian(dim):
 def test_both_preconditioners_reach_the_same_certified_optimum(dim):
     rng = np.random.default_rng(11 + dim)
     graph = random_pose_graph(40, dim, rng, loop_closures=30, rot_noise=0.1, trans_noise=0.1)[0]
-    schur = solve(graph, tangent_precond=False)
-    tangent = solve(graph, tangent_precond=True)
+    schur = solve(graph, preconditioner="base")
+    tangent = solve(graph, preconditioner="tangent")
     assert schur.certified and tangent.certified
     # both stop at a Newton decrement of decrement_tol |f| (TROptions), past the quadratic phase
     tol = 100 * TROptions().decrement_tol
@@ -135,11 +156,11 @@ def test_default_uses_it_on_2d_graphs_only():
     for dim, default_is_tangent in ((2, True), (3, False)):
         graph = random_pose_graph(30, dim, rng, loop_closures=20, rot_noise=0.1, trans_noise=0.1)[0]
         default = solve(graph)
-        chosen = solve(graph, tangent_precond=default_is_tangent)
-        other = solve(graph, tangent_precond=not default_is_tangent)
+        chosen = solve(graph, preconditioner="tangent" if default_is_tangent else "base")
+        other = solve(graph, preconditioner="base" if default_is_tangent else "tangent")
         assert default.hessian_vector_products == chosen.hessian_vector_products
         assert default.objective == chosen.objective
-        assert SolverOptions().tangent_precond is None
+        assert SolverOptions().preconditioner == "auto"
         assert other.hessian_vector_products != default.hessian_vector_products
 
 
@@ -148,7 +169,6 @@ def test_not_positive_definite_falls_back_without_lambda_then_to_the_base_factor
     graph = random_pose_graph(12, 2, rng, loop_closures=6, rot_noise=0.05, trans_noise=0.05)[0]
     problem = Problem.from_graph(graph)
     system = TangentSystem.build(problem)
-    base = problem.factor_full(None, 1.0, name="base")
     Z = _optimum(graph)
     calls: list[bool] = []
     real_factor = system.factor
@@ -160,15 +180,16 @@ def test_not_positive_definite_falls_back_without_lambda_then_to_the_base_factor
         return real_factor(Z, lam, shift, name)
 
     monkeypatch.setattr(system, "factor", factor)
-    model = RelaxedModel(problem, base, 1e-10, tangent=system, tangent_fallback_shift=1.0)
-    state = model.evaluate(Z)
-    model.prepare(state)
-    assert calls == [True, False] and model.factorizations == 2
+    policy = _tangent_policy(problem, 1e-10, system=system)
+    state = RelaxedProblem(problem).evaluate(Z)
+    policy.prepare(state)
+    assert calls == [True, False] and policy.tangent is not None and policy.tangent.factorizations == 2
+    assert not policy.exact(state)
     R = remove_vertical(Z, np.einsum("na,axy,nyc->nxc", rng.standard_normal((problem.n, 1)), so_basis(2), Z))
     E = _dense_E(Z)
     M = 2.0 * E.T @ (_dense_S(problem, None, 2) + 1.0 * np.eye(E.shape[0])) @ E
     expected = remove_vertical(Z, (E @ np.linalg.solve(M, E.T @ R.ravel())).reshape(Z.shape))
-    got = model.precondition(state, R)
+    got = policy.apply(state, R)
     assert np.abs(got - expected).max() <= MARGIN * M.shape[0] * spd_condition(M) * EPS * np.abs(expected).max()
 
     # both fail: the base factor (Q + delta I)^{-1} preconditions, as without the tangent system
@@ -176,11 +197,13 @@ def test_not_positive_definite_falls_back_without_lambda_then_to_the_base_factor
         raise NotPositiveDefinite(name, "test", 0)
 
     monkeypatch.setattr(system, "factor", failing)
-    model = RelaxedModel(problem, base, 1e-10, tangent=system, tangent_fallback_shift=1.0)
-    state = model.evaluate(Z)
-    model.prepare(state)
-    plain = RelaxedModel(problem, base, 1e-10)
-    np.testing.assert_array_equal(model.precondition(state, R), plain.precondition(plain.evaluate(Z), R))
+    policy = _tangent_policy(problem, 1e-10, system=system)
+    state = RelaxedProblem(problem).evaluate(Z)
+    policy.prepare(state)
+    plain = PreconditionerPolicy(problem, base=BasePreconditioner(problem, 1.0, "schur"),
+                                 adaptive=AdaptivePreconditioner(problem, 1e-10))
+    np.testing.assert_array_equal(policy.apply(state, R), plain.apply(RelaxedProblem(problem).evaluate(Z), R))
+    assert policy.solves() == plain.solves() == {"schur": 1}
 
 
 def test_so_basis_is_orthogonal_and_skew():
@@ -215,7 +238,7 @@ def test_k_eliminates_to_the_tangent_hessian(dim, with_lambda):
     problem = Problem.from_graph(graph)
     system = TangentSystem.build(problem)
     Z = np.ascontiguousarray(np.swapaxes(random_pose_graph(12, dim, rng)[1], 1, 2))
-    lam = RelaxedModel(problem).evaluate(Z).lam if with_lambda else None
+    lam = RelaxedProblem(problem).evaluate(Z).lam if with_lambda else None
     shift = 0.25
     K = system.matrix(Z, lam, shift).toarray()
     f = system.first
@@ -240,7 +263,7 @@ def test_a_graph_certified_at_the_first_level_never_factors_the_base_preconditio
     assert res.certified and res.rank == 3
     assert [name for name, _ in calls] == ["certificate matrix Q - Lambda + eta I"]
     calls.clear()
-    assert solve(graph, tangent_precond=False).certified
+    assert solve(graph, preconditioner="base").certified
     assert calls[0][0] == "preconditioner M_red(delta)"
 
 
@@ -248,28 +271,25 @@ def test_3d_switches_to_it_after_a_long_truncated_cg_run():
     rng = np.random.default_rng(4)
     graph = random_pose_graph(12, 3, rng, loop_closures=6, rot_noise=0.05, trans_noise=0.05)[0]
     problem = Problem.from_graph(graph)
-    built: list[TangentSystem] = []
-
-    def factory() -> TangentSystem:
-        built.append(TangentSystem.build(problem))
-        return built[-1]
-
-    model = RelaxedModel(problem, problem.factor_full(None, 1.0, name="base"), 1e-10, tangent_fallback_shift=1.0,
-                         tangent_factory=factory, tangent_switch_hvps=20)
+    relaxed = RelaxedProblem(problem)
+    policy = _tangent_policy(problem, 1e-10, switch=20)
+    assert policy.tangent is not None
     Z = _optimum(graph)
-    state = model.evaluate(Z)
-    model.prepare(state, 20)            # not more than the threshold: M_red's preconditioner
-    assert not built and model.tangent is None
-    switched = model.evaluate(Z.copy())
-    model.prepare(switched, 21)
-    assert len(built) == 1 and model.tangent is built[0]
-    assert model.exact_preconditioner(switched) and not model.exact_preconditioner(state)
+    state = relaxed.evaluate(Z)
+    policy.prepare(state, 20)            # not more than the threshold: M_red's preconditioner
+    assert policy.tangent.system is None and not policy.exact(state)
+    policy.apply(state, state.grad)
+    switched = relaxed.evaluate(Z.copy())
+    policy.prepare(switched, 21)
+    assert policy.tangent.system is not None
+    assert policy.exact(switched) and not policy.exact(state)
+    policy.apply(switched, switched.grad)
+    assert policy.solves() == {"schur": 1, "tangent": 1}
     # at a later level (width d + 1) the switch never happens
-    fresh = RelaxedModel(problem, problem.factor_full(None, 1.0, name="base"), 1e-10, tangent_fallback_shift=1.0,
-                         tangent_factory=factory, tangent_switch_hvps=20)
+    fresh = _tangent_policy(problem, 1e-10, switch=20)
     wide = np.concatenate([Z, np.zeros((problem.n, 3, 1))], axis=2)
-    fresh.prepare(fresh.evaluate(wide), 100)
-    assert fresh.tangent is None and len(built) == 1
+    fresh.prepare(relaxed.evaluate(wide), 100)
+    assert fresh.tangent is not None and fresh.tangent.system is None
 
 
 def test_a_vacuous_certificate_at_eta_is_proven_again_at_the_small_shift(caplog):
@@ -342,9 +362,8 @@ def test_apply_with_the_gauge_replaced_is_the_dense_reference():
     graph = random_pose_graph(14, 3, rng, loop_closures=8, rot_noise=0.05, trans_noise=0.05)[0]
     problem = Problem.from_graph(graph)
     system = TangentSystem.build(problem)
-    model = RelaxedModel(problem)
     Z = _optimum(graph)
-    state = model.evaluate(Z)
+    state = RelaxedProblem(problem).evaluate(Z)
     shift = 1e-3 * problem.gershgorin_max()
     E = _dense_E(Z)
     M = 2.0 * E.T @ (_dense_S(problem, state.lam, 3) + shift * np.eye(E.shape[0])) @ E
@@ -361,19 +380,18 @@ def test_apply_with_the_gauge_replaced_is_the_dense_reference():
 @pytest.mark.parametrize("dim", [2, 3])
 def test_split_preconditioner_inverts_the_hessian_at_the_padded_point(dim):
     """At [Z1 | 0], Z1 a certified first-level optimum, the split preconditioner (K's factor at Z1
-    for the in-plane directions, (Q - Lambda + s I)^{-1} for the new column's) undoes the model's
-    own Hessian-vector product on every horizontal tangent vector, up to the shift's effect."""
+    for the in-plane directions, (Q - Lambda + s I)^{-1} for the new column's) undoes the
+    relaxation's own Hessian-vector product on every horizontal tangent vector, up to the shift's
+    effect."""
     rng = np.random.default_rng(40 + dim)
-    problem, model, first, shift = _model_at_optimum(rng, 16, dim, loop_closures=10)
+    problem, relaxed, policy, first, shift = _model_at_optimum(rng, 16, dim, loop_closures=10)
     Z1 = first.Z
-    state = model.evaluate(lift(Z1, dim + 1))
-    model.precond_factor = problem.factor_full(state.lam, shift, name="M_red(Lambda, s)")
-    v = remove_vertical(state.Z, model.project(state, rng.standard_normal(state.Z.shape)))
-    calls = []
-    real = model._split_apply
-    model._split_apply = lambda *a: calls.append(1) or real(*a)
-    back = model.precondition(state, model.hvp(state, v))
-    assert calls
+    state = relaxed.evaluate(lift(Z1, dim + 1))
+    policy.prepare(state)       # the adaptive factor at the padded point (refactored at every point)
+    assert policy.adaptive is not None and policy.adaptive.factor_shift == shift
+    v = remove_vertical(state.Z, relaxed.project(state, rng.standard_normal(state.Z.shape)))
+    back = policy.apply(state, relaxed.hvp(state, v))
+    assert policy.solves() == {"split": 1}
     # the in-plane block's eigenvalues past the gauge's k zeros, and S's past its d zeros (the
     # new column's vertical tilts), bound the shift's effect
     E = _dense_E(Z1)
@@ -391,19 +409,19 @@ def test_split_preconditioner_inverts_the_hessian_at_the_padded_point(dim):
 
 def test_split_preconditioner_after_the_escape_reaches_the_same_certified_optimum(monkeypatch):
     graph = _escaping_grid()
-    schur = solve(graph, tangent_precond=False)
+    schur = solve(graph, preconditioner="base")
     calls = record_factor_full(monkeypatch)
     applied = []
-    real = RelaxedModel._split_apply
+    real = SplitPreconditioner.apply
 
     def spy(self, *args):
         applied.append(1)
         return real(self, *args)
 
-    monkeypatch.setattr(RelaxedModel, "_split_apply", spy)
+    monkeypatch.setattr(SplitPreconditioner, "apply", spy)
     split = solve(graph)
     assert schur.certified and split.certified and split.rank == schur.rank == 3
-    assert applied
+    assert applied and split.preconditioner_solves["split"] == len(applied)
     # the saddle's shifted factor preconditions the new column: no factorization between the
     # shifted certificate at the saddle and the final certificate
     names = [name for name, _ in calls]
@@ -413,48 +431,48 @@ def test_split_preconditioner_after_the_escape_reaches_the_same_certified_optimu
     tol = 100 * TROptions().decrement_tol
     assert split.relaxation_value == pytest.approx(schur.relaxation_value, rel=tol)
     assert split.objective == pytest.approx(schur.objective, rel=tol)
-    # the option turns it off: M_red's preconditioner after the escape, refactored at the escape point
+    # the setting turns it off: M_red's preconditioner after the escape, refactored at the escape point
     applied.clear()
     calls.clear()
-    off = solve(graph, split_precond=False)
-    assert not applied and off.certified
+    off = solve(graph, preconditioner_settings=PreconditionerSettings(split_after_escape=False))
+    assert not applied and off.certified and "split" not in off.preconditioner_solves
     assert "preconditioner M_red(Lambda, s)" in [name for name, _ in calls]
     assert off.relaxation_value == pytest.approx(split.relaxation_value, rel=tol)
 
 
-def test_split_preconditioner_is_not_used_once_a_block_turns_to_the_new_column():
-    problem, model, first, _ = _model_at_optimum(np.random.default_rng(50), 12, 2, loop_closures=8)
-    Z1 = first.Z
-    Z = lift(Z1, 3)
-    # pose 0 rotated in the (first, new) column plane by 70 degrees: its rows lean on the new column
-    c, s = np.cos(np.radians(70)), np.sin(np.radians(70))
+def _leaning(Z1: np.ndarray, degrees: float) -> np.ndarray:
+    """[Z1 | 0] with pose 0 rotated by ``degrees`` in the plane of its first and the new column."""
+    Z = lift(Z1, Z1.shape[2] + 1)
+    c, s = np.cos(np.radians(degrees)), np.sin(np.radians(degrees))
     Z[0] = Z[0] @ np.array([[c, 0, -s], [0, 1, 0], [s, 0, c]])
-    state = model.evaluate(Z)
-    model.precond_factor = problem.factor_full(None, 1.0, name="M_red")
-    assert model._split_parts(state, gram_eigh(Z)) is None
-    assert model._split_parts(model.evaluate(lift(Z1, 3)), gram_eigh(lift(Z1, 3))) is not None
+    return Z
+
+
+def test_split_preconditioner_is_not_used_once_a_block_turns_to_the_new_column():
+    problem, relaxed, policy, first, _ = _model_at_optimum(np.random.default_rng(50), 12, 2, loop_closures=8)
+    split = policy.split
+    assert split is not None
+    # pose 0's rows lean on the new column by 70 degrees: past the split's 60
+    assert not split.prepare(relaxed.evaluate(_leaning(first.Z, 70)))
+    assert split.prepare(relaxed.evaluate(_leaning(first.Z, 50)))
+    assert split.prepare(relaxed.evaluate(lift(first.Z, 3)))
 
 
 def test_the_saddle_factor_is_replaced_once_the_split_stops_applying(monkeypatch):
     """The saddle's factor serves the split preconditioner's new column only: where a block has
     turned towards the new column and the split no longer applies, prepare() refactors M_red's
     preconditioner at the point."""
-    problem, model, first, _ = _model_at_optimum(np.random.default_rng(60), 12, 2, loop_closures=8)
-    Z1 = first.Z
+    problem, relaxed, policy, first, _ = _model_at_optimum(np.random.default_rng(60), 12, 2, loop_closures=8)
+    assert policy.adaptive is not None and policy.split is not None
     saddle = problem.factor_full(first.lam, 0.5, name="shifted certificate matrix")
-    model.saddle_factor = (saddle, 0.5)
-    model.lambda_hint, model.refactor_next = -0.1, True
+    policy.after_escape(Certificate(False, -0.1, np.zeros((problem.n, 2)), 1, 0, shifted_factor=(saddle, 0.5)))
     calls = record_factor_full(monkeypatch)
-    padded = model.evaluate(lift(Z1, 3))
-    model.prepare(padded)
-    assert calls == [] and model.precond_factor is saddle
-    assert model._split_parts(padded, gram_eigh(padded.Z)) is not None
-    # pose 0 rotated by 80 degrees in the plane of its first and the new column
-    Z = lift(Z1, 3)
-    c, s = np.cos(np.radians(80)), np.sin(np.radians(80))
-    Z[0] = Z[0] @ np.array([[c, 0, -s], [0, 1, 0], [s, 0, c]])
-    far = model.evaluate(Z)
-    model.prepare(far, last_hvps=1)
+    padded = relaxed.evaluate(lift(first.Z, 3))
+    policy.prepare(padded)
+    assert calls == [] and policy.current is policy.adaptive and policy.adaptive.factor is saddle
+    assert policy.split.prepare(padded)
+    far = relaxed.evaluate(_leaning(first.Z, 80))
+    policy.prepare(far, last_hvps=1)
     assert [name for name, _ in calls] and calls[0][0] == "preconditioner M_red(Lambda, s)"
-    assert model.precond_factor is not saddle
-    assert model._split_parts(far, gram_eigh(far.Z)) is None
+    assert policy.adaptive.factor is not saddle
+    assert not policy.split.prepare(far)

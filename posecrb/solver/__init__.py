@@ -1,4 +1,5 @@
 """Certifiably correct pose-graph optimisation (SE-Sync, Rosen et al. 2019); docs/design.md#solver."""
-from .solve import SolveResult, SolverOptions, solve
+from .options import Preconditioner, PreconditionerSettings, SolverOptions
+from .solve import SolveResult, solve
 
-__all__ = ["SolveResult", "SolverOptions", "solve"]
+__all__ = ["Preconditioner", "PreconditionerSettings", "SolveResult", "SolverOptions", "solve"]

@@ -58,13 +58,13 @@ from ..linalg.threads import factorization_threads, solve_threads
 # and b the rows per pose of the matrix factored. That quotient estimates the factorization's
 # flops per factor entry, CHOLMOD's own supernodal criterion (its switch, 40, is tuned for the
 # factorization alone). Here a solve is one process: a handful of factorizations, each serving
-# tens to hundreds of triangular solves with r <= 5 right-hand sides. Timed kernel by kernel after
-# a warm-up (benchmarks/solver_variants.py --kernels) the supernodal factorization is 1.8-3.4x
-# cheaper from fill 150 on and the solves cost the same; but
-# the whole first solve of a fresh process (benchmarks/solve_checkouts.py --repeat 1, see
-# docs/performance.md) is faster simplicial up to fill ~170 (cubicle 152, the 2D grid of
-# 10,000 poses 157, sphere2500 168: 15-25% less) and slower from ~220 on (sphere_bignoise 226,
-# torus3D 232: supernodal kept). The 2D 10^5-pose grid (fill 400) and the 3D grids (>= 271) are above.
+# tens to hundreds of triangular solves with r <= 5 right-hand sides. Kernel by kernel after a
+# warm-up the supernodal factorization is the cheaper one from fill 150 on, but the whole first
+# solve of a fresh process, which is what a user runs, is faster simplicial up to fill ~170
+# (cubicle 152, the 2D grid of 10,000 poses 157, sphere2500 168) and slower from ~220 on
+# (sphere_bignoise 226, torus3D 232: supernodal kept), so the switch sits between
+# (docs/decisions/solver-preconditioners.md). The 2D 10^5-pose grid (fill 400) and the 3D grids
+# (>= 271) are above.
 SIMPLICIAL_MAX_FLOPS_PER_ENTRY = 200.0
 
 # CHOLMOD's default supernodal switch (Common->supernodal_switch): with its automatic choice, a
@@ -124,11 +124,11 @@ class RotationBlockFactor:
     """A Cholesky factor of ``C + s I``, the rotation block of M (``C = L(G^rho) + Sigma``, dn x dn)
     without the translations' coupling: ``C + s I = Q + s I + V^T L(W^tau)^+ V >= Q + s I``.
 
-    The solver's base preconditioner of large 3D graphs (``posecrb.solver.solve``,
-    ``base_precond``): d rows per pose instead of M_red's d + 1, so on graphs with dense separators
-    its factorization takes about (d / (d + 1))^3 of M_red's flops and each solve reads a smaller
-    factor (docs/performance.md). ``threaded``: its solves share CHOLMOD's BLAS threads, as the
-    factorizations of such graphs do.
+    The solver's base preconditioner of large 3D graphs (posecrb.solver.preconditioners,
+    ``PreconditionerSettings.base``): d rows per pose instead of M_red's d + 1, so on graphs with
+    dense separators its factorization takes about (d / (d + 1))^3 of M_red's flops and each solve
+    reads a smaller factor (docs/decisions/solver-preconditioners.md). ``threaded``: its solves
+    share CHOLMOD's BLAS threads, as the factorizations of such graphs do.
     """
 
     factor: Factor
@@ -173,8 +173,8 @@ class Problem:
     _pose_order: np.ndarray | None = field(default=None, repr=False)
     _defect_const: float | None = field(default=None, repr=False)
     # C and V_red^T in CSC for the products Q Z (every Hessian-vector product): scipy's CSC
-    # kernel multiplies these by an (nd, r) block 0.6-0.9x the CSR kernel's time on the SE-Sync
-    # datasets (benchmarks/solver_variants.py --kernels).
+    # kernel multiplies these by an (nd, r) block faster than the CSR kernel
+    # (docs/decisions/solver-preconditioners.md).
     _C_csc: sp.csc_matrix | None = field(default=None, repr=False)
     _VredT_csc: sp.csc_matrix | None = field(default=None, repr=False)
 
@@ -212,8 +212,8 @@ class Problem:
             # CHOLMOD factored L(W^tau) supernodal, and reading its column counts converted it to a
             # simplicial factor with the supernodes' padding (1.4-1.7x the entries). This factor
             # serves a solve per Hessian-vector product: a simplicial factorization of its own
-            # solves faster (2D grid of 100,489 poses: 11.5 instead of 20.9 ms per product Q Z,
-            # docs/performance.md), for one more factorization of a one-row-per-pose matrix.
+            # solves faster, without the padding, for one more factorization of a one-row-per-pose
+            # matrix (docs/decisions/solver-preconditioners.md).
             Lfactor = SymbolicCholesky(Lred, mode="simplicial").factor(Lred, name=name)
         Vred = V[1:].tocsr()
         defect_edges, defect = orthogonality_defect(rot)
@@ -273,9 +273,8 @@ class Problem:
         Z is a point of St(d, r)^n (its defect term is then :meth:`defect_constant`)."""
         n, d = self.n, self.d
         Zb = Z.reshape(n, d, -1)
-        # np.take along the first axis gathers the same rows as fancy indexing, 3-5x faster for
-        # these (m, d, r) and (m, r) gathers (0.3-0.4 CPU seconds per solve on the 2D grid of
-        # 100,489 poses, docs/performance.md)
+        # np.take along the first axis gathers the same rows as fancy indexing, several times
+        # faster for these (m, d, r) and (m, r) gathers (docs/decisions/solver-preconditioners.md)
         Zi = np.take(Zb, self.src, axis=0)
         # rotation residual, transposed: Z_j - R~^T Z_i  (d x r)
         rr = np.take(Zb, self.dst, axis=0) - self.rotT @ Zi
@@ -391,10 +390,9 @@ class Problem:
         """(Q - Lambda + s I)^{-1} W, the rotation block of M_red(s)^{-1} [0; W]. For a large 3D graph
         (one whose factorizations take CHOLMOD's threads, ``SymbolicCholesky.threaded``) CHOLMOD's
         BLAS shares the solve's dense triangles out over the cores other processes leave free
-        (``solve_threads``). benchmarks/precond_solve.py on the Intel machine of
-        docs/performance.md, k = 3: 161 -> 137 ms on the 3D grid of 21,952 poses, whose top
-        separators are triangles of 3,136 rows; 158 -> 155 ms on the 2D grid of 100,489 poses,
-        whose separators have 951 rows, so 2D graphs keep one thread (their threads would only spin)."""
+        (``solve_threads``): on large 3D graphs the top separators are dense triangles of thousands
+        of rows, which two threads share; 2D graphs' separators are a few hundred rows, where a second
+        thread only spins, so they keep one (docs/decisions/solver-preconditioners.md)."""
         threaded = self.d == 3 and self._full_symbolic is not None and self._full_symbolic.threaded
         with solve_threads() if threaded else contextlib.nullcontext():
             return solve_tail(factor, self.n - 1, W)

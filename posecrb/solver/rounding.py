@@ -1,6 +1,8 @@
 """Rounding a relaxed solution to SO(d)^n and recovering translations (SE-Sync Algorithm 2)."""
 from __future__ import annotations
 
+from dataclasses import dataclass
+
 import numpy as np
 
 from .problem import Problem
@@ -53,3 +55,35 @@ def anchor_estimate(rot: np.ndarray, trans: np.ndarray, anchor: int) -> tuple[np
     rot2[anchor] = np.eye(rot.shape[1])
     trans2[anchor] = 0.0
     return rot2, trans2
+
+
+@dataclass(frozen=True)
+class Rounding:
+    """The estimate rounded from a staircase level's point: its objective F, rotations (n, d, d) and
+    translations (n, d) (pose 0 at the origin), and the level and rank it comes from."""
+
+    level: int
+    rank: int
+    objective: float
+    rot: np.ndarray
+    trans: np.ndarray
+
+
+def round_point(problem: Problem, Z: np.ndarray, level: int, rank: int) -> Rounding:
+    """The rounding of a relaxed point Z (n, d, r): rotations, their optimal translations, F there."""
+    rot = round_rotations(Z)
+    trans = recover_translations(problem, rot)
+    return Rounding(level, rank, se_objective(problem, rot, trans), rot, trans)
+
+
+def pose_objective(problem: Problem, rot: np.ndarray, trans: np.ndarray | None = None) -> float:
+    """SE-Sync's objective F at poses given as rotations (n, d, d) and translations (n, d).
+
+    With ``trans=None`` the translations are eliminated: ``F*(R) = min_t F(R, t)``, at the optimal
+    translations :func:`recover_translations` (what ``posecrb solve`` reports as ``objective`` at its
+    rotations). Given translations are used as they are (F is invariant under a common rigid
+    motion of the poses, so any anchoring will do).
+    """
+    rot = np.asarray(rot, dtype=float)
+    trans = recover_translations(problem, rot) if trans is None else np.asarray(trans, dtype=float)
+    return se_objective(problem, rot, trans)

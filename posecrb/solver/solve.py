@@ -1,17 +1,16 @@
 """``solve``: SE-Sync's certifiably correct maximum-likelihood pose-graph estimator (docs/design.md#solver).
 
-Pipeline (Rosen et al., IJRR 2019, Algorithms 1-2): build the sparse data
-(problem.py), chordal initialisation (chordal.py), Riemannian staircase with a
-preconditioned truncated-Newton trust region at each rank (trust_region.py,
-staircase.py), verification of ``Q - Lambda >= 0`` by sparse Cholesky, rounding
-to SO(d)^n and translation recovery (rounding.py).
+Pipeline (Rosen et al., IJRR 2019, Algorithms 1-2), one function per stage: the initialisation
+(:func:`_initialise`: the sparse data of problem.py, the chordal rotations of chordal.py, the
+preconditioners of policy.py), the Riemannian staircase (staircase.py: the trust region of
+trust_region.py on the relaxation of relaxed.py at each rank, the certificate of certificate.py),
+and the rounding to SO(d)^n with its certificate (:func:`_round_and_certify`, rounding.py).
 """
 from __future__ import annotations
 
 import logging
 import time
-from collections.abc import Mapping
-from dataclasses import dataclass, field, fields, replace
+from dataclasses import dataclass, field, replace
 from typing import Any
 
 import numpy as np
@@ -21,16 +20,22 @@ from ..core.graph import PoseGraph
 from ..core.result import Result, array_field, optional_field, status_field
 from ..core.status import OK, Status
 from ..io.rotations import rot_to_quat
-from ..linalg.cholesky import Factor
 from ..linalg.ordering import threaded_matrix
 from ..linalg.threads import cholmod_threads, solver_threads
+from .certificate import Certificate
 from .chordal import chordal_rotations
+from .options import BASE_PRECONDITIONERS, PreconditionerSettings, SolverOptions
+from .policy import PreconditionerPolicy, build_policy
 from .poses import checked_poses
-from .problem import Problem, RotationBlockFactor
-from .rounding import anchor_estimate, recover_translations, round_rotations, se_objective
-from .staircase import PRECONDITIONERS, RelaxedModel, escape, verify
-from .tangent import TangentSystem
-from .trust_region import TROptions, trust_region
+from .preconditioners import base_preconditioner_kind
+from .problem import Problem
+from .relaxed import RelaxedProblem
+from .rounding import Rounding, anchor_estimate, round_point
+from .staircase import StaircaseOutcome, run_staircase, timed_phase
+from .trust_region import TROptions
+
+__all__ = ["BASE_PRECONDITIONERS", "PreconditionerSettings", "SolveResult", "SolverOptions",
+           "base_preconditioner_kind", "solve"]
 
 log = logging.getLogger("posecrb")
 
@@ -81,10 +86,10 @@ class SolveResult(Result):
         How many times each preconditioner was applied (a solve with its factor: one per
         truncated-CG residual and one per Newton decrement), by name: ``schur`` (SE-Sync's
         ``(Q + delta I)^{-1}`` through a factor of M_red) or ``rotation`` (the rotation block's
-        ``(C + delta I)^{-1}``), whichever is the base one (``SolverOptions.base_precond``);
+        ``(C + delta I)^{-1}``), whichever is the base one (``PreconditionerSettings.base``);
         ``adaptive`` (``(Q - Lambda + s I)^{-1}``, refactored at an iterate); ``tangent`` (the
         tangent space's inverse Hessian); ``split`` (after an escape). Empty without a
-        preconditioner (``precondition=False``).
+        preconditioner (``preconditioner="none"``).
     quaternions : str
         How the file's 3D quaternions were read (``"normalize"``, or ``"raw"`` as SE-Sync).
     saved : str or None
@@ -165,95 +170,6 @@ class SolveResult(Result):
         return pd.DataFrame(cols)
 
 
-# On 3D graphs (tangent_precond=None) the first level switches to the tangent space's preconditioner
-# after a truncated-CG run of more than this many products: its factorizations cost 2-2.5 times
-# M_red's there, which pays only where products are many (parking-garage's first run: 26; the other
-# SE-Sync files' stay below 15).
-TANGENT_SWITCH_HVPS = 20
-
-# The base preconditioner (SolverOptions.base_precond): "schur", SE-Sync's (Q + delta I)^{-1} through a
-# factor of M_red(delta); "rotation", (C + delta I)^{-1} through a factor of the rotation block C alone
-# (posecrb.solver.problem.RotationBlockFactor); "auto", the rotation block on the 3D graphs whose
-# factorizations are threaded (threaded_matrix: from 10,000 poses, dense separators), where its factor
-# takes (3/4)^3 of M_red's flops and truncated CG needed fewer products on three of the four graphs
-# measured (3D grid of 21,952 poses: 17 instead of 25) and one more on the fourth (docs/performance.md);
-# SE-Sync's elsewhere, where factorizations are cheap and
-# the products decide, and the rotation block needed more of them on some graphs (cubicle: 79 instead of 32).
-BASE_PRECONDITIONERS = ("auto", "schur", "rotation")
-
-# TROptions fields a caller may set through SolverOptions.trust_region (max_iterations is a
-# SolverOptions field of its own).
-_TR_TUNING = frozenset(f.name for f in fields(TROptions)) - {"max_iterations"}
-
-
-@dataclass(frozen=True, kw_only=True)
-class SolverOptions:
-    """Options of :func:`solve` (docs/design.md#solver); the defaults are SE-Sync's settings.
-
-    ``r0`` / ``rmax``: first (default d + 1) and last rank of the Riemannian staircase (the
-    start's zero padding is filled by escapes before the rank grows past r0); ``init``:
-    "chordal", "vertices" (the file's own estimate) or an (n, d, d) array of rotations;
-    ``anchor``: internal index of the pose put at the identity (default 0); ``max_iterations``:
-    trust-region iterations per staircase level; ``certificate_tol``: accept
-    lambda_min(Q - Lambda) >= -tol; ``seed``: of the verification's random start (the solver is
-    deterministic); ``precondition`` / ``precond_max_cond``: the regularised base preconditioner
-    and the cap on its condition number; ``base_precond``: which one (``BASE_PRECONDITIONERS``:
-    "schur", SE-Sync's (Q + delta I)^{-1}; "rotation", (C + delta I)^{-1} of the rotation block C
-    without the translations' coupling; "auto", the default: "rotation" on 3D graphs of at least
-    10,000 poses, "schur" elsewhere, :func:`base_preconditioner_kind`); ``adaptive_precond``: relative shift of
-    the (Q - Lambda + s I)^{-1} preconditioner (None: off), refactored when the last truncated-CG
-    run needed more than ``refactor_hvps`` Hessian-vector products (None: at every accepted
-    iterate); ``tangent_precond``: precondition the first staircase level with the exact inverse
-    Hessian on the tangent space (``posecrb.solver.tangent``), refactored at accepted iterates
-    (True: from the start; False: never; None, the default: from the start on 2D graphs, where its
-    sparse system has as many rows per pose as M_red, and on 3D graphs, where it has half as many
-    again, only after a truncated-CG run of more than ``TANGENT_SWITCH_HVPS`` products,
-    docs/performance.md); ``split_precond``: after an escape from the first level, precondition
-    with that level's factor of K on the in-plane directions and (Q - Lambda + sigma I)^{-1} on the
-    new column's (the inverse Hessian at the padded point; False: ``Proj (Q - Lambda + s I)^{-1}
-    Proj`` there too); ``trust_region``: other :class:`TROptions` fields (e.g. ``theta``,
-    ``decrement_tol``, ``exact_decrement_tol``).
-    """
-
-    r0: int | None = None
-    rmax: int = 10
-    init: str | np.ndarray = "chordal"
-    anchor: int | None = None
-    max_iterations: int = 500
-    certificate_tol: float = 1e-3
-    verbose: bool = False
-    seed: int = 0
-    precondition: bool = True
-    precond_max_cond: float = 1e6
-    base_precond: str = "auto"
-    adaptive_precond: float | None = 1e-10
-    refactor_hvps: int | None = 30
-    tangent_precond: bool | None = None
-    split_precond: bool = True
-    trust_region: Mapping[str, Any] = field(default_factory=dict)
-
-    def __post_init__(self) -> None:
-        _check_base_precond(self.base_precond)
-        unknown = set(self.trust_region) - _TR_TUNING
-        if unknown:
-            raise UsageError(f"unknown trust-region option(s) {', '.join(sorted(unknown))}; "
-                             f"choose from {', '.join(sorted(_TR_TUNING))}")
-
-    @classmethod
-    def from_keywords(cls, base: SolverOptions | None = None, **keywords: Any) -> SolverOptions:
-        """``base`` (default: the defaults) with ``keywords`` applied: SolverOptions fields by name,
-        TROptions fields into ``trust_region``; any other name is a UsageError."""
-        base = cls() if base is None else base
-        own = {f.name for f in fields(cls)} - {"trust_region"}
-        tuning = {k: v for k, v in keywords.items() if k not in own}
-        unknown = set(tuning) - _TR_TUNING
-        if unknown:
-            raise UsageError(f"unknown solver option(s) {', '.join(sorted(unknown))}")
-        return replace(base, **{k: v for k, v in keywords.items() if k in own},
-                       trust_region={**base.trust_region, **tuning})
-
-
-
 def solve(graph: PoseGraph, options: SolverOptions | None = None, **keywords: Any) -> SolveResult:
     """Certifiably correct maximum-likelihood estimate of a pose graph (see :func:`_solve`).
 
@@ -277,152 +193,92 @@ def _solve(graph: PoseGraph, options: SolverOptions) -> SolveResult:
     are documented on :class:`SolverOptions`). Raises DisconnectedGraph for a disconnected
     graph, UsageError for bad ranks, anchor or init."""
     t_start = time.perf_counter()
+    start = _initialise(graph, options)
+    outcome = run_staircase(start.relaxed, start.policy, start.Z, r0=start.r0, rmax=options.rmax,
+                            certificate_tol=options.certificate_tol, rng=start.rng, options=start.tr_options,
+                            times=start.times)
+    return _round_and_certify(graph, start, outcome, options.certificate_tol, t_start)
+
+
+@dataclass
+class _Start:
+    """What the staircase starts from: the problem, its relaxation and preconditioners, the rank-r0
+    point Z (rotations, at width d), and the settings the later stages need."""
+
+    problem: Problem
+    relaxed: RelaxedProblem
+    policy: PreconditionerPolicy
+    Z: np.ndarray
+    r0: int
+    anchor: int
+    small_shift: float | None      # the adaptive preconditioner's shift s (absolute), or None
+    rng: np.random.Generator
+    tr_options: TROptions
+    times: dict[str, float] = field(default_factory=dict)
+
+
+def _initialise(graph: PoseGraph, options: SolverOptions) -> _Start:
+    """Check the ranks and anchor, build the problem, the initial rotations and the preconditioners
+    (timed as ``init``)."""
     graph.require_connected()
     d, n = graph.dim, graph.n
     anchor = 0 if options.anchor is None else int(options.anchor)
     if not 0 <= anchor < n:
         raise UsageError(f"anchor index {anchor} out of range 0..{n - 1}")
     r0 = d + 1 if options.r0 is None else int(options.r0)
-    rmax, init, certificate_tol = options.rmax, options.init, options.certificate_tol
-    if r0 < d or rmax < r0:
-        raise UsageError(f"need d <= r0 <= rmax (d={d}, r0={r0}, rmax={rmax})")
+    if r0 < d or options.rmax < r0:
+        raise UsageError(f"need d <= r0 <= rmax (d={d}, r0={r0}, rmax={options.rmax})")
     if options.verbose:
         log.setLevel(min(log.level or logging.INFO, logging.INFO))
-    rng = np.random.default_rng(options.seed)
-    opts = TROptions(max_iterations=options.max_iterations, **options.trust_region)
+    tr_options = TROptions(max_iterations=options.max_iterations, **options.trust_region)
+    times = {"init": 0.0, "optimize": 0.0, "verify": 0.0, "round": 0.0}
+    with timed_phase(times, "init"):
+        problem = Problem.from_graph(graph)
+        rot0 = _initial_rotations(graph, problem, options.init)
+        settings = options.preconditioner_settings
+        policy = build_policy(problem, options.preconditioner, settings, options.certificate_tol)
+        # The rank-r0 starting point is the rotations padded with r0 - d zero columns. Every step of
+        # the trust region acts on the columns linearly or through d x d block products with Z_i, so
+        # the padding stays exactly zero: the level is the rank-d problem, computed here at width d
+        # (a third fewer right-hand sides in 2D, a quarter in 3D). An escape fills one zero column at
+        # a time and raises the rank only once none is left: the rank is max(r0, width).
+        Z = np.ascontiguousarray(np.swapaxes(rot0, 1, 2))
+    small_shift = None if settings.adaptive_shift is None else settings.adaptive_shift * problem.gershgorin_max()
+    return _Start(problem, RelaxedProblem(problem), policy, Z, r0, anchor, small_shift,
+                  np.random.default_rng(options.seed), tr_options, times)
 
-    # ---- initialisation --------------------------------------------------
-    t0 = time.perf_counter()
-    problem = Problem.from_graph(graph)
+
+def _initial_rotations(graph: PoseGraph, problem: Problem, init: str | np.ndarray) -> np.ndarray:
+    """(n, d, d) rotations to start from: ``init`` as an array, the chordal relaxation's, or the
+    file's vertices."""
     if isinstance(init, np.ndarray):
-        rot0 = np.asarray(init, float)
-    elif init == "chordal":
-        rot0 = chordal_rotations(problem)
-    elif init == "vertices":
+        return np.asarray(init, float)
+    if init == "chordal":
+        return chordal_rotations(problem)
+    if init == "vertices":
         if not graph.has_vertices:
             raise PosecrbError(f"{graph.path}: the file has no VERTEX lines to initialise the solver from")
-        rot0 = np.asarray(graph.vertex_rot, float)
-    else:
-        raise ArgumentError("init", init, "is not 'chordal', 'vertices' or an (n, d, d) array of rotations")
-    precond = None
-    tangent = None
-    delta = 0.0
-    base_kind = base_preconditioner_kind(options.base_precond, d, n)
-    if options.precondition:
-        # Regularised base preconditioner ((Q + delta I)^{-1} or (C + delta I)^{-1}); delta caps the
-        # condition number near precond_max_cond (SE-Sync's regularised Cholesky, section 4.3).
-        delta = problem.gershgorin_max() / options.precond_max_cond
-        if options.tangent_precond or (options.tangent_precond is None and d == 2):
-            if options.adaptive_precond is not None:
-                tangent = TangentSystem.build(problem)
-        if tangent is None:
-            precond = _base_preconditioner(problem, delta, base_kind)
-    # 3D by default: the tangent system only after a truncated-CG run of more than
-    # TANGENT_SWITCH_HVPS products at the first level (docs/performance.md)
-    switch = (options.precondition and options.tangent_precond is None and d != 2
-              and options.adaptive_precond is not None)
-    model = RelaxedModel(problem, precond,
-                         None if options.adaptive_precond is None
-                         else options.adaptive_precond * problem.gershgorin_max(),
-                         refactor_hvps=options.refactor_hvps, tangent=tangent, tangent_fallback_shift=delta,
-                         base_factory=(None if tangent is None
-                                       else (lambda: _base_preconditioner(problem, delta, base_kind))),
-                         tangent_factory=(lambda: TangentSystem.build(problem)) if switch else None,
-                         tangent_switch_hvps=TANGENT_SWITCH_HVPS if switch else None,
-                         split_escape=options.split_precond)
-    model.certificate_tol = certificate_tol
-    # The rank-r0 starting point is the rotations padded with r0 - d zero columns. Every step of the
-    # trust region acts on the columns linearly or through d x d block products with Z_i, so the
-    # padding stays exactly zero: the level is the rank-d problem, computed here at width d (a
-    # third fewer right-hand sides in 2D, a quarter in 3D). An escape fills one zero column at a time
-    # and raises the rank only once none is left: the rank is max(r0, width).
-    Z = np.ascontiguousarray(np.swapaxes(rot0, 1, 2))
-    times = {"init": time.perf_counter() - t0, "optimize": 0.0, "verify": 0.0, "round": 0.0}
-    rounded: list[tuple[int, int, float, np.ndarray, np.ndarray]] = []   # (level, r, F, rot, trans)
+        return np.asarray(graph.vertex_rot, float)
+    raise ArgumentError("init", init, "is not 'chordal', 'vertices' or an (n, d, d) array of rotations")
 
-    # ---- Riemannian staircase ---------------------------------------------
-    iterations = 0
-    state = None
-    cert = None
-    reason = ""
-    r = r0
-    level = 1
-    while True:
-        t0 = time.perf_counter()
-        res = trust_region(model, Z, opts, state=state)
-        times["optimize"] += time.perf_counter() - t0
-        state = res.state
-        iterations += res.iterations
-        log.info("staircase level %d, r=%d%s: f=%.12g after %d TR iterations (%s), %d HVPs", level, r,
-                 _width_note(state.Z, r), state.f, res.iterations, res.status, model.hvps)
-        t0 = time.perf_counter()
-        try:
-            # A preconditioner factored at this point with a shift <= eta already decides the test.
-            cert = verify(problem, state, certificate_tol, rng,
-                          factor=model.certificate_factor(state, certificate_tol))
-        except NotPositiveDefinite as exc:
-            times["verify"] += time.perf_counter() - t0
-            reason = f"verification failed: {exc}"
-            break
-        times["verify"] += time.perf_counter() - t0
-        log.info("staircase level %d, r=%d: lambda_min(Q - Lambda) = %.3e (%s)", level, r, cert.lambda_min,
-                 "certified" if cert.certified else "saddle")
-        if cert.certified:
-            reason = f"lambda_min(Q - Lambda) = {cert.lambda_min:.3e} >= -{certificate_tol:g} at rank {r}"
-            break
-        if state.Z.shape[2] >= rmax:
-            reason = (f"not certified: lambda_min(Q - Lambda) = {cert.lambda_min:.3e} < -{certificate_tol:g} "
-                      f"at the maximum rank rmax = {rmax}")
-            break
-        # Round this level's point before leaving it: where the relaxation is not exact, the next
-        # levels' roundings can be worse than this one (the first level, started from rotations,
-        # never leaves SO(d)^n: its point is a local optimum of F itself).
-        t0 = time.perf_counter()
-        rounded.append((level, r, *_rounded_estimate(problem, state.Z)))
-        times["round"] += time.perf_counter() - t0
-        # The next level starts near a saddle: rebuild the preconditioner there at once, shifted
-        # past the negative curvature just found (RelaxedModel.prepare).
-        model.lambda_hint = min(cert.lambda_min, 0.0)
-        model.refactor_next = True
-        model.saddle_factor = cert.shifted_factor
-        t0 = time.perf_counter()
-        state = escape(model, state, cert)
-        times["optimize"] += time.perf_counter() - t0
-        Z = state.Z
-        r = max(r0, Z.shape[2])
-        level += 1
 
-    # ---- rounding: the final level's, or an earlier level's when that one is lower ----------
-    t0 = time.perf_counter()
-    rounded.append((level, r, *_rounded_estimate(problem, state.Z)))
-    final = rounded[-1]
-    best = min(rounded, key=lambda point: point[2])
-    if best[2] < final[2]:
-        log.info("estimate: the rounding of level %d's point (r=%d), F = %.12g, is below the final level's "
-                 "(r=%d), F = %.12g; kept", best[0], best[1], best[2], r, final[2])
-    else:
-        best = final
-    _, _, objective, rot, trans = best
-    rot, trans = anchor_estimate(rot, trans, anchor)
-    times["round"] += time.perf_counter() - t0
+def _round_and_certify(graph: PoseGraph, start: _Start, outcome: StaircaseOutcome, certificate_tol: float,
+                       t_start: float) -> SolveResult:
+    """The estimate (the lowest rounding of the levels' points, anchored), its certificate, duality
+    gap and statuses."""
+    problem, times, state = start.problem, start.times, outcome.state
+    n, d = problem.n, problem.d
+    with timed_phase(times, "round"):
+        best = _best_rounding(outcome.saddle_roundings, round_point(problem, state.Z, outcome.level, outcome.rank))
+        rot, trans = anchor_estimate(best.rot, best.trans, start.anchor)
+    objective = best.objective
+    cert = outcome.certificate
     certified = bool(cert is not None and cert.certified)
     gap = objective - state.f
     gap_status = OK
     if certified and cert is not None:
-        shift = model.adaptive_shift
-        if (cert.proven_shift is not None and shift is not None and 0.0 <= shift < cert.proven_shift
-                and n * d * cert.proven_shift + max(gap, 0.0) >= abs(objective)):
-            # The certificate's bound n d s is not below the objective at s = eta: a Cholesky of
-            # Q - Lambda + s I at the preconditioner's small shift proves the tighter bound (the
-            # M_red preconditioner's last factorization often does so on its own; the tangent one
-            # never does).
-            t0 = time.perf_counter()
-            try:
-                problem.factor_full(state.lam, shift, name="certificate matrix Q - Lambda + s I")
-                cert.proven_shift = float(shift)
-            except NotPositiveDefinite:
-                pass
-            times["verify"] += time.perf_counter() - t0
+        with timed_phase(times, "verify"):
+            cert = _prove_at_small_shift(problem, state.lam, cert, start.small_shift, n * d, objective, gap)
     times["total"] = time.perf_counter() - t_start
     if certified and cert is not None:
         if cert.proven_shift is not None:
@@ -430,51 +286,41 @@ def _solve(graph: PoseGraph, options: SolverOptions) -> SolveResult:
                                             objective, trans, certificate_tol, cert.proven_shift)
         gap_status = _duality_gap_status(graph, gap, objective, trans)
     return SolveResult(
-        dataset=graph.name, dim=d, poses=n, edges=graph.m, anchor=int(graph.ids[anchor]),
+        dataset=graph.name, dim=d, poses=n, edges=graph.m, anchor=int(graph.ids[start.anchor]),
         objective=float(objective), relaxation_value=float(state.f), duality_gap=float(gap),
         duality_gap_status=gap_status,
-        lambda_min=float(cert.lambda_min) if cert is not None else None, certified=certified, reason=reason,
-        rank=r, iterations=iterations, hessian_vector_products=model.hvps,
-        preconditioner_solves={name: model.preconditioned[name] for name in PRECONDITIONERS
-                               if model.preconditioned[name]},
+        lambda_min=float(cert.lambda_min) if cert is not None else None, certified=certified,
+        reason=outcome.reason, rank=outcome.rank, iterations=outcome.iterations,
+        hessian_vector_products=outcome.hessian_vector_products, preconditioner_solves=start.policy.solves(),
         quaternions=graph.quaternions, times=times, rot=rot, trans=trans, ids=graph.ids.copy())
 
 
-def _check_base_precond(name: str) -> None:
-    if name not in BASE_PRECONDITIONERS:
-        raise UsageError(f"unknown base preconditioner {name!r}; choose from {', '.join(BASE_PRECONDITIONERS)}")
+def _best_rounding(saddles: list[Rounding], final: Rounding) -> Rounding:
+    """The final level's rounding, or an earlier level's where that one is lower (where the
+    relaxation is not exact, the last level's rounding can be worse)."""
+    best = min([*saddles, final], key=lambda point: point.objective)
+    if best.objective < final.objective:
+        log.info("estimate: the rounding of level %d's point (r=%d), F = %.12g, is below the final level's "
+                 "(r=%d), F = %.12g; kept", best.level, best.rank, best.objective, final.rank, final.objective)
+        return best
+    return final
 
 
-def base_preconditioner_kind(requested: str, dim: int, poses: int) -> str:
-    """The base preconditioner ``requested`` (``BASE_PRECONDITIONERS``) stands for on a graph of
-    ``poses`` poses in dimension ``dim``: ``auto`` is "rotation" on the 3D graphs whose
-    factorizations are threaded (``posecrb.linalg.ordering.threaded_matrix``), "schur" otherwise."""
-    _check_base_precond(requested)
-    if requested != "auto":
-        return requested
-    return "rotation" if dim == 3 and threaded_matrix(dim, poses, "solver") else "schur"
-
-
-def _base_preconditioner(problem: Problem, delta: float, kind: str) -> Factor | RotationBlockFactor:
-    """The regularised base preconditioner (``base_preconditioner_kind``): "schur", (Q + delta I)^{-1}
-    through a factor of M_red(delta) (SE-Sync's); "rotation", (C + delta I)^{-1} through a factor of
-    the rotation block alone."""
-    if kind == "rotation":
-        log.debug("base preconditioner: the rotation block's (C + %.3e I)^-1", delta)
-        return problem.factor_rotation_block(delta, name="preconditioner C + delta I")
-    return problem.factor_full(None, delta, name="preconditioner M_red(delta)")
-
-
-def _width_note(Z: np.ndarray, r: int) -> str:
-    width = int(Z.shape[2])
-    return "" if width == r else f" (a rank-{width} point: its other columns stay zero)"
-
-
-def _rounded_estimate(problem: Problem, Z: np.ndarray) -> tuple[float, np.ndarray, np.ndarray]:
-    """(F, rotations, translations) of the rounding of a relaxed point (rounding.py)."""
-    rot = round_rotations(Z)
-    trans = recover_translations(problem, rot)
-    return se_objective(problem, rot, trans), rot, trans
+def _prove_at_small_shift(problem: Problem, lam: np.ndarray, cert: Certificate, shift: float | None, nd: int,
+                          objective: float, gap: float) -> Certificate:
+    """``cert`` with the tighter bound ``n d s`` proven at the preconditioner's small shift s where
+    its bound ``n d s'`` (s' the certifying Cholesky's shift) is not below the objective: one more
+    Cholesky of ``Q - Lambda + s I`` (the adaptive factor often proves it on its own; the tangent
+    one never does)."""
+    proven = cert.proven_shift
+    if (proven is None or shift is None or not 0.0 <= shift < proven
+            or nd * proven + max(gap, 0.0) < abs(objective)):
+        return cert
+    try:
+        problem.factor_full(lam, shift, name="certificate matrix Q - Lambda + s I")
+    except NotPositiveDefinite:
+        return cert
+    return replace(cert, proven_shift=float(shift))
 
 
 # A certified duality gap above this fraction of the objective is more than the solver's own

@@ -30,8 +30,8 @@ def from_components(a: np.ndarray) -> np.ndarray:
 # block part) act on n tiny d x r blocks (2 x 3, 3 x 4). numpy's batched matmul pays a per-block
 # overhead that made them half of an HVP-heavy solve; instead they transpose once to the
 # component-major layout (d, r, n) and loop over the d^2 block entries, each a contiguous
-# length-n vector operation (measured 3-4x faster at n = 1.5e4 than the batched matmul, equal to
-# a compiled numba kernel without its ~0.3 s import and cache-load cost per process).
+# length-n vector operation (several times faster than the batched matmul on large graphs, and as
+# fast as a compiled numba kernel without numba's import and cache-load cost in every process).
 def _sym_products(At: np.ndarray, Bt: np.ndarray) -> np.ndarray:
     """(d, d, n) entries of sym(A_i B_i^T) from component-major A, B (d, r, n)."""
     d = At.shape[0]

@@ -62,7 +62,7 @@ def generator_traces(entries: list[list[tuple[int, int, float]]], left: np.ndarr
     With ``P_n = L_n R_n^T`` it is ``sum G_a[x, u] G_b[y, v] M[x, y] P[u, v]``: four terms per pair
     of generators (``entries``, :func:`generator_entries`), each a product of two length-nb
     vectors, instead of the products through G_a L and G_b R, whose blocks are k times the size
-    (docs/performance.md).
+    (docs/decisions/solver-preconditioners.md).
     """
     d, nb = left.shape[0], left.shape[2]
     P = np.empty((d, d, nb))
@@ -163,7 +163,8 @@ class TangentSystem:
 
         Each row of G_a has one nonzero, +-1 (:func:`so_basis`), so the product copies rows of Z_i
         with a sign. Written that way it has the product's digits and skips the contraction over
-        the zeros, which took a few percent of a large 2D solve (docs/performance.md).
+        the zeros, which runs at every preconditioner application
+        (docs/decisions/solver-preconditioners.md).
         """
         n, d, r = Z.shape
         out = np.zeros((n, len(self.entries), d, r))

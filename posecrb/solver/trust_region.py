@@ -15,33 +15,53 @@ from typing import Protocol
 
 import numpy as np
 
-from .stiefel import inner, project, retract
+from .relaxed import State
+from .stiefel import inner, retract
 
 log = logging.getLogger("posecrb")
 
 
 # The relative decrease of f below which an accepted step is "converging": the default of
-# TROptions.certified_rel_decrease, and what the model's prepare() is told when that option is None.
+# TROptions.certified_rel_decrease, and what the preconditioner's prepare() is told when that option is None.
 CONVERGING_REL_DECREASE = 1e-9
 
 
-class Model(Protocol):
-    """What the trust region needs from a problem on St(d, r)^n."""
+class Objective(Protocol):
+    """What the trust region needs of a problem on St(d, r)^n (posecrb.solver.relaxed.RelaxedProblem)."""
 
     def evaluate(self, Z: np.ndarray) -> State: ...
 
     def hvp(self, state: State, V: np.ndarray) -> np.ndarray: ...
 
-    def precondition(self, state: State, R: np.ndarray) -> np.ndarray: ...
+    def project(self, state: State, W: np.ndarray) -> np.ndarray: ...
 
 
-@dataclass
-class State:
-    Z: np.ndarray          # (n, d, r) point
-    f: float               # objective
-    QZ: np.ndarray         # (n, d, r) Q Z (Euclidean gradient / 2)
-    lam: np.ndarray        # (n, d, d) Lambda blocks sym(QZ_i Z_i^T)
-    grad: np.ndarray       # (n, d, r) Riemannian gradient
+class Preconditioning(Protocol):
+    """What the trust region needs of a preconditioner (posecrb.solver.policy.PreconditionerPolicy)."""
+
+    def prepare(self, state: State, last_hvps: int | None = None, converging: bool = False) -> None: ...
+
+    def apply(self, state: State, R: np.ndarray) -> np.ndarray: ...
+
+    def exact(self, state: State) -> bool: ...
+
+    def certified(self, state: State) -> bool: ...
+
+
+class _Identity:
+    """No preconditioner."""
+
+    def prepare(self, state: State, last_hvps: int | None = None, converging: bool = False) -> None:
+        return None
+
+    def apply(self, state: State, R: np.ndarray) -> np.ndarray:
+        return R
+
+    def exact(self, state: State) -> bool:
+        return False
+
+    def certified(self, state: State) -> bool:
+        return False
 
 
 @dataclass
@@ -59,16 +79,16 @@ class TROptions:
     # Hessian-vector products but moved f by up to 2.3e-10 relatively, which the trace of the CRLB
     # at the estimate amplified to 7e-6 on sphere_bignoise (regress tolerance 1e-6).
     decrement_tol: float = 1e-11
-    # The same stop where the model's preconditioner is the exact inverse Hessian (its
-    # ``exact_preconditioner(state)``): the decrement is then the distance f - f* itself to second
-    # order, which other preconditioners overestimate, so the test stops only at its rounding level;
+    # The same stop where the preconditioner is the exact inverse Hessian (its ``exact(state)``):
+    # the decrement is then the distance f - f* itself to second order, which other
+    # preconditioners overestimate, so the test stops only at its rounding level;
     # one more Newton step costs a product or two (posecrb.solver.tangent; intel's CRLB at the
     # estimate agrees with a converged one to 1.5e-11 relative, against 1.4e-7 at 1e-11).
     exact_decrement_tol: float = 1e-15
     rel_decrease_tol: float = 1e-12
     step_tol: float = 0.0
     delta0: float | None = None
-    # Stop as soon as an accepted iterate is certified (the model's preconditioner factorization
+    # Stop as soon as an accepted iterate is certified (the preconditioner's factorization
     # there proves lambda_min(Q - Lambda) >= -eta) and its step decreased f by at most this much,
     # relatively: past that point further iterations only polish a certified optimum (they
     # changed f by < 1e-10 relatively where measured), and they are the slowest ones at a
@@ -84,7 +104,7 @@ class TRResult:
     status: str
 
 
-def _tcg(model: Model, state: State, delta: float,
+def _tcg(objective: Objective, precond: Preconditioning, state: State, delta: float,
          opt: TROptions) -> tuple[np.ndarray, np.ndarray, int, str, bool]:
     """Steihaug-Toint truncated CG on the trust-region subproblem; returns (eta, Heta, hvps, reason, boundary)."""
     grad = state.grad
@@ -93,7 +113,7 @@ def _tcg(model: Model, state: State, delta: float,
     r = grad
     r_r = inner(r, r)
     norm_r0 = math.sqrt(r_r)
-    z = model.precondition(state, r)
+    z = precond.apply(state, r)
     z_r = inner(z, r)
     d_Pd = z_r
     delta_dir = -z
@@ -101,10 +121,9 @@ def _tcg(model: Model, state: State, delta: float,
     e_Pe = 0.0
     model_value = 0.0
     hvps = 0
-    proj = getattr(model, "project", None)
     stop = norm_r0 * min(opt.kappa, norm_r0 ** opt.theta)
     for _j in range(opt.max_inner):
-        Hd = model.hvp(state, delta_dir)
+        Hd = objective.hvp(state, delta_dir)
         hvps += 1
         d_Hd = inner(delta_dir, Hd)
         alpha = z_r / d_Hd if d_Hd != 0 else math.inf
@@ -124,27 +143,26 @@ def _tcg(model: Model, state: State, delta: float,
         r_r = inner(r, r)
         if math.sqrt(r_r) <= stop:
             return eta, Heta, hvps, "converged", False
-        z = model.precondition(state, r)
+        z = precond.apply(state, r)
         zold_rold = z_r
         z_r = inner(z, r)
         beta = z_r / zold_rold
         w = beta * delta_dir - z
-        delta_dir = proj(state, w) if proj is not None else project(state.Z, w)
+        delta_dir = objective.project(state, w)
         e_Pd = beta * (e_Pd + alpha * d_Pd)
         d_Pd = z_r + beta * beta * d_Pd
     return eta, Heta, hvps, "max inner", False
 
 
-def trust_region(model: Model, Z0: np.ndarray, opt: TROptions, state: State | None = None) -> TRResult:
-    """Minimise the model's objective on St(d, r)^n from Z0 (or a given evaluated state)."""
-    x = state or model.evaluate(Z0)
+def trust_region(objective: Objective, Z0: np.ndarray, opt: TROptions, state: State | None = None,
+                 preconditioner: Preconditioning | None = None) -> TRResult:
+    """Minimise ``objective`` on St(d, r)^n from Z0 (or a given evaluated state), preconditioned by
+    ``preconditioner`` (None: not at all)."""
+    precond: Preconditioning = _Identity() if preconditioner is None else preconditioner
+    x = state or objective.evaluate(Z0)
     hvps = 0
-    prepare = getattr(model, "prepare", None)
-    certified = getattr(model, "certified", None)
-    exact_preconditioner = getattr(model, "exact_preconditioner", None)
-    if prepare is not None:
-        prepare(x)
-    pg = model.precondition(x, x.grad)
+    precond.prepare(x)
+    pg = precond.apply(x, x.grad)
     decrement = 0.5 * inner(pg, x.grad)
     delta = opt.delta0 if opt.delta0 is not None else max(math.sqrt(2.0 * max(decrement, 1e-300)), 1e-12)
     delta_max = 1e6 * delta
@@ -159,15 +177,15 @@ def trust_region(model: Model, Z0: np.ndarray, opt: TROptions, state: State | No
             status = "gradient norm"
             it -= 1
             break
-        exact = exact_preconditioner is not None and exact_preconditioner(x)
+        exact = precond.exact(x)
         if decrement <= (opt.exact_decrement_tol if exact else opt.decrement_tol) * max(abs(x.f), 1.0):
             status = "Newton decrement"
             it -= 1
             break
-        eta, Heta, k, reason, boundary = _tcg(model, x, delta, opt)
+        eta, Heta, k, reason, boundary = _tcg(objective, precond, x, delta, opt)
         hvps += k
         model_decrease = -(inner(x.grad, eta) + 0.5 * inner(eta, Heta))
-        cand = model.evaluate(retract(x.Z, eta))
+        cand = objective.evaluate(retract(x.Z, eta))
         reg = max(1.0, abs(x.f)) * np.finfo(float).eps * 1e3
         rho = (x.f - cand.f + reg) / (model_decrease + reg)
         step = math.sqrt(inner(eta, eta))
@@ -181,19 +199,18 @@ def trust_region(model: Model, Z0: np.ndarray, opt: TROptions, state: State | No
         if accepted:
             rel = (x.f - cand.f) / max(abs(x.f), 1e-300)
             x = cand
-            if prepare is not None:
-                prepare(x, k, rel <= converged_rel)
-            if (certified is not None and opt.certified_rel_decrease is not None
-                    and rel <= opt.certified_rel_decrease and certified(x)):
+            precond.prepare(x, k, rel <= converged_rel)
+            if (opt.certified_rel_decrease is not None and rel <= opt.certified_rel_decrease
+                    and precond.certified(x)):
                 status = "certified"
                 break
-            pg = model.precondition(x, x.grad)
+            pg = precond.apply(x, x.grad)
             decrement = 0.5 * inner(pg, x.grad)
             if rel <= opt.rel_decrease_tol:
                 status = "relative decrease"
                 break
-        elif prepare is not None:
-            prepare(x, k)   # a rejected but expensive tCG: a better preconditioner at the same point
+        else:
+            precond.prepare(x, k)   # a rejected but expensive tCG: a better preconditioner at the same point
         if model_decrease <= 1e-15 * max(abs(x.f), 1e-300):
             status = "model decrease below machine precision"
             break
