@@ -40,7 +40,7 @@ endif
 SHELL := /bin/bash
 .SHELLFLAGS := -euo pipefail -c
 .ONESHELL:
-.PHONY: system install run lint test test-fast test-latest lock regress bench docs clean
+.PHONY: system install run lint test test-fast test-latest lock regress bench bench-quick bench-report docs clean
 
 # What apt must provide. A Debian-packaged interpreter needs python3.X-venv (ensurepip) for a venv and
 # python3.X-dev (Python.h) to compile scikit-sparse; any other interpreter brings its own.
@@ -172,8 +172,23 @@ test-fast: lint
 regress: install
 	@$(PY) -m posecrb regress
 
+# The benchmark suite (benchmarks/run.py): the in-process asv suite over the SE-Sync datasets ($POSECRB_DATA)
+# and the scaling grids, the whole-process comparisons through hyperfine (posecrb's commands, and the peers
+# SE-Sync C++, GTSAM and MAC when $SESYNC_BIN / gtsam / $POSECRB_MAC_PYTHON are there), then the report's tables
+# in .bench/report. `make bench` installs hyperfine (apt) when it is missing; `make test` does not need it.
 bench: install
-	@for f in benchmarks/*.py; do $(PY) $$f; done
+	@command -v hyperfine >/dev/null || { echo "make: installing hyperfine (apt-get)" >&2; \
+	  $(APT) update -q && $(APT) install -y -q hyperfine; }
+	$(PY) benchmarks/run.py
+
+# Every benchmark once on small inputs, in a few minutes: a broken benchmark fails (the test suite runs the same,
+# tests/test_benchmarks.py, so CI does too). Comparisons whose program is missing say so and are skipped.
+bench-quick: install
+	@$(PY) benchmarks/run.py --quick
+
+# The performance page's tables and scaling figure from the suite's last results (.bench), into .bench/report.
+bench-report: install
+	@$(PY) benchmarks/report.py
 
 # The documentation site into docs/_build/html: Sphinx with warnings as errors, offline (no
 # intersphinx, nothing fetched at build time). Its packages are the `docs` extra, installed here
@@ -185,4 +200,4 @@ docs: install
 	echo "make: the site is in docs/_build/html/index.html" >&2
 
 clean:
-	@rm -rf build dist *.egg-info .pytest_cache docs/_build
+	@rm -rf build dist *.egg-info .pytest_cache docs/_build .bench/quick

@@ -7,8 +7,8 @@ in GTSAM's body-frame coordinates (``crlb --model sed --frame body``) at the sam
 script prints, per dataset, the largest and the median relative (Frobenius) difference of the
 per-pose covariance blocks and both anchored traces.
 
-Needs gtsam (``pip install 'posecrb[gtsam]'``): without it the script says so and exits with
-status 77 (skipped). Needs the real datasets (``$POSECRB_DATA``). Usage::
+Needs gtsam (``pip install '.[gtsam]'`` in posecrb's clone): without it the script says so and
+exits with status 77 (skipped). Needs the real datasets (``$POSECRB_DATA``). Usage::
 
     python examples/gtsam_marginals.py [NAME ...]      # default: intel tinyGrid3D
 """
@@ -52,7 +52,7 @@ def main() -> int:
     parser.add_argument("names", nargs="*", default=["intel", "tinyGrid3D"])
     args = parser.parse_args()
     if importlib.util.find_spec("gtsam") is None:
-        print("gtsam is not installed (pip install 'posecrb[gtsam]'): nothing to compare", file=sys.stderr)
+        print("gtsam is not installed (pip install '.[gtsam]' in posecrb's clone): nothing to compare", file=sys.stderr)
         return SKIPPED
 
     print(f"{'dataset':12s} {'poses':>6s} {'max rel diff':>12s} {'median':>9s} {'trace posecrb':>14s} "

@@ -15,8 +15,9 @@ The conventions (CONTRIBUTING.md, "Code blocks in the documentation"):
 * ```` ```text ```` blocks hold what is not code (formulas, diagrams, file excerpts); they may not
   contain a ``$ `` command or a ``>>>`` prompt, so nothing executable hides in them.
 * MyST directives (```` ```{toctree} ````, ```` ```{eval-rst} ````, ...) from a fixed list.
-* A block preceded by the line ``*Not run by the docs tests: <reason>.*`` is not run (and nothing
-  else is skipped).
+* A block preceded by the line ``<!-- Not run by the docs tests: <reason>. -->`` is not run (and
+  nothing else is skipped). The line is an HTML comment: it is for the tests and the page's
+  editors, and readers of the site (or of README.md on a repository browser) do not see it.
 
 Anything else is an error: a block in another language or without one, an indented code block, a
 skip line that is not followed by a block, or a misspelt skip line.
@@ -47,7 +48,7 @@ DIRECTIVES = frozenset({
     "toctree", "include", "literalinclude", "image", "figure", "eval-rst", "note", "warning",
     "seealso", "important", "tip", "admonition", "contents", "list-table", "csv-table",
 })
-SKIP_LINE = re.compile(r"^\*Not run by the docs tests: (?P<reason>\S.*)\.\*$")
+SKIP_LINE = re.compile(r"^<!-- Not run by the docs tests: (?P<reason>\S.*)\. -->$")
 SKIP_MENTION = re.compile(r"not run by the docs tests", re.IGNORECASE)
 COMMAND_TIMEOUT = 600   # seconds for one console command
 
@@ -127,7 +128,7 @@ def page_blocks(path: Path, text: str | None = None) -> list[Block]:
         m = SKIP_LINE.match(line.strip())
         if not m:
             raise DocBlockError(f"{_rel(path)}:{i + 1}: skip line not in the form "
-                                "'*Not run by the docs tests: <reason>.*'")
+                                "'<!-- Not run by the docs tests: <reason>. -->'")
         j = i + 1
         while j < len(lines) and not lines[j].strip():
             j += 1
@@ -165,7 +166,7 @@ def parse_console(block: Block) -> list[Command]:
             cmd = line[2:]
             while cmd.endswith("\\") and i + 1 < len(lines):
                 i += 1
-                cmd = cmd[:-1] + "\n" + lines[i]
+                cmd += "\n" + lines[i]      # bash reads the backslash-newline as a continuation
             commands.append(Command(block.line + 1 + first, cmd))
         elif not commands:
             if line.strip():

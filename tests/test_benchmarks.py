@@ -1,316 +1,334 @@
-"""The benchmark scripts' own code paths that no measurement run exercises in CI."""
+"""The benchmark suite (benchmarks/): its inputs, the whole-process harness with stand-in peers, the
+report on records made here, and the quick run of every benchmark (CI's check that none is broken)."""
 from __future__ import annotations
 
 import importlib
+import json
+import math
+import os
+import shutil
+import subprocess
 import sys
+import textwrap
 from pathlib import Path
 
 import pytest
 
 BENCHMARKS = Path(__file__).resolve().parents[1] / "benchmarks"
+HAS_HYPERFINE = shutil.which("hyperfine") is not None
+needs_hyperfine = pytest.mark.skipif(not HAS_HYPERFINE, reason="hyperfine is not installed (apt-get install hyperfine)")
 
 
 def _module(name: str):
-    if str(BENCHMARKS) not in sys.path:
-        sys.path.insert(0, str(BENCHMARKS))
+    """A module of benchmarks/ (``peers.NAME`` for a peer script), imported as the scripts import them."""
+    for directory in (BENCHMARKS, BENCHMARKS / "peers"):
+        if str(directory) not in sys.path:
+            sys.path.insert(0, str(directory))
     return importlib.import_module(name)
 
 
-def _random_spd(seed: int):
-    """A random sparse SPD matrix of 60 rows (condition number ~10^2), its dense log-det (numpy's
-    slogdet, the reference) and the pose of each row (ten poses of 6 rows), for the pose ordering."""
-    import numpy as np
-    import scipy.sparse as sp
-
-    rng = np.random.default_rng(seed)
-    n = 60
-    b = sp.random(n, n, density=0.08, random_state=rng)
-    a = (b @ b.T + sp.diags(rng.uniform(1.0, 2.0, n))).tocsc()
-    sign, ref = np.linalg.slogdet(a.toarray())
-    assert sign == 1
-    return a, float(ref), np.repeat(np.arange(n // 6), 6)
+@pytest.fixture
+def bench_env(tmp_path, monkeypatch):
+    """Grids cached in a scratch directory; the quick suite's inputs."""
+    monkeypatch.setenv("POSECRB_BENCH_CACHE", str(tmp_path / "cache"))
+    monkeypatch.setenv("POSECRB_BENCH", "quick")
+    return tmp_path
 
 
-def test_scaling_plot_and_markdown_write_from_records(tmp_path):
-    scaling = _module("scaling")
-    records = [{"dim": d, "poses": n, "edges": 2 * n, "command": c, "wall": 0.01 * n ** 1.1, "rss": 1e5 * n,
-                "status": "ok", "phases": "parse 0.01", "inprocess": 0.01 * n}
-               for d in (2, 3) for n in (100, 1000, 10000) for c in ("solve", "fim")]
-    out = tmp_path / "scaling.png"
-    scaling.plot(records, str(out))
-    assert out.stat().st_size > 1000
-    table = scaling.markdown(records, "")
-    assert table.count("\n| 3 | 10,000 |") == 2
+def test_grid_inputs_are_full_lattices_with_every_neighbour_pair(bench_env):
+    """A grid's name gives the full lattice of side ceil(N^(1/d)); the file `posecrb datasets synth`
+    writes has s^d poses and one edge per pair of lattice neighbours, d s^(d-1) (s - 1) (closed form)."""
+    import posecrb
+
+    inputs = _module("suite.inputs")
+    assert inputs.grid_spec("grid2d-100000") == (2, 317 ** 2)
+    assert inputs.grid_spec("grid3d-20000") == (3, 28 ** 3)
+    assert inputs.grid_spec("grid3d-125") == (3, 125)
+    assert inputs.grid_spec("intel") is None
+    for dim, side in ((2, 8), (3, 4)):
+        graph = posecrb.load(inputs.grid_file(dim, side ** dim))
+        assert (graph.dim, graph.n, graph.m) == (dim, side ** dim, dim * side ** (dim - 1) * (side - 1))
+    with pytest.raises(NotImplementedError):   # asv's "skip": a dataset that is not there
+        inputs.path("no-such-dataset")
 
 
-def test_scaling_phases_count_every_stage_the_command_times():
-    """The in-process sum must cover every stage a command reports: a stage left out (the log-det's
-    accuracy bound, the CRLB's accuracy estimate) hides most of the time on large grids."""
-    import json
-
-    scaling = _module("scaling")
-    reported = {
-        "fim": {"parse": 1.0, "fim_build": 2.0, "fim_logdet": 3.0, "logdet_accuracy": 20.0},
-        "bounds-vertices": {"parse": 1.0, "laplacians": 0.5, "lb": 1.0, "ub": 1.0, "ub_lambda": 0.5,
-                            "fim_build": 2.0, "fim_logdet": 3.0, "logdet_accuracy": 20.0},
-        "crlb": {"parse": 1.0, "fim_build": 2.0, "crlb_blocks": 18.0, "accuracy": 1.5, "curvature": 3.0},
-    }
-    for command, times in reported.items():
-        text, total = scaling.phases(command, json.dumps({"times": times}))
-        assert total == sum(times.values()), command
-        assert all(name in text for name in times), command
+def test_sesync_output_is_parsed_and_objectives_compared_to_the_printed_digits():
+    sesync = _module("peers.sesync_solve")
+    out = sesync.parse_sesync("Loaded 3500 measurements between 1728 poses from file x\n"
+                              "Value of rounded pose estimates F(x): 52.3482\n"
+                              "Value of dual SDP solution F(Y): 52.3482\nFound global optimum!\n")
+    assert (out["poses"], out["measurements"], out["objective"], out["certified"]) == (1728, 3500, 52.3482, True)
+    assert sesync.parse_sesync("Escaping saddle point\n")["status"] == "saddle point"
+    # 52.3482 printed: the true value lies within half a unit of the 6th digit, 5e-5
+    assert sesync.printed_tolerance(52.3482) == pytest.approx(5e-5)
+    assert sesync.objectives_agree(52.34822729, 52.3482)
+    assert not sesync.objectives_agree(52.3490, 52.3482)
+    assert not sesync.objectives_agree(math.nan, 52.3482)
 
 
-def test_factor_candidates_rejects_runs_it_cannot_report(tmp_path, capsys):
-    """An unknown candidate, or only posecrb's own (no CHOLMOD flop count, so no flop limit), is a
-    usage error before any grid is built or any candidate is factored."""
-    candidates = _module("factor_candidates")
-    for spec, message in (("metis/all,bogus/all", "unknown candidate(s) bogus/all"),
-                          ("metis/2t", "unknown candidate(s) metis/2t"),
-                          ("posecrb/all,posecrb/1t", "needs CHOLMOD's flop count")):
-        with pytest.raises(SystemExit) as exc:
-            candidates.main(["--candidates", spec, "--cache-dir", str(tmp_path)])
-        assert exc.value.code == 2
-        assert message in capsys.readouterr().err
-    assert not any(tmp_path.iterdir())   # nothing was built
+@needs_hyperfine
+def test_sesync_comparison_with_a_stand_in_peer(bench_env, monkeypatch):
+    """A stand-in for SE-Sync's executable prints SE-Sync's lines with the objective of an independent
+    `posecrb solve` run: the harness times both, parses both objectives, finds them equal to the
+    printed digits, and the report's row and sum come from hyperfine's medians."""
+    fake = bench_env / "SE-Sync"
+    fake.write_text(textwrap.dedent(f"""\
+        #!{sys.executable}
+        import json, subprocess, sys
+        out = json.loads(subprocess.run([sys.executable, "-m", "posecrb", "solve", sys.argv[1], "--sesync-compat",
+                                         "--format", "json"], capture_output=True, text=True, check=True).stdout)
+        print(f"Loaded {{out['edges']}} measurements between {{out['poses']}} poses from file {{sys.argv[1]}}")
+        print(f"Value of rounded pose estimates F(x): {{out['objective']:.6g}}")
+        print("Found global optimum!")
+        """))
+    fake.chmod(0o755)
+    monkeypatch.setenv("SESYNC_BIN", str(fake))
+    out = bench_env / "results"
+    assert _module("peers.sesync_solve").main(["--quick", "--out", str(out), "grid2d-400", "grid3d-125"]) == 0
+    group = json.loads((out / "sesync.json").read_text())
+    assert [c["label"] for c in group["comparisons"]] == ["grid2d-400", "grid3d-125"]
+    for c in group["comparisons"]:
+        assert c["checks"]["agree"] and c["checks"]["sesync"]["certified"] and c["checks"]["posecrb"]["certified"]
+        assert c["checks"]["poses"] == c["checks"]["sesync"]["poses"]
+        assert {r["command"] for r in c["hyperfine"]["results"]} == {"SE-Sync", "posecrb"}
+    report = _module("report")
+    text = report.sesync(report.read_groups(out))
+    total = sum(r["median"] for c in group["comparisons"] for r in c["hyperfine"]["results"]
+                if r["command"] == "posecrb")
+    assert "| **sum** |  |  | " in text and report.seconds(total) in text
 
 
-def test_factor_candidates_one_thread_reaches_cholmods_blas():
-    """A '/1t' candidate must run CHOLMOD's BLAS at one thread. threadpoolctl limits only the
-    libraries loaded when the limit is entered, and CHOLMOD's BLAS loads with CHOLMOD: the limit
-    once came first, and every '/1t' figure was measured with two threads. A fresh process (nothing
-    loaded yet, as in the script's candidate processes) with OpenBLAS set to two threads."""
-    import os
-    import subprocess
+@needs_hyperfine
+def test_a_comparison_that_fails_is_recorded_as_failed_not_timed(tmp_path):
+    """A command that fails in its check run, or only in hyperfine's timed runs, leaves a comparison
+    marked failed with the reason (no timing), and the report's row says so."""
+    import argparse
 
-    code = ("import sys; sys.path.insert(0, sys.argv[1]); import factor_candidates as fc\n"
-            "with fc._limit_blas('1t'):\n"
-            "    import _cholmod; import sksparse.cholmod\n"
-            "    from posecrb.linalg.threads import cholmod_threads\n"
-            "    inside = cholmod_threads()\n"
-            "print(inside, cholmod_threads())\n")
-    env = dict(os.environ, OPENBLAS_NUM_THREADS="2", OMP_NUM_THREADS="2")
-    out = subprocess.run([sys.executable, "-c", code, str(BENCHMARKS)], env=env, capture_output=True, text=True,
-                         check=True, timeout=120)
-    inside, after = (int(x) for x in out.stdout.split())
-    if after < 2:
-        pytest.skip("CHOLMOD's BLAS has a single thread here: no limit to check")
-    assert inside == 1
-
-
-def test_factor_candidates_mumps_is_skipped_with_its_reason_where_it_does_not_build(tmp_path, monkeypatch):
-    """The MUMPS candidate compiles a driver against the system's MUMPS; where that fails (no MUMPS,
-    no compiler) the candidate reports why instead of failing the run."""
-    candidates = _module("factor_candidates")
-    monkeypatch.setenv("POSECRB_MUMPS_LIBS", "-lposecrb_no_such_library")
-    import numpy as np
-    import scipy.sparse as sp
-
-    res = candidates._mumps(sp.identity(3, format="csc"), np.arange(3), "mumps", "1t", tmp_path / "m.fim.npz")
-    assert res["error"].startswith("skipped: ")
-    assert not (tmp_path / "mumps_logdet").exists()
+    harness = _module("harness")
+    options = argparse.Namespace(runs=1, warmup=0, out=str(tmp_path / "out"), threads=0, quick=True)
+    group = harness.Group("sesync", options)
+    marker = tmp_path / "ran-once"
+    second_run_fails = ("import os, sys; p = sys.argv[1]; "
+                        "sys.exit(1) if os.path.exists(p) else open(p, 'w').close()")
+    ok = harness.Command("posecrb", (sys.executable, "-c", "pass"))
+    assert group.compare("flaky", [harness.Command("SE-Sync", (sys.executable, "-c", second_run_fails,
+                                                               str(marker))), ok]) is None
+    broken = harness.Command("SE-Sync", (sys.executable, "-c", "import sys; sys.exit('no such file')"))
+    assert group.compare("broken", [broken, ok]) is None
+    group.save()
+    saved = json.loads((tmp_path / "out" / "sesync.json").read_text())["comparisons"]
+    assert saved[0]["failed"] == {"hyperfine": "exit 1"} and "hyperfine" not in saved[0]
+    assert saved[1]["failed"] == {"SE-Sync": "exit 1: no such file"}
+    report = _module("report")
+    rows = report.sesync(report.read_groups(tmp_path / "out")).splitlines()
+    assert any(r.startswith("| broken | failed: SE-Sync: exit 1: no such file") for r in rows)
 
 
-def test_factor_candidates_mumps_logdet_matches_dense_reference(tmp_path):
-    """MUMPS's log-det through the driver, with its own ordering and with a given pivot order,
-    against numpy's dense slogdet of the same random SPD matrix (optional: needs MUMPS here)."""
-    import numpy as np
-    import scipy.sparse as sp
+FAKE_MAC = {
+    "mac/__init__.py": "",
+    "mac/utils/__init__.py": "",
+    "mac/utils/graphs.py": "from collections import namedtuple\nEdge = namedtuple('Edge', 'i j weight')\n",
+    "mac/solvers.py": textwrap.dedent("""\
+        import numpy as np
 
-    candidates = _module("factor_candidates")
-    try:
-        candidates._mumps_driver(tmp_path)
-    except RuntimeError as exc:
-        pytest.skip(str(exc))
-    a, ref, pose_of_row = _random_spd(7)
-    for kind in ("mumps", "mumps-pose-metis"):
-        res = candidates._mumps(a, pose_of_row, kind, "1t", tmp_path / "m.fim.npz")
-        assert "error" not in res, res
-        # log-det error ~ n eps cond(A): far below 1e-9 for this size and conditioning
-        assert abs(res["logdet"] - ref) <= 1e-9 * max(1.0, abs(ref)), kind
-        assert res["flops"] > 0 and res["lnz"] >= a.nnz // 2
-    # an indefinite matrix is an error with its reason, never the log of a negative determinant
-    indefinite = sp.csc_matrix(np.array([[1.0, 2.0], [2.0, 1.0]]))
-    res = candidates._mumps(indefinite, np.arange(2), "mumps", "1t", tmp_path / "indefinite.fim.npz")
-    assert "not positive definite" in res["error"]
+        class NaiveGreedy:
+            def __init__(self, cand):
+                self.cand = cand
+            def subset(self, k):
+                w = np.zeros(len(self.cand))
+                w[np.argsort([-e.weight for e in self.cand], kind="stable")[:k]] = 1.0
+                return w
 
-
-def test_factor_candidates_pardiso_is_skipped_with_its_reason_without_mkl(monkeypatch):
-    """The PARDISO candidate needs MKL's libmkl_rt through POSECRB_MKL_RT; unset or not loadable,
-    the candidate reports why instead of failing the run."""
-    import numpy as np
-    import scipy.sparse as sp
-
-    candidates = _module("factor_candidates")
-    a = sp.identity(3, format="csc")
-    monkeypatch.delenv("POSECRB_MKL_RT", raising=False)
-    res = candidates._pardiso_candidate(a, np.arange(3), "pardiso", "all")
-    assert res["error"].startswith("skipped: set POSECRB_MKL_RT")
-    monkeypatch.setenv("POSECRB_MKL_RT", "/nonexistent/libmkl_rt.so")
-    res = candidates._pardiso_candidate(a, np.arange(3), "pardiso", "all")
-    assert res["error"].startswith("skipped: MKL PARDISO does not load")
+        class MAC:
+            def __init__(self, fixed, cand, n, fiedler_method=None):
+                self.fixed, self.cand, self.n = fixed, cand, n
+            def evaluate_objective(self, w):
+                # lambda_2 of the weighted Laplacian, dense (the stand-in's own evaluator)
+                lap = np.zeros((self.n, self.n))
+                for e, x in [(e, 1.0) for e in self.fixed] + list(zip(self.cand, w)):
+                    lap[e.i, e.i] += x * e.weight; lap[e.j, e.j] += x * e.weight
+                    lap[e.i, e.j] -= x * e.weight; lap[e.j, e.i] -= x * e.weight
+                return float(np.linalg.eigvalsh(lap)[1])
+            def solve(self, k, w_init, max_iters=20, rounding="nearest", use_cache=True):
+                return w_init, w_init, self.evaluate_objective(np.ones(len(self.cand)))
+        """),
+}
 
 
-def test_factor_candidates_pardiso_logdet_matches_dense_reference():
-    """PARDISO's log-det, with its own ordering and with a given one, against numpy's dense
-    slogdet of the same random SPD matrix (optional: needs MKL through POSECRB_MKL_RT)."""
-    import numpy as np
-    import scipy.sparse as sp
-
-    candidates = _module("factor_candidates")
-    pardiso = _module("_pardiso")
-    try:
-        pardiso.library()
-    except pardiso.Unavailable as exc:
-        pytest.skip(str(exc))
-    a, ref, pose_of_row = _random_spd(11)
-    for kind in ("pardiso", "pardiso-pose-metis"):
-        res = candidates._pardiso_candidate(a, pose_of_row, kind, "all")
-        assert "error" not in res, res
-        # log-det error ~ n eps cond(A): far below 1e-9 for this size and conditioning
-        assert abs(res["logdet"] - ref) <= 1e-9 * max(1.0, abs(ref)), kind
-        assert res["lnz"] >= a.nnz // 2
-    indefinite = sp.csc_matrix(np.array([[1.0, 2.0], [2.0, 1.0]]))
-    res = candidates._pardiso_candidate(indefinite, np.arange(2), "pardiso", "all")
-    assert "not positive definite" in res["error"]
-
-
-def test_select_engines_runs_both_engines_and_reports_the_choice(tmp_path, capsys):
-    """benchmarks/select_engines.py on a small graph: both engines as whole processes, the same edges,
-    ``auto``'s choice (the CHOLMOD engine here) and numba loaded by the path engine only."""
-    import numpy as np
-
-    from posecrb.io import write_g2o
-
-    from .helpers import random_pose_graph
-
-    write_g2o(random_pose_graph(80, 2, np.random.default_rng(7), loop_closures=30)[0], tmp_path / "small.g2o")
-    assert _module("select_engines").main(["--repeat", "1", "--data-dir", str(tmp_path), "small"]) == 0
-    row = next(line for line in capsys.readouterr().out.splitlines() if line.startswith("| small |"))
-    cells = [c.strip() for c in row.strip("|").split("|")]
-    assert cells[5] == "cholmod" and cells[8] == "yes" and cells[9] == "True, False"
-    assert float(cells[6]) > 0 and float(cells[7]) > 0
+@needs_hyperfine
+def test_mac_comparison_poses_the_same_problem_to_both_sides(bench_env, monkeypatch):
+    """With a stand-in MAC (a dense lambda_2 evaluator and the naive selection), the problem both sides
+    get is the same: posecrb's lambda_2 (rotation weight 2 kappa in 2D) is twice the stand-in's
+    evaluation of posecrb's selection, mapped back through the candidates, at K = 20% rounded down."""
+    for name, text in FAKE_MAC.items():
+        (bench_env / "fake" / name).parent.mkdir(parents=True, exist_ok=True)
+        (bench_env / "fake" / name).write_text(text)
+    interpreter = bench_env / "mac-python"
+    interpreter.write_text(f"#!/bin/sh\nPYTHONPATH={bench_env / 'fake'} exec {sys.executable} \"$@\"\n")
+    interpreter.chmod(0o755)
+    monkeypatch.setenv("POSECRB_MAC_PYTHON", str(interpreter))
+    out = bench_env / "results"
+    assert _module("peers.mac_select").main(["--quick", "--out", str(out)]) == 0
+    (c,) = json.loads((out / "mac.json").read_text())["comparisons"]
+    checks = c["checks"]
+    assert checks["budget"] == checks["candidates"] * 20 // 100
+    # lambda_2 from Lanczos (posecrb) against a dense eigensolver: agreement to ~1e-9 relative
+    assert checks["posecrb_value"] == pytest.approx(2 * checks["lambda2"]["posecrb"], rel=1e-7)
+    assert checks["lambda2"]["posecrb"] > checks["lambda2"]["MAC"]   # the naive choice is worse here
+    report = _module("report")
+    assert c["label"] in report.mac(report.read_groups(out))
 
 
-def test_solver_variants_runs_both_base_preconditioners_and_needs_data(tmp_path, capsys, monkeypatch):
-    """benchmarks/solver_variants.py on a small 3D graph: SE-Sync's and the rotation block's base
-    preconditioner, both certified at the same optimum; without data it stops with a usage error."""
-    import numpy as np
-
-    from posecrb.io import write_g2o
-
-    from .helpers import random_pose_graph
-
-    write_g2o(random_pose_graph(30, 3, np.random.default_rng(3), loop_closures=20, rot_noise=0.05,
-                                trans_noise=0.05)[0], tmp_path / "small3d.g2o")
-    module = _module("solver_variants")
-    assert module.main(["--repeat", "1", "--data-dir", str(tmp_path), "--variants", "schur-base,rotation-base",
-                        "small3d"]) == 0
-    rows = [line.split() for line in capsys.readouterr().out.splitlines() if line.startswith("small3d ")]
-    assert [r[1] for r in rows] == ["schur-base", "rotation-base"] and all(r[9] == "yes" for r in rows)
-    monkeypatch.delenv("POSECRB_DATA", raising=False)
-    monkeypatch.setattr(module, "data_dir", lambda arg: None)
-    with pytest.raises(SystemExit) as exc:
-        module.main(["--variants", "schur-base"])
-    assert exc.value.code == 2
+def _asv_result(path: Path, benchmarks: dict[str, tuple[list[list[str]], list[float | None]]]) -> None:
+    """An asv result file (format 2) of ``benchmarks``: name -> (params, values over their product)."""
+    columns = ["result", "params", "version", "started_at", "duration"]
+    path.parent.mkdir(parents=True, exist_ok=True)
+    (path.parent / "machine.json").write_text(json.dumps({"machine": "test", "cpu": "cpu", "num_cpu": "2"}))
+    path.write_text(json.dumps({
+        "commit_hash": "0123456789abcdef", "env_name": "existing", "date": 0, "python": "3.11", "version": 2,
+        "result_columns": columns,
+        "results": {name: [values, [[repr(v) for v in p] for p in params], "v", 1.7e12, 1.0]
+                    for name, (params, values) in benchmarks.items()}}))
 
 
-def test_process_parser_threads_default_is_what_help_says():
-    """The whole-process scripts' --threads default: one thread unless the script keeps every pool's
-    own default (0); --help prints the default the parser really has."""
-    common = _module("_common")
-    for default in (1, 0):
-        ap = common.process_parser("x", threads=default)
-        assert ap.parse_args([]).threads == default
-        assert f"[default: {default}]" in " ".join(ap.format_help().split())
-    assert common.process_parser("x").parse_args(["--threads", "2"]).threads == 2
+def _group(out: Path, name: str, comparisons: list[dict]) -> None:
+    out.mkdir(parents=True, exist_ok=True)
+    (out / f"{name}.json").write_text(json.dumps({"group": name, "environment": {"date": "2026-01-01T00:00",
+                                                                                   "commit": "abc", "runs": 5},
+                                                  "comparisons": comparisons}))
 
 
-@pytest.mark.parametrize("script", sorted(p.name for p in BENCHMARKS.glob("[a-z]*.py")))
-def test_every_benchmark_script_starts_and_answers_help(script):
-    """`make bench` runs every script: each must at least import what it names and parse --help
-    (a renamed library function once broke one of them before any measurement started)."""
-    import subprocess
+def _timed(label: str, medians: dict[str, float], checks: dict | None = None, rss: dict | None = None) -> dict:
+    results = [{"command": k, "median": v, "user": v / 2, "system": 0.0} for k, v in medians.items()]
+    return {"label": label, "hyperfine": {"results": results}, "checks": checks or {}, "peak_rss": rss or {}}
 
+
+def test_report_tables_from_records_made_here(tmp_path):
+    """The report on result files written here: power laws come back as their exponents, each goal is
+    judged by its rule (met, missed), the per-file sums and ratios are the records' own, the fastest
+    ordering is named, the figure is drawn, and a table without results says which command makes them."""
+    report = _module("report")
+    grids = ["grid2d-1000", "grid2d-10000", "grid2d-100000"]
+    poses = [32 ** 2, 100 ** 2, 317 ** 2]
+    _asv_result(tmp_path / "asv" / "test" / "0123abcd-existing.json", {
+        "bench_solve.Solve.time_solve": ([["intel"] + grids], [0.1] + [1e-4 * n ** 1.2 for n in poses]),
+        "bench_solve.Solve.peakmem_solve": ([["intel"] + grids], [8e7] + [1e4 * n for n in poses]),
+        "bench_select.Select.time_select": ([["intel"], ["tree-greedy", "tree-relax"]], [0.2, 0.1]),
+        "bench_models.Orderings.time_fim": ([["grid3d-20000"], ["auto", "amd", "metis"]], [2.0, 5.0, None]),
+    })
+    hyper = tmp_path / "hyperfine"
+    _group(hyper, "startup", [_timed("startup", {"import floor": 0.2, "posecrb --help": 0.2, "posecrb info": 0.4},
+                                     {"file": "/data/CSAIL.g2o"})])
+    _group(hyper, "goals", [_timed("solve grid2d-100000", {"solve": 12.0}, {"poses": 100489, "certified": True}),
+                            _timed("bounds-vertices grid3d-20000", {"bounds": 40.0},
+                                   {"poses": 21952, "times": {"parse": 10.0, "fim_logdet": 15.0}})])
+    _group(hyper, "sesync", [
+        _timed("big", {"SE-Sync": 2.0, "posecrb": 1.0}, {"agree": True, "poses": 10}),     # met: 1.0 <= 2.0
+        _timed("small", {"SE-Sync": 0.1, "posecrb": 0.35}, {"agree": True, "poses": 5}),  # 0.1 + 0.2 + 0.1
+        _timed("slow", {"SE-Sync": 0.6, "posecrb": 0.7}, {"agree": False, "poses": 7})])  # missed: 0.7 > 0.6
+    tables = report.build(report.find_asv(tmp_path / "asv", None), report.read_groups(hyper), tmp_path / "out")
+
+    assert "| 2 | solve | 3 | 1.20 | 1.00 |" in tables["scaling"]
+    assert (tmp_path / "out" / "scaling.png").stat().st_size > 10_000
+    goals = {row.split(" | ")[0].lstrip("| "): row for row in tables["goals"].splitlines()[2:]}
+    assert goals["`posecrb --help` at most 0.25 s"].endswith("| yes |")
+    assert goals["`posecrb info` of a small file (CSAIL) at most 0.35 s"].endswith("| **no** |")
+    assert "12.00 s" in goals["`solve` of the 2D grid of 100,489 poses at most 15 s, certified"]
+    bounds = next(v for k, v in goals.items() if k.startswith("`bounds --estimate vertices`"))
+    assert "allowed 39.00 s" in bounds and bounds.endswith("| **no** |")     # 1.5 x 25 + 1.5
+    sesync = next(v for k, v in goals.items() if k.startswith("every SE-Sync file"))
+    assert "2 of 3 files; sum 2.050 s against 2.700 s, **0.76x**" in sesync and sesync.endswith("| **no** |")
+    relax = next(v for k, v in goals.items() if k.startswith("the tree objective's"))
+    assert "intel 0.100 s against 0.200 s (0.50x)" in relax and relax.endswith("| yes |")
+    assert "| **sum** |  |  | 2.700 | 2.050 | **0.76** |" in tables["sesync"]
+    assert "| slow |" in tables["sesync"] and "| **no** |" in tables["sesync"]
+    assert "| grid3d-20000 | 2.000 | 5.000 | - | auto |" in tables["orderings"]
+    assert "| intel | - | 0.100 |" in tables["inprocess"]
+    assert tables["gtsam"].startswith("No results") and "gtsam_marginals.py" in tables["gtsam"]
+    assert "commit 0123456" in tables["provenance"]
+
+
+def test_report_fit_exponent_against_closed_forms():
+    report = _module("report")
+    sizes = [1e3, 1e4, 1e5]
+    assert report.fit_exponent(sizes, [3 * n ** 1.5 for n in sizes]) == pytest.approx(1.5, rel=1e-12)
+    assert math.isnan(report.fit_exponent([1e3], [1.0]))
+    assert math.isnan(report.fit_exponent(sizes, [None, None, 2.0]))
+
+
+@pytest.mark.parametrize("script", ["commands.py", "report.py", "run.py", "peers/sesync_solve.py",
+                                    "peers/gtsam_marginals.py", "peers/mac_select.py"])
+def test_every_script_answers_help(script):
     run = subprocess.run([sys.executable, str(BENCHMARKS / script), "--help"], capture_output=True, text=True,
                          timeout=120, cwd=BENCHMARKS.parent)
     assert run.returncode == 0, run.stderr[-2000:]
     assert "usage:" in run.stdout.lower()
 
 
-def test_parse_benchmark_compares_both_tokenisers_on_a_file_given_by_name(tmp_path, capsys, monkeypatch):
-    """benchmarks/parse.py resolves a bare name in the data directory, reads it through the input
-    layer and finds the fast and the reference tokeniser's graphs the same."""
-    import numpy as np
+def test_benchmarks_import_only_public_names():
+    """What a benchmark needs is public (``posecrb.__all__``) or it is not benchmarked: no
+    ``posecrb.<module>`` import anywhere under benchmarks/."""
+    import posecrb
 
-    from posecrb.io import write_g2o
-
-    from .helpers import random_pose_graph
-
-    write_g2o(random_pose_graph(40, 3, np.random.default_rng(5), loop_closures=10)[0], tmp_path / "tiny.g2o")
-    monkeypatch.setattr(sys, "argv", ["parse.py", "--repeat", "1", "--no-grid", "--data-dir", str(tmp_path), "tiny"])
-    _module("parse").main()
-    row = next(line for line in capsys.readouterr().out.splitlines() if line.startswith("tiny.g2o"))
-    assert row.split()[-1] == "yes"
-
-
-def test_accuracy_bound_norm_bound_dominates_the_exact_one_and_uses_the_true_norm():
-    """benchmarks/accuracy_bound.py: ``||A^{-1}||_2`` from Lanczos against dense numpy, and the norm
-    bound at least the exact one (every ``|(A^{-1})_ij| <= ||A^{-1}||_2``), with the same gamma."""
-    import numpy as np
-    import scipy.sparse as sp
-
-    from posecrb.linalg.accuracy import logdet_accuracy
-    from posecrb.linalg.cholesky import SymbolicCholesky
-
-    rng = np.random.default_rng(21)
-    n = 60
-    b = sp.random(n, n, density=0.08, random_state=rng) + sp.eye(n)
-    a = (b @ b.T + 1e-2 * sp.eye(n)).tocsc()
-    factor, logdet = SymbolicCholesky(a).factor_logdet(a)
-    bound, inv_norm, gamma = _module("accuracy_bound").norm_bound(factor, n)
-    dense = a.toarray()
-    eig = np.linalg.eigvalsh(dense)
-    reference = 1.0 / eig[0]
-    # ARPACK's tol: the Ritz value within a relative 1e-6 of the eigenvalue
-    assert inv_norm == pytest.approx(reference, rel=1e-6)
-    exact = logdet_accuracy(factor, logdet)
-    assert bound >= exact.error_bound * (1 - 1e-6)
-    lower = np.abs(factor.L().toarray())
-    assert bound == pytest.approx(gamma * float(lower.sum(axis=0) @ lower.sum(axis=0)) * reference, rel=1e-6)
+    offenders = []
+    for path in BENCHMARKS.rglob("*.py"):
+        for number, line in enumerate(path.read_text().splitlines(), 1):
+            stripped = line.strip()
+            if stripped.startswith(("from posecrb.", "import posecrb.")):
+                offenders.append(f"{path.name}:{number}: {stripped}")
+            if stripped.startswith("from posecrb import "):
+                names = [n.strip() for n in stripped[len("from posecrb import "):].split(",")]
+                offenders += [f"{path.name}:{number}: {n}" for n in names if n not in posecrb.__all__]
+            offenders += [f"{path.name}:{number}: posecrb.{n}" for n in _attributes(stripped)
+                          if n not in posecrb.__all__]
+    assert not offenders
 
 
-def test_orderings_counts_are_cholmods_and_a_chain_has_no_fill_under_amd(tmp_path, capsys):
-    """benchmarks/orderings.py --counts: CHOLMOD's analysis counts per matrix and ordering. A pose
-    chain's FIM and M_red are block tridiagonal (chordal), where minimum degree eliminates without
-    fill, so AMD's nnz(L) is exactly nnz(tril(A)); with loop closures every ordering has at least
-    that many and flops (sum of squared column counts) at least nnz(L)."""
-    import numpy as np
+def _attributes(line: str) -> list[str]:
+    import re
 
-    from posecrb.io import write_g2o
-    from posecrb.models.paper.fim import paper_fim
+    return re.findall(r"\bposecrb\.([A-Za-z_]\w*)\(", line)
 
-    from .helpers import random_pose_graph
 
-    chain = random_pose_graph(30, 2, np.random.default_rng(1), loop_closures=0)[0]
-    loops = random_pose_graph(60, 3, np.random.default_rng(2), loop_closures=25)[0]
-    write_g2o(chain, tmp_path / "chain.g2o")
-    write_g2o(loops, tmp_path / "loops.g2o")
-    orderings = "amd,nesdis/poses,metis/poses,nesdis"
-    assert _module("orderings").main(["--counts", "--grids3", "", "--data-dir", str(tmp_path), "--orderings",
-                                      orderings, "--matrices", "FIM,Mred", "chain", "loops"]) == 0
-    rows = [[c.strip() for c in line.strip("|").split("|")] for line in capsys.readouterr().out.splitlines()
-            if line.startswith(("| chain |", "| loops |"))]
-    assert [(r[0], r[1]) for r in rows] == [("chain", "FIM"), ("chain", "Mred"), ("loops", "FIM"), ("loops", "Mred")]
-    fim = {"chain": paper_fim(chain, chain.vertex_rot, chain.vertex_trans).to_layout("poses").matrix,
-           "loops": paper_fim(loops, loops.vertex_rot, loops.vertex_trans).to_layout("poses").matrix}
-    for name, matrix, _, *cells in rows:
-        counts = [(float(c.split(" G / ")[0]) * 1e9, float(c.split(" G / ")[1].rstrip("M")) * 1e6) for c in cells]
-        assert len(counts) == 4 and all(fl >= lnz > 0 for fl, lnz in counts)
-        if matrix == "FIM":
-            a = fim[name]
-            tril = (a.nnz + a.shape[0]) // 2
-            # the cells carry 3 significant digits
-            assert all(lnz >= tril * (1 - 5e-3) for _, lnz in counts)
-            if name == "chain":
-                assert counts[0][1] == pytest.approx(tril, rel=5e-3)
+@pytest.mark.slow
+@pytest.mark.skipif(importlib.util.find_spec("asv") is None, reason="asv is not installed (the dev extra)")
+def test_bench_quick_runs_every_benchmark(tmp_path):
+    """`make bench-quick`: every asv benchmark once on small inputs, every whole-process comparison
+    whose programs are here, and the report; exit 0. CI runs this, so a broken benchmark fails it."""
+    env = {**os.environ, "POSECRB_BENCH_CACHE": os.environ.get("POSECRB_BENCH_CACHE",
+                                                               str(Path.home() / ".cache" / "posecrb-bench"))}
+    run = subprocess.run([sys.executable, str(BENCHMARKS / "run.py"), "--quick", "--out", str(tmp_path)],
+                         capture_output=True, text=True, timeout=600, env=env, cwd=BENCHMARKS.parent)
+    assert run.returncode == 0, (run.stdout + run.stderr)[-4000:]
+    assert (tmp_path / "report" / "goals.md").is_file()
+    if HAS_HYPERFINE:
+        assert {p.stem for p in (tmp_path / "hyperfine").glob("*.json")} >= {"startup", "goals", "timeline",
+                                                                             "threads"}
+
+
+@pytest.mark.skipif(importlib.util.find_spec("asv") is None, reason="asv is not installed (the dev extra)")
+def test_a_broken_benchmark_fails_the_quick_run(tmp_path):
+    """The quick run's exit status: a benchmark that raises makes asv, so run.py, exit non-zero."""
+    suite = tmp_path / "broken"
+    suite.mkdir()
+    (suite / "__init__.py").write_text("")
+    (suite / "bench_broken.py").write_text("def time_broken():\n    raise RuntimeError('broken')\n")
+    config = tmp_path / "asv.conf.json"
+    config.write_text(json.dumps({"version": 1, "project": "posecrb", "repo": str(BENCHMARKS.parent),
+                                  "environment_type": "existing", "benchmark_dir": "broken",
+                                  "results_dir": str(tmp_path / "results"), "env_dir": str(tmp_path / "env"),
+                                  "html_dir": str(tmp_path / "html")}))
+    argv = _module("run").asv_argv(True, None, config)
+    subprocess.run([*argv[:5], "machine", "--yes"], capture_output=True, check=False)
+    run = subprocess.run(argv, capture_output=True, text=True, timeout=300, cwd=tmp_path)
+    assert run.returncode != 0
+    assert "broken" in run.stdout + run.stderr
+
+
+def test_inputs_dimension_of_a_dataset_from_its_lines(tmp_path, monkeypatch):
+    inputs = _module("suite.inputs")
+    (tmp_path / "flat.g2o").write_text("VERTEX_SE2 0 0 0 0\n")
+    (tmp_path / "space.g2o").write_text("EDGE_SE3:QUAT 0 1 0 0 0 0 0 0 1" + " 1" * 21 + "\n")
+    monkeypatch.setenv("POSECRB_DATA", str(tmp_path))
+    assert (inputs.dimension("flat"), inputs.dimension("space")) == (2, 3)
+    assert inputs.lattice_side(100000, 2) == 317 and inputs.lattice_side(1000, 3) == 10

@@ -87,9 +87,11 @@ def _blocks(text: str) -> list[Block]:
     ("```sh\nls\n```\n", "'sh'"),
     ("```\nls\n```\n", "no language"),
     ("Para.\n\n    indented code\n", "indented code block"),
-    ("*Not run by the docs tests: needs a cluster.*\n\nText.\n", "not followed by a code block"),
-    ("*Not run by the docs tests: needs a cluster.*\n", "not followed by a code block"),
-    ("*Not run by the docs tests because it is slow.*\n\n```console\n$ ls\n```\n", "not in the form"),
+    ("<!-- Not run by the docs tests: needs a cluster. -->\n\nText.\n", "not followed by a code block"),
+    ("<!-- Not run by the docs tests: needs a cluster. -->\n", "not followed by a code block"),
+    ("<!-- Not run by the docs tests because it is slow. -->\n\n```console\n$ ls\n```\n", "not in the form"),
+    # the visible form of earlier versions showed the note to every reader
+    ("*Not run by the docs tests: needs a cluster.*\n\n```console\n$ ls\n```\n", "not in the form"),
     ("```{code-block} python\nx = 1\n```\n", "not allowed"),
     ("```python\nx = 1\n```\n", "must be a doctest"),
     ("```console\nls\n```\n", r"starts with a '\$ ' command"),
@@ -102,16 +104,21 @@ def test_conventions_are_enforced(text: str, message: str) -> None:
 
 
 def test_skip_line_skips_exactly_the_next_block() -> None:
-    blocks = _blocks("*Not run by the docs tests: needs a Dask cluster.*\n\n```console\n$ dask scheduler\n```\n\n"
-                     "```console\n$ echo hi\nhi\n```\n")
+    blocks = _blocks("<!-- Not run by the docs tests: needs a Dask cluster. -->\n\n"
+                     "```console\n$ dask scheduler\n```\n\n```console\n$ echo hi\nhi\n```\n")
     assert [b.skip for b in blocks] == ["needs a Dask cluster", None]
 
 
 def test_console_commands_and_exit_codes() -> None:
     (block,) = _blocks("```console\n$ echo a \\\n  b\na b\n$ false\n[exit 1]\n```\n")
     first, second = parse_console(block)
-    assert first.command == "echo a \n  b" and first.expected == ["a b"] and first.exit_code == 0
+    assert first.command == "echo a \\\n  b" and first.expected == ["a b"] and first.exit_code == 0
     assert second.command == "false" and second.expected == [] and second.exit_code == 1
+
+
+def test_continued_command_runs_as_one(tmp_path: Path) -> None:
+    (block,) = _blocks("```console\n$ echo a \\\n  b\na b\n```\n")
+    assert list(run_console(block, tmp_path)) == []
 
 
 def test_console_block_runs_and_reports_mismatches(tmp_path: Path) -> None:

@@ -3,17 +3,21 @@ last row against `bounds`, loop-closure gains against dense log-det differences,
 the command line."""
 from __future__ import annotations
 
+import itertools
 import json
+import math
 from dataclasses import replace
+from fractions import Fraction
 
 import numpy as np
 import pytest
 
 from posecrb import load
 from posecrb.core.errors import UsageError
+from posecrb.core.graph import PoseGraph
 from posecrb.core.noise import rotation_weights
 from posecrb.evaluation.evaluate import EvaluationSettings, evaluate
-from posecrb.incremental import TimelineResult, timeline
+from posecrb.incremental import TimelineResult, timeline, tracker
 from posecrb.models.paper.bounds import compute_bounds
 from posecrb.models.paper.fim import paper_fim
 
@@ -199,14 +203,70 @@ def test_loop_closure_gains_are_sequential_increases_of_lb():
 
 
 def test_drift_fallback_recomputes_segments_down_to_single_steps(monkeypatch):
-    import posecrb.incremental.tracker as tracker
-
     monkeypatch.setattr(tracker, "drift_tolerance", lambda level, *a: np.full(level.shape, -1.0))
     g = graphs(2)[4]
     res = timeline(g, estimate="vertices")
     check_rows(res, reference_rows(g))
     # no drift is accepted: every segment shrinks to a single step, whose row is the fresh value
     assert res.checks["L_tau"]["checkpoints"] == g.n - 1
+
+
+# ------------------------------------------------------------------ the drift tolerance on long chains
+def _chain(n, tau):
+    """A 2D chain of n poses (odometry only) with edge precisions ``tau`` (kappa = tau / 2, so
+    L_w = L_tau) and the prefix lb of every step in exact arithmetic of the rounded logs: on a tree
+    the reduced Laplacian's determinant is the product of the edge weights."""
+    rng = np.random.default_rng(7)
+    th = rng.uniform(-0.3, 0.3, n - 1)
+    rot = np.stack([np.stack([np.cos(th), -np.sin(th)], -1), np.stack([np.sin(th), np.cos(th)], -1)], -2)
+    info = np.zeros((n - 1, 3, 3))
+    info[:, 0, 0] = info[:, 1, 1] = tau
+    info[:, 2, 2] = tau / 2
+    g = PoseGraph(dim=2, ids=np.arange(n), src=np.arange(n - 1), dst=np.arange(1, n), rot=rot,
+                  trans=rng.normal(size=(n - 1, 2)), info=info, format="synthetic")
+    per_edge = 3 * np.log(g.tau)                      # d log tau + d_r log w, w = 2 kappa = tau
+    lb = np.array([float(x) for x in itertools.accumulate(Fraction(v) for v in per_edge)])
+    return g, lb
+
+
+def test_drift_tolerance_follows_the_rounding_of_the_sums_on_a_long_chain():
+    # 20,000 poses whose closed forms are tiny for the first 6,000 steps (tau = 1.001) and
+    # log 50 after: the suffix sums add the small ones onto a large partial sum, and every
+    # addition rounds the same way. A tolerance from the factorization alone (plus eps times the
+    # values) is below that rounding: segments halve down to single steps and the drift is
+    # reported as a warning.
+    n = 20_000
+    tau = np.full(n - 1, 50.0)
+    tau[: 6000] = 1.001
+    g, exact_lb = _chain(n, tau)
+    res = timeline(g, estimate="none")
+    assert res.lb_status.ok and res.ub_status.ok
+    checks = res.checks["L_tau"]
+    assert checks["checkpoints"] <= tracker.FIRST_SEGMENTS       # no halving: the first, then doubling
+    assert checks["max_drift"] <= checks["tolerance"]
+    # every row within the tolerance of the exact prefix lb (lb = 3 logdet L_tau here)
+    assert np.max(np.abs(res.lb - exact_lb)) <= 3 * checks["tolerance"]
+    # the tolerance is the rounding of sums of n terms: of the order of n u sum |terms|, no looser
+    terms = np.abs(np.log(g.tau)).sum()
+    assert checks["tolerance"] <= 8 * tracker.SUM_MARGIN * n * np.finfo(float).eps * terms
+
+
+@pytest.mark.parametrize("kind", ["equal", "small onto large", "alternating"])
+def test_running_error_bounds_hold_against_exact_sums(kind):
+    rng = np.random.default_rng(11)
+    n = 20_000
+    x = {"equal": np.full(n, 0.1),
+         "small onto large": np.r_[np.full(n // 4, 1e-3), rng.uniform(3, 4, n - n // 4)],
+         "alternating": rng.uniform(1, 2, n) * np.where(np.arange(n) % 2, 1e8, -1e8)}[kind]
+    suffix, bound = tracker._suffix(x)
+    exact = list(itertools.accumulate(Fraction(v) for v in x[::-1]))[::-1][1:] + [Fraction(0)]
+    error = np.array([abs(Fraction(s) - e) for s, e in zip(suffix.tolist(), exact, strict=True)], dtype=float)
+    assert np.all(error <= bound)
+    assert error.max() > 0                                   # the sums do round: the test can fail
+    assert bound.max() <= n * np.finfo(float).eps * np.abs(x).sum()    # never looser than the a priori bound
+    # a log-det summed in any order (numpy's pairwise sum here)
+    logs = np.log(rng.uniform(0.01, 100, n))
+    assert abs(float(np.sum(logs)) - math.fsum(logs)) <= tracker._logdet_sum_error(logs)
 
 
 def test_every_from_to_select_rows_of_the_same_computation():

@@ -18,6 +18,7 @@ import numpy as np
 
 from ..core.errors import ArgumentError, UsageError
 from ..core.graph import PoseGraph
+from ..core.integers import IntegerError, check_int, parse_int
 from ..core.timing import Repeat, measure
 from ..datasets import search
 from ..io import load as read_graph
@@ -45,11 +46,10 @@ def flag(parameter: str, value: Any) -> bool:
 
 def integer(parameter: str, value: Any, low: int, high: int = INT64_MAX) -> int:
     """``value`` when it is an integer (not a bool, not a float such as 1.5) in [low, high]."""
-    if isinstance(value, (bool, np.bool_)) or not isinstance(value, numbers.Integral):
-        raise ArgumentError(parameter, value, "is not an integer")
-    if not low <= int(value) <= high:
-        raise ArgumentError(parameter, value, f"is not in {low}..{high}")
-    return int(value)
+    try:
+        return check_int(value, lo=low, hi=high)
+    except IntegerError as exc:
+        raise ArgumentError(parameter, value, str(exc)) from None
 
 
 def finite(parameter: str, value: Any, low: float, high: float = math.inf, *, low_open: bool = False) -> float:
@@ -167,15 +167,19 @@ def pose_request(value: Any) -> bool | list[int]:
         for part in text.split(","):
             part = part.strip()
             # digits only (int() would take 1_0 and non-ASCII digits), ids that fit int64
-            if re.fullmatch(r"[0-9]+(?:-[0-9]+)?", part) is None or max(map(int, part.split("-"))) > INT64_MAX:
-                raise ArgumentError("poses", part, "is not a pose id or an id range a-b")
-            if "-" in part:
-                lo, hi = map(int, part.split("-", 1))
+            try:
+                if re.fullmatch(r"[0-9]+(?:-[0-9]+)?", part) is None:
+                    raise IntegerError("is not a pose id or an id range a-b")
+                bounds = [parse_int(x, lo=0, hi=INT64_MAX) for x in part.split("-")]
+            except IntegerError:
+                raise ArgumentError("poses", part, "is not a pose id or an id range a-b") from None
+            if len(bounds) == 2:
+                lo, hi = bounds
                 if hi < lo or hi - lo > 10 ** 7:     # (a huge range would exhaust memory)
                     raise ArgumentError("poses", part, "is not a pose id or an id range a-b")
                 out.extend(range(lo, hi + 1))
             else:
-                out.append(int(part))
+                out.append(bounds[0])
         return out
     if isinstance(value, (list, tuple, np.ndarray, range)):
         ids = list(value)

@@ -10,6 +10,7 @@ from typing import TYPE_CHECKING, Any
 import click
 
 from ..core.errors import UsageError
+from ..core.integers import INT64_MAX, IntegerError, check_int, parse_int, shown
 from ..core.timing import AUTO, Repeat, Timing, measure
 from ..datasets import search as datasets
 from .paths import InputDir, InputFile
@@ -32,7 +33,6 @@ FIM_VARIANTS = ("eq64", "consistent")                        # posecrb.models.pa
 ROTATION_WEIGHTS = ("eq59", "table2")                        # posecrb.core.noise.ROTATION_WEIGHTS
 
 _PLAIN_NUMBER = re.compile(r"[+-]?(?:[0-9]+\.?[0-9]*|\.[0-9]+)(?:[eE][+-]?[0-9]+)?")
-INT64_MAX = 2 ** 63 - 1
 
 
 class FiniteFloat(click.FloatRange):
@@ -71,10 +71,10 @@ class PlainInt(click.IntRange):
 
     def convert(self, value, param, ctx):
         if isinstance(value, str):
-            text = value.strip()
-            if re.fullmatch(r"[+-]?[0-9]+", text) is None:
-                self.fail(f"{value!r} is not an integer (plain decimal digits)", param, ctx)
-            value = int(text)
+            try:
+                value = parse_int(value)          # int64 (no int() of thousands of digits); click checks the range
+            except IntegerError as exc:
+                self.fail(f"{shown(value)} {exc}", param, ctx)
         return super().convert(value, param, ctx)
 
 
@@ -84,13 +84,12 @@ class PoseId(click.ParamType):
     name = "ID"
 
     def convert(self, value, param, ctx):
-        if isinstance(value, int) and not isinstance(value, bool):
-            text = str(value)
-        else:
-            text = str(value).strip()
-        if re.fullmatch(r"[0-9]+", text) is None or int(text) > INT64_MAX:
-            self.fail(f"{value!r} is not a pose id (a non-negative integer up to 2^63-1)", param, ctx)
-        return int(text)
+        try:
+            if isinstance(value, int) and not isinstance(value, bool):
+                return check_int(value, lo=0, hi=INT64_MAX)
+            return parse_int(str(value), lo=0, hi=INT64_MAX, what="a pose id")
+        except IntegerError:
+            self.fail(f"{shown(value)} is not a pose id (a non-negative integer up to 2^63-1)", param, ctx)
 
 
 POSE_ID = PoseId()
@@ -125,15 +124,14 @@ class RepeatCount(click.ParamType):
     def convert(self, value, param, ctx):
         if value == AUTO:
             return AUTO
-        if isinstance(value, int) and not isinstance(value, bool):
-            text = str(value)
-        else:
-            text = str(value).strip()
-        if text.lower() == AUTO:
-            return AUTO
-        if re.fullmatch(r"[0-9]+", text) is None or not 1 <= int(text) <= 1000:
-            self.fail(f"{value!r} is neither 'auto' nor a whole number from 1 to 1000", param, ctx)
-        return int(text)
+        try:
+            if isinstance(value, int) and not isinstance(value, bool):
+                return check_int(value, lo=1, hi=1000)
+            if str(value).strip().lower() == AUTO:
+                return AUTO
+            return parse_int(str(value), lo=1, hi=1000)
+        except IntegerError:
+            self.fail(f"{shown(value)} is neither 'auto' nor a whole number from 1 to 1000", param, ctx)
 
 
 repeat_option = click.option(

@@ -23,6 +23,8 @@ from __future__ import annotations
 import shlex
 from dataclasses import dataclass
 
+from .integers import shown, shown_text
+
 
 class PosecrbError(Exception):
     """Base class of every error posecrb raises on purpose (a data, solver or usage error).
@@ -159,7 +161,7 @@ class ArgumentError(UsageError):
 
     def __init__(self, parameter: str, value: object, reason: str, *, sep: str = " "):
         self.parameter, self.value, self.reason, self.sep = parameter, value, reason, sep
-        super().__init__(f"{parameter}={value!r}{sep}{reason}")
+        super().__init__(f"{parameter}={shown(value)}{sep}{reason}")    # (repr of a huge int raises)
 
     def cli_message(self) -> str:
         """The message with the command-line spelling: ``--max-iter 0 ...`` for ``max_iter=0``;
@@ -169,8 +171,7 @@ class ArgumentError(UsageError):
         flag = _CLI_SPELLING.get(self.parameter) or "--" + self.parameter.replace("_", "-")
         if isinstance(self.value, bool):   # a flag: given or not
             return f"{flag}{self.sep}{self.reason}"
-        shown = " ".join(map(str, self.value)) if isinstance(self.value, (list, tuple)) else str(self.value)
-        return f"{flag} {shown}{self.sep}{self.reason}"
+        return f"{flag} {shown_text(self.value)}{self.sep}{self.reason}"
 
 
 class NumericalError(PosecrbError):

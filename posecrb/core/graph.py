@@ -8,8 +8,9 @@ information matrix in g2o order (translation block first, then rotation).
 from __future__ import annotations
 
 import os
-from dataclasses import dataclass, field, replace
+from dataclasses import dataclass, field, fields, replace
 from functools import cached_property
+from typing import Any
 
 import numpy as np
 
@@ -17,6 +18,36 @@ from .errors import ArgumentError, ComponentSummary, DisconnectedGraph, UsageErr
 from .noise import isotropic_precisions, rotation_weights
 
 _INT64_MAX = 2 ** 63 - 1
+
+
+def _is_frozen(array: np.ndarray) -> bool:
+    """Whether nothing can write ``array``'s values through numpy: it and every array it views are
+    read-only, down to memory that is not writeable at all (an array's own, or ``bytes``)."""
+    base: Any = array
+    while isinstance(base, np.ndarray):
+        if base.flags.writeable:
+            return False
+        base = base.base
+    return base is None or isinstance(base, bytes)
+
+
+def frozen_array(value: Any) -> np.ndarray:
+    """``value`` as a read-only array whose values nothing else can change: ``value`` itself when it
+    already is one (an array of another frozen graph, so ``dataclasses.replace`` shares them), else a
+    read-only copy, so that the caller's array stays writeable and its later changes do not reach
+    the graph."""
+    array = np.asarray(value)
+    if _is_frozen(array):
+        return array
+    array = np.array(array, copy=True)
+    array.setflags(write=False)
+    return array
+
+
+def _read_only(array: np.ndarray) -> np.ndarray:
+    """``array`` (computed here, referenced nowhere else) made read-only: a cached property."""
+    array.setflags(write=False)
+    return array
 
 
 def connected_components(n: int, src: np.ndarray, dst: np.ndarray) -> tuple[int, np.ndarray]:
@@ -49,6 +80,10 @@ def connected_components(n: int, src: np.ndarray, dst: np.ndarray) -> tuple[int,
     is_root = label == np.arange(n)
     component = np.cumsum(is_root) - 1          # roots in increasing order = by smallest vertex
     return int(np.count_nonzero(is_root)), component[label]
+
+
+# The array fields of a PoseGraph: read-only, copied from the caller unless already frozen.
+_ARRAY_FIELDS = frozenset({"ids", "src", "dst", "rot", "trans", "info", "vertex_rot", "vertex_trans", "edge_lines"})
 
 
 def rotation_dimension(dim: int) -> int:
@@ -84,6 +119,13 @@ class PoseGraph(PoseDimensions):
     and reports ids; ``index_of`` maps an id to its index.
 
     Read one with ``posecrb.load`` or ``posecrb.parse``.
+
+    A graph is immutable, arrays included: every array is read-only (``g.info[:] *= 4`` raises
+    ``ValueError``), so the values derived from them and cached (``tau``, ``kappa``, the
+    components) cannot go stale. The constructor takes a read-only copy of each array argument
+    (the caller's own array stays writeable, and changing it later does not change the graph),
+    except an array that is already frozen, such as another graph's: ``dataclasses.replace(g,
+    info=...)`` shares the arrays it keeps. A changed graph is a new one made with ``replace``.
 
     Attributes
     ----------
@@ -126,6 +168,12 @@ class PoseGraph(PoseDimensions):
     sha256: str | None = None               # of the file's bytes, for reproducibility records
     quaternions: str = "normalize"          # how the reader took 3D edge quaternions (posecrb.io.load)
 
+    def __post_init__(self) -> None:
+        for f in fields(self):
+            value = getattr(self, f.name)
+            if f.name in _ARRAY_FIELDS and value is not None:
+                object.__setattr__(self, f.name, frozen_array(value))
+
     # ---- sizes -------------------------------------------------------------
     @property
     def n(self) -> int:
@@ -152,27 +200,29 @@ class PoseGraph(PoseDimensions):
     # ---- noise model (docs/design.md#noise-model) ---------------------------
     @cached_property
     def _precisions(self) -> tuple[np.ndarray, np.ndarray]:
-        return isotropic_precisions(self.info, self.dim)
+        tau, kappa = isotropic_precisions(self.info, self.dim)
+        return _read_only(tau), _read_only(kappa)
 
     @property
     def tau(self) -> np.ndarray:
-        """Isotropic translation precision per edge (SE-Sync convention)."""
-        return self._precisions[0]
+        """Isotropic translation precision per edge (SE-Sync convention), read-only."""
+        return _read_only(self._precisions[0])      # also when the reader seeded the cache
 
     @property
     def kappa(self) -> np.ndarray:
-        """Langevin rotation concentration per edge (SE-Sync convention)."""
-        return self._precisions[1]
+        """Langevin rotation concentration per edge (SE-Sync convention), read-only."""
+        return _read_only(self._precisions[1])
 
     @cached_property
     def rotation_weights(self) -> np.ndarray:
-        """Edge weight of the rotation Laplacian in the paper's coordinates (eq. 39-41, 59)."""
-        return rotation_weights(self.kappa, self.dim)
+        """Edge weight of the rotation Laplacian in the paper's coordinates (eq. 39-41, 59), read-only."""
+        return _read_only(rotation_weights(self.kappa, self.dim))
 
     # ---- topology ----------------------------------------------------------
     @cached_property
     def _components(self) -> tuple[int, np.ndarray]:
-        return connected_components(self.n, self.src, self.dst)
+        count, labels = connected_components(self.n, self.src, self.dst)
+        return count, _read_only(labels)
 
     @property
     def n_components(self) -> int:
@@ -201,8 +251,8 @@ class PoseGraph(PoseDimensions):
 
     @cached_property
     def degree(self) -> np.ndarray:
-        """(n,) node degree; each parallel edge counts."""
-        return np.bincount(self.src, minlength=self.n) + np.bincount(self.dst, minlength=self.n)
+        """(n,) node degree; each parallel edge counts (read-only)."""
+        return _read_only(np.bincount(self.src, minlength=self.n) + np.bincount(self.dst, minlength=self.n))
 
     # ---- ids ---------------------------------------------------------------
     def index_of(self, vertex_id: int, parameter: str = "pose") -> int:

@@ -13,14 +13,26 @@ step t is ``log det(full-size matrix) - sum_{s > t} closed[s]``.
 
 Checkpoints: at chosen steps every family is factored from scratch (CHOLMOD, the group's
 analysis) and compared with the tracked value; the tracked factors then restart from the fresh
-ones, so rounding never accumulates past one segment. The *tolerance* is the rounding level of
-the fresh factorization itself, from its conditioning: the pivot ``l_jj^2`` is computed as
-``a_jj`` minus the ``c_j`` squared entries of row j, so its relative error is about
-``c_j eps a_jj / l_jj^2`` and the log-determinant's about ``eps sum_j c_j a_jj / l_jj^2``; the
-tolerance is ``TOLERANCE_MARGIN`` times that, plus the rounding of the closed-form subtraction.
-A segment whose drift exceeds it is recomputed in halves from its starting factor (down to single
-steps, whose rows are the fresh values themselves); the segments double while the drift stays
-under a quarter of it.
+ones, so rounding never accumulates past one segment. The *tolerance* bounds the rounding of both
+sides of the comparison:
+
+* the pivots of the fresh factorizations, from their conditioning: the pivot ``l_jj^2`` is
+  computed as ``a_jj`` minus the ``c_j`` squared entries of row j, so its relative error is about
+  ``c_j eps a_jj / l_jj^2`` and the log-determinant's about ``eps sum_j c_j a_jj / l_jj^2`` (an
+  estimate, taken ``TOLERANCE_MARGIN`` times);
+* every sum the two sides are made of, each by a rigorous bound on its rounding error (taken
+  ``SUM_MARGIN`` times, for the rounding of the bounds' own evaluation): the N-term sum of the
+  fresh factor's ``log l_jj^2`` (in an order CHOLMOD's wrapper chooses: ``(N - 1) u sum |terms|``
+  for any order, plus the logarithms' own rounding), the suffix sums of the closed forms and the
+  segment's running sums of increments and closed forms (recursive summation:
+  ``u sum_k |partial sum_k|``, Higham, *Accuracy and Stability of Numerical Algorithms*, 2nd ed.,
+  section 4.2), and the subtractions between them. On a long chain these sums, not the
+  factorization, dominate: their rounding grows with the number of terms, about ``n u`` times the
+  values compared.
+
+A segment whose drift exceeds the tolerance is recomputed in halves from its starting factor (down
+to single steps, whose rows are the fresh values themselves); the segments double while the drift
+stays under a quarter of it.
 """
 from __future__ import annotations
 
@@ -34,9 +46,11 @@ from ..core.errors import InternalError, NotPositiveDefinite
 from ..core.status import OK, Status
 from ..linalg.cholesky import SymbolicCholesky
 
-# The drift tolerance is this many times the rounding level of a fresh factorization (module
-# docstring).
+# The drift tolerance is this many times the rounding level of a fresh factorization (an estimate
+# from the pivots' conditioning), plus SUM_MARGIN times the rounding bounds of the sums compared
+# (rigorous; the margin covers their own evaluation in floating point) (module docstring).
 TOLERANCE_MARGIN = 16.0
+SUM_MARGIN = 2.0
 # Rank-one updates applied in one traversal of the elimination tree (columns of the work array).
 BATCH = 16
 # Vectors per kernel call (signals are handled between calls; a call costs microseconds).
@@ -45,6 +59,7 @@ CALL = 2048
 # while the drift stays small: three checkpoints after the start).
 FIRST_SEGMENTS = 4
 _EPS = float(np.finfo(float).eps)
+_U = 0.5 * _EPS                      # unit roundoff: |fl(a + b) - (a + b)| <= u |a + b|
 
 
 @dataclass(frozen=True, eq=False)
@@ -85,18 +100,35 @@ class Tracked:
     tolerance: float = 0.0
 
 
-def drift_tolerance(level: np.ndarray, logdet: np.ndarray, closed: np.ndarray, run: np.ndarray) -> np.ndarray:
+def drift_tolerance(level: np.ndarray, rounding: np.ndarray) -> np.ndarray:
     """Per family: the largest |tracked - fresh| accepted at a checkpoint: ``TOLERANCE_MARGIN`` times
-    the rounding ``level`` of the factorizations, plus the rounding of the closed-form subtraction
-    ``logdet - closed`` and of the running sums ``run`` (F, steps) of the segment."""
-    return (TOLERANCE_MARGIN * level + 4.0 * _EPS * (np.abs(logdet) + np.abs(closed))
-            + 2.0 * _EPS * np.sum(np.abs(run), axis=1))
+    the rounding ``level`` of the factorizations plus ``SUM_MARGIN`` times ``rounding``, the bound on
+    the rounding of the sums compared (module docstring)."""
+    return TOLERANCE_MARGIN * level + SUM_MARGIN * rounding
 
 
-def _suffix(closed: np.ndarray) -> np.ndarray:
-    """``out[t] = sum_{s > t} closed[s]``."""
-    total = np.cumsum(closed[::-1])[::-1]
-    return np.append(total[1:], 0.0)
+def recursive_sum_error(partial: np.ndarray) -> np.ndarray:
+    """Bound on the rounding error of each partial sum of a recursive (left to right) summation
+    along the last axis, from the computed partial sums ``partial`` themselves:
+    ``|s^_k - s_k| <= u sum_{i <= k} |s^_i|`` (Higham, *Accuracy and Stability of Numerical
+    Algorithms*, 2nd ed., section 4.2; ``numpy.cumsum`` sums recursively)."""
+    return _U * np.cumsum(np.abs(partial), axis=-1)
+
+
+def _suffix(closed: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """``out[..., t] = sum_{s > t} closed[..., s]`` and the bound on its rounding error."""
+    total = np.cumsum(closed[..., ::-1], axis=-1)            # recursive, from the last step back
+    error = recursive_sum_error(total)[..., ::-1]
+    pad = np.zeros(closed.shape[:-1] + (1,))
+    return (np.concatenate([total[..., ::-1][..., 1:], pad], axis=-1),
+            np.concatenate([error[..., 1:], pad], axis=-1))
+
+
+def _logdet_sum_error(two_log_pivots: np.ndarray) -> float:
+    """Bound on the rounding error of a log-determinant summed from its N terms ``log l_jj^2`` in
+    any order, ``(N - 1) u sum |terms|`` (Higham, section 4.2), plus ``2 u |term|`` per term for
+    the logarithm's own rounding (within one unit in the last place)."""
+    return float((two_log_pivots.size + 1) * _U * np.sum(np.abs(two_log_pivots)))
 
 
 class Group:
@@ -208,14 +240,16 @@ class Group:
         self.v_start = np.searchsorted(self.v_step, np.arange(self.n + 1))   # step s: v_start[s]:v_start[s+1]
 
     # ------------------------------------------------------------------ factors
-    def _fresh(self, step: int) -> tuple[np.ndarray, np.ndarray, np.ndarray, list[Status]]:
+    def _fresh(self, step: int) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, list[Status]]:
         """Every family's full-size matrix after ``step`` factored from scratch: lval (nnz, F),
-        log-dets (F,) and rounding levels (F,) (NaN where the factorization failed) and statuses.
-        The first factorization also gives the factor's structure."""
+        log-dets (F,), the rounding levels of their pivots (F,) and the rounding bounds of their sums
+        (F,) (NaN where the factorization failed), and statuses. The first factorization also gives
+        the factor's structure."""
         nf = len(self.families)
         factors: list[sp.csc_matrix | None] = [None] * nf
         logdets = np.full(nf, np.nan)
         levels = np.full(nf, np.nan)
+        sum_errors = np.full(nf, np.nan)
         statuses = [OK] * nf
         diags = []
         for k, fam in enumerate(self.families):
@@ -250,7 +284,8 @@ class Group:
             lval[:, k] = low.data
             d = low.data[self.lindptr[:-1]]
             levels[k] = _EPS * float(np.sum(self.rowcount * diags[k][self.perm] / (d * d)))
-        return lval, logdets, levels, statuses
+            sum_errors[k] = _logdet_sum_error(2.0 * np.log(d))
+        return lval, logdets, levels, sum_errors, statuses
 
     # ------------------------------------------------------------------ tracking
     def track(self, first: int, last: int) -> list[Tracked]:
@@ -260,15 +295,17 @@ class Group:
 
         nf, n = len(self.families), self.n
         closed = np.array([fam.closed for fam in self.families]).reshape(nf, n)
-        before = np.array([_suffix(c) for c in closed]).reshape(nf, n)
+        before, before_err = _suffix(closed)
         values = np.full((nf, n), np.nan)
         inc = np.zeros(self.v_rows.shape[0])
         checkpoints: list[int] = []
         max_drift, tol_max = np.zeros(nf), np.zeros(nf)
 
         c = first - 1
-        lval, ld, level, statuses = self._fresh(c)
+        lval, ld, level, ld_err, statuses = self._fresh(c)
         base = ld - before[:, c] if c > 0 else np.zeros(nf)        # one pose: the empty matrix, 0
+        # rounding bound of base (0 is exact; the start factor's own rounding is in ``level``)
+        base_err = self._fresh_error(ld, ld_err, before[:, c], before_err[:, c]) if c > 0 else np.zeros(nf)
         checkpoints.append(c)
         counts = self.v_start[1:]                                  # vectors entered up to each step
         budget = max(1, -(-int(counts[last] - counts[c]) // FIRST_SEGMENTS))
@@ -281,12 +318,11 @@ class Group:
             lo, hi = int(self.v_start[c + 1]), int(self.v_start[c2 + 1])
             saved = lval.copy()
             seg = self._run(path_updates, lval, lo, hi, mark, work)
-            per = np.zeros((nf, c2 - c))
-            np.add.at(per, (self.v_fam[lo:hi], self.v_step[lo:hi] - (c + 1)), seg)
-            run = base[:, None] + np.cumsum(per + closed[:, c + 1: c2 + 1], axis=1)
-            lval2, ld2, level2, st2 = self._fresh(c2)
+            run, run_err = self._running(seg, lo, hi, c, c2, base, closed)
+            lval2, ld2, level2, ld_err2, st2 = self._fresh(c2)
             fresh = ld2 - before[:, c2]
-            tol = drift_tolerance(np.fmax(level2, level), ld2, before[:, c2], run)
+            fresh_err = self._fresh_error(ld2, ld_err2, before[:, c2], before_err[:, c2])
+            tol = drift_tolerance(np.fmax(level2, level), base_err + run_err + fresh_err)
             drift = np.abs(run[:, -1] - fresh)
             bad = np.isfinite(fresh) & ~(drift <= tol)
             if bad.any() and c2 > c + 1:
@@ -307,6 +343,7 @@ class Group:
             ok = np.isfinite(fresh)
             values[ok, c2] = fresh[ok]
             base = np.where(ok, fresh, run[:, -1])   # a failed factorization: keep the tracked factor
+            base_err = np.where(ok, fresh_err, base_err + run_err)
             lval[:, ok] = lval2[:, ok]
             max_drift[ok] = np.maximum(max_drift[ok], drift[ok])
             tol_max[ok] = np.maximum(tol_max[ok], tol[ok])
@@ -329,6 +366,30 @@ class Group:
                                checkpoints=list(checkpoints), max_drift=float(max_drift[k]),
                                tolerance=float(tol_max[k])))
         return out
+
+    @staticmethod
+    def _fresh_error(ld: np.ndarray, ld_err: np.ndarray, before: np.ndarray, before_err: np.ndarray) -> np.ndarray:
+        """Rounding bound of a fresh prefix value ``ld - before``: of the log-det's sum, of the
+        closed forms' suffix sum and of the subtraction."""
+        return ld_err + before_err + _U * (np.abs(ld) + np.abs(before))
+
+    def _running(self, seg: np.ndarray, lo: int, hi: int, c: int, c2: int, base: np.ndarray,
+                 closed: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """The tracked prefix values after steps ``c + 1..c2`` (F, c2 - c): ``base`` plus the running
+        sum of each step's increments ``seg`` (of vectors ``lo:hi``) and closed forms; and the
+        rounding bound of the last: the per-step sums of k increments (``(k - 1) u sum |x|``), the
+        additions of the closed forms, the running sum and the addition of ``base``."""
+        nf, steps = len(self.families), c2 - c
+        where = self.v_fam[lo:hi] * steps + (self.v_step[lo:hi] - (c + 1))
+        per = np.bincount(where, weights=seg, minlength=nf * steps).reshape(nf, steps)
+        count = np.bincount(where, minlength=nf * steps).reshape(nf, steps)
+        size = np.bincount(where, weights=np.abs(seg), minlength=nf * steps).reshape(nf, steps)
+        terms = per + closed[:, c + 1: c2 + 1]
+        partial = np.cumsum(terms, axis=1)
+        run = base[:, None] + partial
+        error = (_U * np.sum(np.maximum(count - 1, 0) * size + np.abs(terms), axis=1)
+                 + recursive_sum_error(partial)[:, -1] + _U * np.abs(run[:, -1]))
+        return run, error
 
     def _run(self, kernel: Callable[..., np.ndarray], lval: np.ndarray, lo: int, hi: int, mark: np.ndarray,
              work: np.ndarray) -> np.ndarray:

@@ -35,6 +35,7 @@ import numpy as np
 
 from ..core.errors import InternalError, ParseError
 from ..core.files import FIELD_SEP, ODD_SPACE, split_lines
+from ..core.integers import IntegerError, parse_int, shown
 from .records import RecordKind
 
 # Magnitude limits, checked at parse time so that no quantity built from a file overflows
@@ -130,14 +131,21 @@ def _numeric_block(path: str, rows: list[list[str]], lines: np.ndarray,
     what = "vertex id" if rec.kind == "vertex" else "edge endpoint"
     id_tokens = list(chain.from_iterable(r[1: 1 + nid] for r in rows))
     joined = " ".join(id_tokens)
-    if _NOT_ID_CHAR.search(joined) is not None or max(map(len, id_tokens)) > 18:
+    long_ids = max(map(len, id_tokens)) > 18
+    if _NOT_ID_CHAR.search(joined) is not None or long_ids:
         for k, r in enumerate(rows):   # rare path: find the offending line, if any
             for tok in r[1: 1 + nid]:
-                if _NOT_ID_CHAR.search(tok) is not None or int(tok) > _INT64_MAX:
-                    raise ParseError(path, int(lines[k]), f"{rec.tag}: {what} {tok!r} is not a non-negative "
-                                                          "integer id that fits 64 bits (0 .. 2^63-1)")
-    # Digits only (checked above): int() is exact and cannot meet its extensions (1_0, spaces).
-    ids = np.fromiter(map(int, id_tokens), dtype=np.int64, count=len(id_tokens)).reshape(len(rows), nid)
+                try:                           # (parse_int: never int() of thousands of digits)
+                    if _NOT_ID_CHAR.search(tok) is not None:
+                        raise IntegerError(tok)
+                    parse_int(tok, lo=0, hi=_INT64_MAX)
+                except IntegerError:
+                    raise ParseError(path, int(lines[k]), f"{rec.tag}: {what} {shown(tok)} is not a non-negative "
+                                                          "integer id that fits 64 bits (0 .. 2^63-1)") from None
+    # Digits only (checked above): int() is exact and cannot meet its extensions (1_0, spaces); long
+    # tokens (leading zeros) through parse_int, as int() refuses more than 4300 digits.
+    ids = np.fromiter(map(parse_int if long_ids else int, id_tokens), dtype=np.int64,
+                      count=len(id_tokens)).reshape(len(rows), nid)
     tokens = list(chain.from_iterable(r[1 + nid:] for r in rows))
     vals = None
     if _NOT_NUMBER_CHAR.search(" ".join(tokens)) is None:

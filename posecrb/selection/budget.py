@@ -19,6 +19,7 @@ import scipy.sparse as sp
 from ..core.errors import ParseError, PosecrbError, UsageError
 from ..core.files import read_lines
 from ..core.graph import PoseGraph, connected_components
+from ..core.integers import IntegerError, parse_int, shown_text
 
 log = logging.getLogger("posecrb")
 
@@ -33,23 +34,31 @@ def parse_budget(spec: str | int, n_candidates: int) -> int:
     """``K`` (an integer) or ``P%`` (of the candidates, rounded down as MAC does) -> K.
 
     Raises UsageError for 0, negative, malformed, or more than the candidates."""
-    text = str(spec).strip()
-    m = re.fullmatch(r"([0-9]+(?:\.[0-9]*)?|\.[0-9]+)\s*%", text)
-    if m:
-        pct = float(m.group(1))
-        if not 0 < pct <= 100:
-            raise UsageError(f"--budget {text}: a percentage must be in (0, 100]")
-        k = math.floor(pct / 100.0 * n_candidates + 1e-9)
-        if k < 1:
-            raise UsageError(f"--budget {text} of {n_candidates} candidate edge(s) rounds down to 0 edges")
-        return k
-    if not re.fullmatch(r"[+-]?[0-9]+", text):
-        raise UsageError(f"--budget {text!r}: expected a number of edges K or a percentage P% of the candidates")
-    k = int(text)
+    if isinstance(spec, int) and not isinstance(spec, bool):
+        k, label = spec, shown_text(spec)                  # (str() of a huge int raises)
+    else:
+        text = str(spec).strip()
+        label = shown_text(text)
+        m = re.fullmatch(r"([0-9]+(?:\.[0-9]*)?|\.[0-9]+)\s*%", text)
+        if m:
+            pct = float(m.group(1))
+            if not 0 < pct <= 100:
+                raise UsageError(f"--budget {label}: a percentage must be in (0, 100]")
+            k = math.floor(pct / 100.0 * n_candidates + 1e-9)
+            if k < 1:
+                raise UsageError(f"--budget {label} of {n_candidates} candidate edge(s) rounds down to 0 edges")
+            return k
+        if not re.fullmatch(r"[+-]?[0-9]+", text):
+            raise UsageError(f"--budget {label!r}: expected a number of edges K or a percentage P% of the "
+                             "candidates")
+        try:
+            k = parse_int(text)
+        except IntegerError:         # beyond int64 (never int() of thousands of digits): its sign tells
+            k = -1 if text.startswith("-") else n_candidates + 1
     if k <= 0:
-        raise UsageError(f"--budget {text}: the number of edges to select must be >= 1")
+        raise UsageError(f"--budget {label}: the number of edges to select must be >= 1")
     if k > n_candidates:
-        raise UsageError(f"--budget {k} exceeds the {n_candidates} candidate edge(s)")
+        raise UsageError(f"--budget {label} exceeds the {n_candidates} candidate edge(s)")
     return k
 
 

@@ -18,7 +18,8 @@ from ..core.graph import PoseGraph
 from ..core.result import Result, array_field, internal_field, status_field
 from ..core.status import OK, Status
 from ..io import load
-from . import solve
+from .poses import checked_poses
+from .solve import solve
 
 if TYPE_CHECKING:
     from .solve import SolveResult
@@ -39,7 +40,10 @@ class Estimate(Result):
     ----------
     rot : numpy.ndarray
         (n, d, d) rotations, row k for the pose with the k-th smallest id (empty after
-        ``from_dict``: the JSON does not carry the poses).
+        ``from_dict``: the JSON does not carry the poses). Checked on construction by
+        ``posecrb.lie.so.check_rotations``: matrices off by rounding are replaced by the nearest
+        rotations with a warning; scaled matrices, reflections and complex or non-finite values
+        are an ``ArgumentError``.
     trans : numpy.ndarray
         (n, d) translations in the file's length units.
     source : str
@@ -71,6 +75,11 @@ class Estimate(Result):
     objective: float | None = None
     solve_time: float | None = internal_field()
     objective_status: Status = status_field("estimate duality gap")
+
+    def __post_init__(self) -> None:
+        rot, trans = checked_poses(self.rot, self.trans)
+        object.__setattr__(self, "rot", rot)
+        object.__setattr__(self, "trans", trans)
 
     @property
     def has_poses(self) -> bool:

@@ -26,6 +26,7 @@ from .certificate import Certificate
 from .chordal import chordal_rotations
 from .options import BASE_PRECONDITIONERS, PreconditionerSettings, SolverOptions
 from .policy import PreconditionerPolicy, build_policy
+from .poses import checked_poses
 from .preconditioners import base_preconditioner_kind
 from .problem import Problem
 from .relaxed import RelaxedProblem
@@ -134,6 +135,12 @@ class SolveResult(Result):
     rot: np.ndarray = array_field()
     trans: np.ndarray = array_field()
     ids: np.ndarray = array_field()
+
+    def __post_init__(self) -> None:
+        # the one check of poses entering the library, also when ``load`` reads them from a file
+        rot, trans = checked_poses(self.rot, self.trans)
+        object.__setattr__(self, "rot", rot)
+        object.__setattr__(self, "trans", trans)
 
     def statuses(self) -> dict[str, Status]:
         """``{"certificate": ..., "duality gap": ...}``: a warning when the estimate is not certified,

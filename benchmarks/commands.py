@@ -1,0 +1,110 @@
+"""posecrb's commands against each other, whole process, through the harness (hyperfine).
+
+Groups (each written to OUT/GROUP.json; ``--groups`` picks some):
+
+  startup   the interpreter alone, the imports ``solve`` cannot avoid (numpy, scipy.sparse,
+            sksparse.cholmod: its floor), ``posecrb --help``, ``posecrb --version``, ``posecrb info``
+            and ``posecrb solve --format json`` of a small file (intel; the 400-pose 2D grid without
+            data). Goals: ``--help`` at most 0.25 s, ``info`` of a small file at most 0.35 s.
+  goals     ``posecrb solve`` of the 2D grid of 100,489 poses and of the 3D grid of 21,952 (each at
+            most 15 s, certified), ``posecrb bounds --estimate vertices --format json`` of the 3D grid
+            (wall at most 1.5x the sum of the stage times it reports + 1.5 s).
+  timeline  ``posecrb timeline FILE --estimate none`` against one ``posecrb bounds FILE --estimate
+            none --repeat 1`` (goal: at most 3x) on city10000, sphere2500, the 2D grid of 10^5 poses
+            and the 2D chain of 2,000,000 poses (the longest sums the drift check compares).
+  threads   ``posecrb solve`` of the 2D grid of 10^5 poses and ``posecrb fim --estimate vertices`` of
+            the 3D grid of 2*10^4 poses as posecrb runs them (its own thread policy) against every
+            BLAS/OpenMP pool held at one thread (OPENBLAS_NUM_THREADS=1 and the like).
+
+``--quick`` runs every group once on small inputs. Usage: python benchmarks/commands.py [--quick]
+[--groups startup,goals,timeline,threads] [--runs K] [--warmup K] [--threads T] [--out DIR]
+"""
+from __future__ import annotations
+
+import sys
+
+import harness
+from harness import Command, posecrb_cli
+from suite import inputs
+
+GROUPS = ("startup", "goals", "timeline", "threads")
+IMPORT_FLOOR = "import numpy, scipy.sparse, sksparse.cholmod"
+ONE_THREAD = tuple((var, "1") for var in harness.THREAD_VARS)
+
+
+def small_file() -> str:
+    try:
+        return str(inputs.path("intel"))
+    except NotImplementedError:
+        return str(inputs.path(inputs.GRID_2D_SMALL))
+
+
+def startup(group: harness.Group) -> None:
+    py = sys.executable
+    small = small_file()
+    group.compare("startup", [
+        Command("python -c pass", (py, "-c", "pass")),
+        Command("import floor", (py, "-c", IMPORT_FLOOR)),
+        Command("posecrb --help", posecrb_cli("--help")),
+        Command("posecrb --version", posecrb_cli("--version")),
+        Command("posecrb info", posecrb_cli("info", small)),
+        Command("posecrb solve", posecrb_cli("solve", small, "--format", "json")),
+    ], {"file": small})
+
+
+def goals(group: harness.Group) -> None:
+    grid2, grid3 = ("grid2d-400", "grid3d-125") if group.options.quick else ("grid2d-100000", "grid3d-20000")
+    for name in (grid2, grid3):
+        solve = Command("solve", posecrb_cli("solve", str(inputs.path(name)), "--format", "json"))
+        entry = group.compare(f"solve {name}", [solve])
+        if entry:
+            out = entry["outputs"]["solve"].json()
+            entry["checks"].update(poses=out.get("poses"), certified=out.get("certified"), times=out.get("times"))
+    entry = group.compare(f"bounds-vertices {grid3}", [
+        Command("bounds", posecrb_cli("bounds", str(inputs.path(grid3)), "--estimate", "vertices",
+                                      "--format", "json"))])
+    if entry:
+        out = entry["outputs"]["bounds"].json()
+        entry["checks"].update(poses=out.get("poses"), times=out.get("times"))
+
+
+def timeline(group: harness.Group) -> None:
+    names = ("grid2d-400", "chain2d-2000") if group.options.quick else \
+        ("city10000", "sphere2500", "grid2d-100000", "chain2d-2000000")
+    for name, path in harness.found("timeline", names):
+        file = str(path)
+        group.compare(name, [
+            Command("timeline", posecrb_cli("timeline", file, "--estimate", "none")),
+            Command("bounds", posecrb_cli("bounds", file, "--estimate", "none", "--repeat", "1")),
+        ])
+
+
+def threads(group: harness.Group) -> None:
+    grid2, grid3 = ("grid2d-400", "grid3d-125") if group.options.quick else ("grid2d-100000", "grid3d-20000")
+    for label, args in ((f"solve {grid2}", ("solve", str(inputs.path(grid2)), "--format", "json")),
+                        (f"fim {grid3}", ("fim", str(inputs.path(grid3)), "--estimate", "vertices",
+                                          "--format", "json"))):
+        group.compare(label, [Command("posecrb's policy", posecrb_cli(*args)),
+                              Command("one thread", posecrb_cli(*args), ONE_THREAD)])
+
+
+def main(argv: list[str] | None = None) -> int:
+    ap = harness.parser(__doc__.splitlines()[0])
+    ap.add_argument("--groups", default=",".join(GROUPS), help=f"comma-separated, of {', '.join(GROUPS)}")
+    args = harness.parse(ap, argv)
+    chosen = [g for g in args.groups.split(",") if g]
+    unknown = sorted(set(chosen) - set(GROUPS))
+    if unknown:
+        ap.error(f"unknown groups {unknown}; choose from {list(GROUPS)}")
+    run = {"startup": startup, "goals": goals, "timeline": timeline, "threads": threads}
+    for name in chosen:
+        group = harness.start(name, args)
+        if group is None:
+            break
+        run[name](group)
+        group.save()
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

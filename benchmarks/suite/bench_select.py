@@ -1,0 +1,23 @@
+"""Measurement selection: ``posecrb.select`` at 20% of the loop closures."""
+from __future__ import annotations
+
+from . import inputs
+from .common import Benchmark
+
+# objective-method: the tree objective's greedy (the default) and its relaxation; the algebraic
+# connectivity's relaxation (MAC's problem, benchmarks/peers/mac_select.py).
+METHODS = ("tree-greedy", "tree-relax", "fiedler-relax")
+
+
+class Select(Benchmark):
+    params = [inputs.DATASETS + inputs.GRIDS_2D, METHODS]
+    param_names = ["input", "method"]
+
+    def setup(self, name: str, method: str) -> None:
+        import posecrb
+
+        objective, how = method.split("-")
+        self.prepare(name, lambda graph: posecrb.select(graph, budget="20%", objective=objective, method=how))
+
+    def time_select(self, name: str, method: str) -> None:
+        self.call(self.input)
