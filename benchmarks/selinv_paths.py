@@ -3,7 +3,7 @@ the compiled (numba) ones, and which one a command should take.
 
 For each g2o file: the paper FIM at the certified estimate, factored as `posecrb fim` factors it;
 its supernodes, the entries of the ``Z_SS`` blocks the inversion gathers, the block kernels'
-predicted overhead (``posecrb.linalg.selinv.block_kernel_seconds``) and their measured time, the
+Python steps (``posecrb.linalg.selinv.inversion_steps``) and their measured time, the
 compiled kernels' time once numba is loaded (in-process, median of --repeat after a warm-up), the
 path `posecrb` takes, and how far the two paths' inverses and accuracy sums differ. Then numba's
 cost in a fresh process: its import and the first call of the compiled kernels on a 2 x 2 matrix
@@ -31,10 +31,10 @@ from _common import (
 )
 
 # the compiled kernels forced: no factor is cheap enough for the block kernels
-FORCE_COMPILED = ("import sys, runpy; import posecrb.linalg.selinv as s; s._BLOCK_BUDGET_SECONDS = -1.0; "
+FORCE_COMPILED = ("import sys, runpy; import posecrb.linalg.selinv as s; s._BLOCK_MAX_STEPS = -1.0; "
                   "sys.argv = ['posecrb', *sys.argv[1:]]; runpy.run_module('posecrb', run_name='__main__')")
 NUMBA_COLD = ("import numpy as np, scipy.sparse as sp; import posecrb.linalg.selinv as s; "
-              "from posecrb.linalg.cholesky import cholesky; s._BLOCK_BUDGET_SECONDS = -1.0; "
+              "from posecrb.linalg.cholesky import cholesky; s._BLOCK_MAX_STEPS = -1.0; "
               "s.SelectedInverse(cholesky(sp.csc_matrix(np.array([[2.0, 1.0], [1.0, 2.0]]))))")
 NO_INVERSION = ("import numpy as np, scipy.sparse as sp; import posecrb.linalg.selinv as s; "
                 "from posecrb.linalg.cholesky import cholesky; cholesky(sp.csc_matrix(np.array([[2.0, 1.0], "
@@ -67,12 +67,12 @@ def main() -> None:
     if not files:
         sys.exit("no g2o files: pass --data-dir or set POSECRB_DATA")
     print_header("selected inversion: block kernels against compiled kernels", threads=args.threads)
-    print(f"# rule: block kernels where {selinv._BLOCK_SECONDS_PER_SUPERNODE * 1e6:.0f} us x supernodes + "
-          f"{selinv._BLOCK_SECONDS_PER_ENTRY * 1e9:.0f} ns x Z_SS entries <= {selinv._BLOCK_BUDGET_SECONDS} s")
-    print("\n| dataset | FIM rows | supernodes | Z_SS entries | predicted s | block s | compiled s (numba loaded) "
+    print(f"# rule: block kernels where supernodes + Z_SS entries / {selinv._ENTRIES_PER_STEP} "
+          f"<= {selinv._BLOCK_MAX_STEPS:.0f} steps")
+    print("\n| dataset | FIM rows | supernodes | Z_SS entries | steps | block s | compiled s (numba loaded) "
           "| path | max entry difference / max entry | accuracy sum, relative difference |")
     print("|---|---|---|---|---|---|---|---|---|---|")
-    budget = selinv._BLOCK_BUDGET_SECONDS
+    budget = selinv._BLOCK_MAX_STEPS
     block_files = []
     for path in files:
         graph, factor = fim_factor(path)
@@ -80,21 +80,21 @@ def main() -> None:
         bounds = selinv.supernode_bounds(sel.indptr, sel.indices)
         width = np.diff(bounds)
         below = sel.indptr[bounds[:-1] + 1] - sel.indptr[bounds[:-1]] - width
-        predicted = selinv.block_kernel_seconds(sel.indptr, bounds)
+        steps = selinv.inversion_steps(sel.indptr, bounds)
         times, results = {}, {}
         for name, value in (("block", np.inf), ("compiled", -1.0)):
-            selinv._BLOCK_BUDGET_SECONDS = value
+            selinv._BLOCK_MAX_STEPS = value
             times[name] = median_time(lambda: selinv.SelectedInverse(factor, absolute_terms=True), args.repeat)
             results[name] = selinv.SelectedInverse(factor, absolute_terms=True)
-        selinv._BLOCK_BUDGET_SECONDS = budget
+        selinv._BLOCK_MAX_STEPS = budget
         block, compiled = results["block"], results["compiled"]
         entry_diff = float(np.max(np.abs(block.zval - compiled.zval)) / np.max(np.abs(compiled.zval)))
         sum_diff = abs(block.absolute_terms - compiled.absolute_terms) / compiled.absolute_terms
-        chosen = "block" if predicted <= budget else "compiled"
+        chosen = "block" if steps <= budget else "compiled"
         if chosen == "block":
             block_files.append(path)
         print(f"| {graph.name} | {sel.n:,} | {width.size:,} | {int(np.sum(below * (below + 1) // 2)):,} "
-              f"| {predicted:.3f} | {times['block']:.3f} | {times['compiled']:.3f} | {chosen} "
+              f"| {steps:,.0f} | {times['block']:.3f} | {times['compiled']:.3f} | {chosen} "
               f"| {entry_diff:.1e} | {sum_diff:.1e} |", flush=True)
 
     env = child_env(args.threads)
