@@ -112,7 +112,7 @@ def test_both_tiers_bound_the_dense_sum(case):
     assert exact.error_bound == pytest.approx(gamma * exact.condition, rel=1e-15)
     # the lambda_min tier: at least the closed form with the exact eigenvalue (its lambda is a
     # certified lower bound), at most that form with the Lanczos run's eigenvalue (relative
-    # residual _LANCZOS_TOL: mu >= lambda_min / (1 + 2 tol)) less the inertia check's rounding
+    # residual _LANCZOS_TOL: mu >= lambda_min / ((1 + 2 tol) _MU_MARGIN)) less the inertia check's rounding
     # margin (gamma (1 + gamma) x the longest row of the pattern of L + L^T, + 2 eps), hence at
     # least the exact sum
     if cheap.condition == np.inf:          # lambda_min below the rounding level of the inertia check
@@ -120,7 +120,7 @@ def test_both_tiers_bound_the_dense_sum(case):
         return
     pattern = (factor.L() != 0).toarray()
     margin = gamma * (1 + gamma) * int(np.max(pattern.sum(axis=0) + pattern.sum(axis=1) - 1)) + 2 * EPS
-    mu = lam / (1 + 4 * accuracy._LANCZOS_TOL)
+    mu = lam / ((1 + 4 * accuracy._LANCZOS_TOL) * accuracy._MU_MARGIN)
     assert closed * (1 - 1e-9) <= cheap.condition <= closed * lam / (mu - margin)
     assert cheap.condition >= exact_sum
     assert cheap.error_bound == pytest.approx(gamma * cheap.condition, rel=1e-15)
@@ -174,12 +174,34 @@ def test_an_eigenvalue_the_inertia_check_refutes_is_never_used(monkeypatch):
         return lanczos.RitzPair(ritz.value / 100, ritz.vector, 0.0, True, ritz.matvecs, ritz.restarts)
 
     monkeypatch.setattr(lanczos, "largest_eigenpair", understated)
-    forced = logdet_accuracy(f, ld, "paper FIM", matrix=a, tier="lambda_min")
+    forced = logdet_accuracy(f, ld, "paper FIM", matrix=a, tier="lambda_min")   # fails twice: 100 > _MU_RETRY
     assert forced.error_bound == np.inf and forced.status.state == "unavailable"
     assert "inertia check" in forced.status.reason
     monkeypatch.setattr(accuracy, "EXACT_FIRST_STEPS", -1)
     auto = logdet_accuracy(f, ld, "paper FIM", matrix=a)
     assert auto == logdet_accuracy(f, ld, "paper FIM", tier="selected_inversion")
+
+
+def test_a_failed_inertia_check_is_retried_once_lower(monkeypatch):
+    """A Lanczos value half the true one (a top eigenvalue the Krylov space missed): the first
+    check fails, the second at mu / _MU_RETRY holds, and the bound is that much looser."""
+    from posecrb.linalg import lanczos
+
+    a = pose_graph_fim(60, 2, 7)
+    f = cholesky(a)
+    ld = float(f.logdet())
+    _, closed, _ = dense_reference(f, a)
+    honest = lanczos.largest_eigenpair
+
+    def halved(*args, **kwargs):
+        ritz = honest(*args, **kwargs)
+        return lanczos.RitzPair(ritz.value / 2, ritz.vector, 0.0, True, ritz.matvecs, ritz.restarts)
+
+    monkeypatch.setattr(lanczos, "largest_eigenpair", halved)
+    retried = logdet_accuracy(f, ld, "paper FIM", matrix=a, tier="lambda_min")
+    factor = 2 / (accuracy._MU_MARGIN * accuracy._MU_RETRY)       # mu over lambda_min after the retry
+    assert retried.tier == "lambda_min" and retried.status.ok
+    assert retried.condition == pytest.approx(closed / factor, rel=1e-3)
 
 
 def test_arguments_and_the_empty_matrix():

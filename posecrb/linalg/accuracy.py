@@ -34,11 +34,17 @@ EPS = float(np.finfo(float).eps)
 # iterations and the second factorization of the lambda_min tier, and gives the exact sum.
 EXACT_FIRST_STEPS = 500
 
-# The lambda_min tier's Lanczos run: relative residual and restarts (a well separated largest
-# eigenvalue of the scaled inverse, the anchored graph's global mode, converges in a few dozen
-# solves; a slower one is left to the selected inversion).
-_LANCZOS_TOL = 1e-3
+# The lambda_min tier's Lanczos run: relative residual and restarts. The largest eigenvalues of the
+# scaled inverse are the anchored graph's global modes, often a cluster within a percent of each
+# other (the SE(d) FIM of a 3D grid: 31,950 and 31,769); a loose tolerance stops on the second and
+# the inertia check then fails, so the run goes on to 1e-6 (10 solves there instead of 6).
+_LANCZOS_TOL = 1e-6
 _LANCZOS_RESTARTS = 4
+# mu is taken this much below the Lanczos estimate, and once more this many times lower after a
+# failed inertia check (a top eigenvalue the Krylov space had not yet seen): a looser bound, which
+# may still prove the digits, for one more factorization in that rare case only.
+_MU_MARGIN = 1.05
+_MU_RETRY = 8.0
 
 
 def onenorm_inverse(solve: Callable[[np.ndarray], np.ndarray], n: int) -> float:
@@ -220,7 +226,8 @@ def _lambda_min_tier(factor: Any, lower: Any, matrix: Any, logdet: float, name: 
     pattern of ``|L| |L^T|`` lies in the factor's, a closed pattern): one pass over L.
 
     ``lam``: the largest eigenvalue ``theta`` of ``D^{1/2} A^{-1} D^{1/2}`` by Lanczos (solves with
-    the factor) gives ``mu = 1 / (theta + 2 r)``, r the Ritz pair's residual; the factorization of
+    the factor) gives ``mu = 1 / ((theta + 2 r) _MU_MARGIN)``, r the Ritz pair's residual (once
+    ``_MU_RETRY`` times lower when the check below fails); the factorization of
     ``A - mu D`` with the factor's symbolic analysis then succeeds only if no eigenvalue of the
     scaled matrix lies below mu, up to that factorization's own backward error (``|E| <= gamma
     |L'| |L'^T|``, whose scaled 2-norm is at most ``gamma (1 + gamma)`` times the longest row of
@@ -250,17 +257,22 @@ def _lambda_min_tier(factor: Any, lower: Any, matrix: Any, logdet: float, name: 
                              max_restarts=_LANCZOS_RESTARTS)
     if only_if_ok and not gamma * scaled_sum * ritz.value <= limit:
         return None      # even lambda_min = 1 / theta would not prove the printed digits
-    mu = 1.0 / (ritz.value + 2.0 * ritz.residual)
     rows = np.bincount(lower.indices, minlength=d.size) + np.diff(lower.indptr) - 1   # pattern of L + L^T
     delta = gamma * (1.0 + gamma) * float(rows.max()) + 2.0 * EPS
-    lam = mu - delta
-    if not (np.isfinite(lam) and lam > 0):
-        return None if only_if_ok else _not_certified(name, f"its estimate {mu:.3g} is below the rounding level")
-    try:
-        # (a pattern within the analysed one: CHOLMOD takes any subset, so a pruned zero is harmless)
-        refactor(factor, matrix - sp.diags(mu * d, format="csc"), name)
-    except NotPositiveDefinite:
-        return None if only_if_ok else _not_certified(name, f"the inertia check at {mu:.3g} failed")
+    mu = 1.0 / ((ritz.value + 2.0 * ritz.residual) * _MU_MARGIN)
+    for attempt in range(2):
+        lam = mu - delta
+        if not (np.isfinite(lam) and lam > 0 and gamma * scaled_sum / lam <= (limit if only_if_ok else np.inf)):
+            # (also the retry's looser bound when it could no longer prove the digits)
+            return None if only_if_ok else _not_certified(name, f"its estimate {mu:.3g} is below the rounding level")
+        try:
+            # (a pattern within the analysed one: CHOLMOD takes any subset, so a pruned zero is harmless)
+            refactor(factor, matrix - sp.diags(mu * d, format="csc"), name)
+            break
+        except NotPositiveDefinite:
+            if attempt:
+                return None if only_if_ok else _not_certified(name, f"the inertia check at {mu:.3g} failed")
+            mu /= _MU_RETRY
     condition = scaled_sum / lam
     bound = gamma * condition
     if only_if_ok and not bound <= limit:
