@@ -247,3 +247,9 @@ def test_real_datasets_keep_their_status(shared_datasets):
         exact = logdet_accuracy(factor, ld, "paper FIM", tier="selected_inversion")
         assert auto.tier == tier and auto.status == exact.status and auto.status.ok, name
         assert auto.error_bound >= exact.error_bound, name
+
+
+def test_docstring_examples_run():
+    import doctest
+
+    assert doctest.testmod(accuracy, optionflags=doctest.ELLIPSIS).failed == 0

@@ -247,9 +247,9 @@ def _lambda_min_tier(factor: Any, lower: Any, matrix: Any, logdet: float, name: 
     if not (np.all(np.isfinite(d)) and np.all(d > 0)):
         return None if only_if_ok else _not_certified(name, "a diagonal entry is not positive and finite")
     gamma = _gamma(lower)
-    # || |L|^T s ||^2: column k's sum of |L_ik| s_i (every column holds its diagonal: reduceat is safe)
+    # || |L|^T s ||^2: column k's sum of |L_ik| s_i, one sparse product (|L|^T is |L|'s CSC read as CSR)
     s = 1.0 / np.sqrt(d[perm])
-    col = np.add.reduceat(np.abs(lower.data) * s[lower.indices], lower.indptr[:-1])
+    col = sp.csr_matrix((np.abs(lower.data), lower.indices, lower.indptr), shape=lower.shape[::-1]) @ s
     scaled_sum = float(col @ col)
     limit = LOGDET_WARN * max(1.0, abs(logdet))
     root = np.sqrt(d)
