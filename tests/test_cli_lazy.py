@@ -153,6 +153,33 @@ def test_small_inversions_import_no_numba(solvable_g2o, command):
     assert _loaded(modules, "numba") == []
 
 
+def test_anchored_sed_logdet_of_a_large_grid_imports_no_numba(tmp_path):
+    """The log-det's accuracy bound of a factor that the selected inversion would take through the
+    compiled kernels (the SE(d) FIM of the 3D grid of 1,728 poses) comes from the lambda_min tier
+    (posecrb.linalg.accuracy): no numba, and the exact tier's status."""
+    from posecrb.linalg import selinv
+    from posecrb.linalg.ordering import ordered_symbolic
+    from posecrb.models.sed.fim import sed_fim
+    from posecrb.sim.generators import grid
+
+    g = grid(3, 12)
+    path = tmp_path / "grid3d.g2o"
+    write_g2o(g, path)
+    fim = sed_fim(g, g.vertex_rot, g.vertex_trans)
+    dofs = (np.arange(1, g.n)[:, None] * 6 + np.arange(6)).ravel()
+    free = fim.matrix[dofs][:, dofs].tocsc()
+    symbolic, _ = ordered_symbolic(free, "auto", dim=3, poses=g.n, matrix="fim",
+                                   pose_of_row=np.repeat(np.arange(g.n - 1), 6), n_poses=g.n - 1)
+    lower = symbolic.factor(free).L().tocsc()
+    indptr = lower.indptr.astype(np.int64)
+    assert selinv.inversion_steps(indptr, selinv.supernode_bounds(indptr, lower.indices)) > selinv._BLOCK_MAX_STEPS
+    out, modules = _run(["fim", str(path), "--model", "sed", "--anchor", "0", "--format", "json"], listing=True)
+    assert out.returncode == 0, out.stderr
+    row = json.loads(out.stdout)
+    assert row["poses"] == 1728 and "logdet_status" not in row
+    assert _loaded(modules, "numba") == []
+
+
 def test_select_fiedler_imports_no_numba(tmp_path):
     """lambda_2 needs no compiled kernel: numba (0.2-0.5 s) and scipy's graph and eigen modules stay
     unloaded (320 poses: the sparse path, Lanczos on the pseudo-inverse). Neither does the tree
