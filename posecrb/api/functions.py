@@ -15,6 +15,7 @@ from collections.abc import Sequence
 from dataclasses import replace
 from typing import TYPE_CHECKING, Any, TypeAlias
 
+from ..core.choices import FRAMES, MODELS, ROTATION_WEIGHTS
 from ..core.errors import ArgumentError
 from ..core.files import GRAPH_EXTENSIONS
 from ..core.graph import PoseGraph
@@ -30,9 +31,6 @@ if TYPE_CHECKING:
 
 # Each function imports the layers it runs on when called (start-up time: the command line
 # imports this module for one command, and ``solve`` must not load the models or the selection).
-ROTATION_WEIGHTS = ("eq59", "table2")
-FRAMES = ("world", "body")
-MODELS = ("paper", "sed")                    # posecrb.models.MODELS
 Source = PoseGraph | str | os.PathLike[str]
 EstimateSpec: TypeAlias = "str | os.PathLike[str] | SolveResult | Estimate | None"
 

@@ -9,10 +9,11 @@ from __future__ import annotations
 import os
 from typing import TYPE_CHECKING
 
+from ..core.choices import ROTATION_WEIGHTS
 from ..core.graph import PoseGraph
 from ..core.result import check_output_argument
 from . import arguments as arg
-from .functions import ROTATION_WEIGHTS, EstimateSpec, Source
+from .functions import EstimateSpec, Source
 
 if TYPE_CHECKING:
     from ..incremental.result import TimelineResult

@@ -9,6 +9,16 @@ from typing import TYPE_CHECKING, Any
 
 import click
 
+from ..core.choices import (
+    ESTIMATE_SOURCES,
+    ESTIMATE_SOURCES_OR_NONE,
+    FIM_VARIANTS,
+    FORMATS,
+    FRAMES,
+    MODELS,
+    ORDERINGS,
+    ROTATION_WEIGHTS,
+)
 from ..core.errors import UsageError
 from ..core.timing import AUTO, Repeat, Timing, measure
 from ..datasets import search as datasets
@@ -21,15 +31,6 @@ log = logging.getLogger("posecrb")
 
 # What click.option(...) returns: a decorator of command functions.
 OptionDecorator = Callable[[Callable[..., Any]], Callable[..., Any]]
-
-# Option choices, spelled out rather than imported: importing the modules that define them
-# (posecrb.models, posecrb.core.noise, posecrb.report.render) would load numpy, scipy and numba
-# before the command line is even parsed (start-up time). tests/test_cli_lazy.py checks that
-# each tuple equals the library's own.
-FORMATS = ("table", "json", "csv", "markdown")              # posecrb.report.render.FORMATS
-MODELS = ("paper", "sed")                                    # posecrb.models.MODELS
-FIM_VARIANTS = ("eq64", "consistent")                        # posecrb.models.paper.fim.FIM_VARIANTS
-ROTATION_WEIGHTS = ("eq59", "table2")                        # posecrb.core.noise.ROTATION_WEIGHTS
 
 _PLAIN_NUMBER = re.compile(r"[+-]?(?:[0-9]+\.?[0-9]*|\.[0-9]+)(?:[eE][+-]?[0-9]+)?")
 INT64_MAX = 2 ** 63 - 1
@@ -99,9 +100,6 @@ POSE_ID = PoseId()
 def format_option(choices=FORMATS, default="table"):
     return click.option("--format", "fmt", type=click.Choice(list(choices)), default=default,
                         show_default=True, help="Output format (results on stdout).")
-
-
-TABLE_FORMATS = ("table", "markdown", "csv", "json", "latex")   # `tables` adds LaTeX
 
 
 data_dir_option = click.option(
@@ -176,11 +174,8 @@ def plot_target(plot_path: str | None, out_dir: str | None, name: str) -> str | 
 
 
 
-# posecrb.linalg.ordering.ORDERINGS, spelled out so that --help imports no scipy (a test checks both agree).
-ORDERING_CHOICES = ("auto", "amd", "colamd", "metis", "nesdis")
-
 ordering_option = click.option(
-    "--ordering", type=click.Choice(ORDERING_CHOICES), default="auto", show_default=True,
+    "--ordering", type=click.Choice(ORDERINGS), default="auto", show_default=True,
     help="Fill-reducing ordering of the sparse Cholesky factorizations (cost only: the numbers agree "
          "to rounding). amd: CHOLMOD's AMD. colamd: true COLAMD (the paper's Algorithm 1; CHOLMOD "
          "would apply AMD to a symmetric matrix, so COLAMD's permutation of A A^T is computed and passed "
@@ -200,7 +195,7 @@ def make_estimate_option(dest: str = "estimate_source", *, allow_none: bool = Fa
     """``--estimate``: where the poses come from; ``allow_none`` adds ``none`` (graph-only columns)."""
     return click.option(
         "--estimate", dest, default="solve", show_default=True,
-        type=InputFile(("solve", "vertices", "none") if allow_none else ("solve", "vertices")),
+        type=InputFile(ESTIMATE_SOURCES_OR_NONE if allow_none else ESTIMATE_SOURCES),
         metavar="solve|vertices|none|FILE" if allow_none else "solve|vertices|FILE",
         help="Where the poses (at which the FIM is evaluated) come from: the certified solver (global "
              "optimum), the file's own VERTEX lines, "
@@ -232,7 +227,7 @@ fim_variant_option = click.option(
 
 
 frame_option = click.option(
-    "--frame", type=click.Choice(("world", "body")), default=None,
+    "--frame", type=click.Choice(FRAMES), default=None,
     help="sed model: coordinates of the FIM and of every per-pose number. world: the thesis' X_i -> Exp(-delta) X_i, "
          "about the world origin, rotation first (omega, v). body: GTSAM's and g2o's X_i -> X_i Exp(xi), "
          "in GTSAM's order (Pose2 x, y, theta; Pose3 rotation, translation), comparable with "

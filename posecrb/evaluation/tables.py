@@ -28,6 +28,7 @@ from typing import Any
 import numpy as np
 
 from ..core import provenance
+from ..core.choices import EXECUTORS
 from ..core.errors import ArgumentError, DatasetNotFound, InternalError, PosecrbError, UsageError, status_of
 from ..core.status import log_status, put
 from ..core.timing import Repeat, timed
@@ -176,7 +177,6 @@ def _dataset_task(context: tuple[str, TableSettings], task: object) -> dict:
     return row
 
 
-EXECUTORS = ("local", "dask")
 
 
 def build_rows(names: Sequence[str], settings: TableSettings, jobs: int = 1,

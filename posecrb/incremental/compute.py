@@ -38,6 +38,7 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
+from ..core.choices import ESTIMATE_SOURCES_OR_NONE
 from ..core.errors import ArgumentError, UsageError
 from ..core.graph import PoseGraph
 from ..core.noise import rotation_weights
@@ -49,7 +50,7 @@ from .tracker import Family, Group, Parts, Tracked
 if TYPE_CHECKING:
     from ..solver.estimate import Estimate
 
-ESTIMATES = ("solve", "vertices", "none")
+ESTIMATES = ESTIMATE_SOURCES_OR_NONE
 # Keys of ``TimelineResult.checks``: the matrices tracked.
 _CHECK_NAMES = {"tau": "L_tau", "w": "L_w", "ub": "ub", "fim": "fim"}
 _SQRT_HALF = np.sqrt(0.5)

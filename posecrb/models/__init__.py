@@ -13,6 +13,7 @@ from collections.abc import Sequence
 
 import numpy as np
 
+from ..core.choices import MODELS
 from ..core.errors import ArgumentError
 from ..core.graph import PoseGraph
 from ..core.status import OK, Status
@@ -26,8 +27,6 @@ from .results import CrlbResult, FimResult
 from .sed.crlb import SedCrlb
 from .sed.fim import sed_fim
 from .sed.frames import convert_information, coordinate_names, coordinates_description, sed_crlb_in_frame
-
-MODELS = ("paper", "sed")
 
 
 def _graph_keys(graph: PoseGraph, model: str) -> dict[str, object]:

@@ -18,6 +18,7 @@ from typing import Any
 import numpy as np
 from threadpoolctl import threadpool_limits
 
+from ..core.choices import METHODS
 from ..core.errors import NotPositiveDefinite, UsageError
 from ..core.graph import PoseGraph
 from ..solver.estimate import Estimate, get_estimate
@@ -47,8 +48,6 @@ from .result import SelectionResult, pruned_graph, write_pruned
 __all__ = ["METHODS", "SelectionResult", "pruned_graph", "select_edges", "write_pruned"]
 
 log = logging.getLogger("posecrb")
-
-METHODS = ("greedy", "relax", "random", "naive")
 
 
 @dataclass

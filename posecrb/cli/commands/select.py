@@ -6,6 +6,7 @@ import logging
 import click
 
 from ...api.functions import select
+from ...core.choices import ESTIMATE_SOURCES, FIXED_RULES, METHODS, OBJECTIVES
 from ...core.errors import UsageError
 from ...core.status import log_statuses
 from ...report.render import print_rows
@@ -53,15 +54,17 @@ def _summary(d: dict) -> list[dict]:
 @click.argument("file", type=DatasetArg())
 @click.option("--budget", required=True, metavar="K|P%",
               help="Number of candidate edges to keep, or a percentage of the candidates (rounded down).")
-@click.option("--objective", default="tree", show_default=True, metavar="tree|fim|fiedler",
+@click.option("--objective", type=click.Choice(OBJECTIVES), default="tree", show_default=True,
+              metavar="|".join(OBJECTIVES),
               help="tree: d logdet L_tau + d_r logdet L_w (eq. 75, weighted tree-connectivity); fim: logdet of "
                    "the anchored frame-consistent FIM at --estimate; fiedler: algebraic connectivity of the "
                    "rotation-weighted Laplacian (MAC's objective).")
-@click.option("--method", default="greedy", show_default=True, metavar="greedy|relax|random|naive",
+@click.option("--method", type=click.Choice(METHODS), default="greedy", show_default=True,
+              metavar="|".join(METHODS),
               help="greedy (exact greedy; MAC's GreedyEig for fiedler), relax (the concave relaxation's bound, "
                    "top-K and Madow rounding; tree and fim keep the greedy set unless a rounding beats it), "
                    "random (seeded), naive (heaviest rotation weights).")
-@click.option("--fixed", default="odometry", show_default=True, type=InputFile(("odometry",)),
+@click.option("--fixed", default="odometry", show_default=True, type=InputFile(FIXED_RULES),
               metavar="odometry|FILE",
               help="Edges always kept: the odometry chain (consecutive ids, plus edges needed to connect it), "
                    "or a file of pose-id pairs 'i j'. Every other edge is a candidate.")
@@ -79,7 +82,7 @@ def _summary(d: dict) -> list[dict]:
               help="Seed the lazy greedy's queue with random-projection estimates of the gains (implies --lazy; "
                    "the lazy greedy's default above 50000 candidates).")
 @click.option("--exact", is_flag=True, help="Never use random projections.")
-@click.option("--estimate", default="solve", show_default=True, type=InputFile(("solve", "vertices")),
+@click.option("--estimate", default="solve", show_default=True, type=InputFile(ESTIMATE_SOURCES),
               metavar="solve|vertices|FILE",
               help="fim objective: the estimate at which the FIM is evaluated (default the certified optimum "
                    "of the full graph).")

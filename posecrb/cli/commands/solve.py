@@ -6,6 +6,7 @@ import logging
 import click
 
 from ...api.functions import solve
+from ...core.choices import INITS
 from ...core.errors import SolverError
 from ...core.status import log_status
 from ...report.render import print_rows
@@ -31,7 +32,7 @@ HEADERS = {"hessian_vector_products": "HVPs", "times.total": "time s", "duality_
               help="First rank of the Riemannian staircase [default: d+1].")
 @click.option("--rmax", type=PlainInt(2, 100), default=10, show_default=True,
               help="Last rank of the Riemannian staircase.")
-@click.option("--init", "init", type=click.Choice(["chordal", "vertices"]), default="chordal", show_default=True,
+@click.option("--init", "init", type=click.Choice(INITS), default="chordal", show_default=True,
               help="Initial rotations: chordal relaxation, or the file's own vertices.")
 @click.option("--anchor", type=POSE_ID, default=None,
               help="Pose id (as in the file) put at the identity in the output; default: the smallest id.")

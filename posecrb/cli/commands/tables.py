@@ -8,6 +8,7 @@ from collections.abc import Sequence
 
 import click
 
+from ...core.choices import EXECUTORS, TABLE_FORMATS
 from ...core.errors import PosecrbError
 from ...core.files import make_output_dir, scratch_dir, write_text
 from ...core.provenance import write_run_record
@@ -29,7 +30,6 @@ from ...report.latex import to_latex
 from ...report.render import to_csv, to_json, to_markdown, to_rich_table
 from ...sim.generators import builtin_demo
 from ..options import (
-    TABLE_FORMATS,
     PlainInt,
     data_dir_option,
     format_option,
@@ -105,7 +105,7 @@ def _render(rows: list[dict], tables: Sequence[int], fmt: str, compare: bool, se
               help="Also draw one figure (PNG, SVG or PDF, by the extension): FIM log-det and ub relative to lb per "
                    "dataset, and every time against the paper's printed one.")
 @ordering_option
-@click.option("--executor", type=click.Choice(["local", "dask"]), default="local", show_default=True,
+@click.option("--executor", type=click.Choice(EXECUTORS), default="local", show_default=True,
               help="local: in this process (--jobs 1) or a process pool; dask: one dataset per task on "
                    "dask.distributed (pip install 'posecrb[dask]'), each task single-threaded (BLAS/OpenMP "
                    "1 thread), so its timings are single-threaded ones (rows say timing).")
