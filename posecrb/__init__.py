@@ -39,12 +39,14 @@ from .core.errors import (
 
 if TYPE_CHECKING:
     from .api.functions import bounds, crlb, fim, load, parse, select, solve
-    from .api.results import BoundsResult, SelectResult
+    from .api.results import SelectResult
     from .api.timeline import timeline
     from .core.graph import PoseGraph
     from .core.status import Status
     from .incremental.result import TimelineResult
+    from .models.paper.bounds import GraphBounds
     from .models.paper.crlb import InverseAccuracy
+    from .models.paper.result import BoundsResult, FimAtEstimate
     from .models.results import CrlbResult, FimResult
     from .solver.estimate import Estimate
     from .solver.solve import SolveResult
@@ -57,14 +59,16 @@ _LAZY = {
     "load": "api.functions", "parse": "api.functions", "solve": "api.functions", "bounds": "api.functions",
     "fim": "api.functions", "crlb": "api.functions", "select": "api.functions", "timeline": "api.timeline",
     "PoseGraph": "core.graph", "Status": "core.status", "Estimate": "solver.estimate",
-    "SolveResult": "solver.solve", "BoundsResult": "api.results", "FimResult": "models.results",
+    "SolveResult": "solver.solve", "BoundsResult": "models.paper.result",
+    "GraphBounds": "models.paper.bounds", "FimAtEstimate": "models.paper.result", "FimResult": "models.results",
     "CrlbResult": "models.results", "InverseAccuracy": "models.paper.crlb", "SelectResult": "api.results",
     "TimelineResult": "incremental.result",
 }
 
 __all__ = [
     "load", "parse", "solve", "bounds", "fim", "crlb", "select", "timeline",
-    "PoseGraph", "Estimate", "SolveResult", "BoundsResult", "FimResult", "CrlbResult", "InverseAccuracy",
+    "PoseGraph", "Estimate", "SolveResult", "BoundsResult", "GraphBounds", "FimAtEstimate", "FimResult", "CrlbResult",
+    "InverseAccuracy",
     "SelectResult", "TimelineResult", "Status",
     "PosecrbError", "UsageError", "ArgumentError", "ParseError", "DatasetNotFound", "DisconnectedGraph",
     "NumericalError", "NotPositiveDefinite", "SolverError",

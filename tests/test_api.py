@@ -206,10 +206,9 @@ def test_statuses_travel_through_the_dict():
          "lambda_min_rot_lower": 0.4, "gap_bound": 9.0, "t_opt_graph": 1.0, "t_opt_approx": 2.0, "total_degree": 8,
          "times": {"lb": 0.1}, "runs": {"lb": 1}, "ordering": {"requested": "auto", "lb": "amd"}}
     res = posecrb.BoundsResult.from_dict(d)
-    assert res.ub is None and res.ub_status == Status.unavailable("breaks down", "use ub_lambda")
-    assert res.to_dict() == d
-    assert res.status.state == "unavailable" and set(res.statuses()) == {"ub", "lambda_min(L_w)", "Lemma 4 gap bound",
-                                                                               "FIM log-det"}
+    assert res.ub is None and res.bounds.ub_status == Status.unavailable("breaks down", "use ub_lambda")
+    assert res.to_dict() == d and res.fim is None
+    assert res.status.state == "unavailable" and set(res.statuses()) == {"ub", "lambda_min(L_w)", "Lemma 4 gap bound"}
     assert "status" not in res.to_dict()                             # no estimate: nothing uncertified
     unc = dict(d, fim_logdet=5.0, trace_fim=6.0, fim_variant="consistent",
                estimate={"source": "solve", "certified": False, "objective": 1.0})

@@ -144,7 +144,7 @@ def test_last_row_equals_bounds_and_the_fim_at_the_same_estimate():
             assert abs(last["lb"] - b.lb) <= tol
             assert abs(last["ub"] - b.ub) <= tol
             assert abs(last["t_opt_graph"] - b.t_opt_graph) <= sum_atol([b.t_opt_graph] * g.m)
-            assert abs(last["fim_logdet"] - m.fim_logdet) <= tol
+            assert abs(last["fim_logdet"] - m.result.fim_logdet) <= tol
 
 
 def _processing_order(g):
@@ -305,7 +305,7 @@ def test_intel_prefixes_against_dense_and_bounds(shared_datasets):
     assert last["lb"] == pytest.approx(b.lb, abs=tol) and last["ub"] == pytest.approx(b.ub, abs=tol)
     assert last["t_opt_graph"] == pytest.approx(b.t_opt_graph, abs=sum_atol([b.t_opt_graph] * g.m))
     m = evaluate(g, EvaluationSettings(estimate="vertices"))
-    assert last["fim_logdet"] == pytest.approx(m.fim_logdet, abs=res.checks["fim"]["tolerance"])
+    assert last["fim_logdet"] == pytest.approx(m.result.fim_logdet, abs=res.checks["fim"]["tolerance"])
     # every 100th prefix against bounds from scratch (sparse Cholesky), to the timeline's tolerance
     for k in range(100, g.n, 100):
         bk = compute_bounds(prefix(g, k - 1))

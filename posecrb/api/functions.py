@@ -19,15 +19,15 @@ from ..core.choices import FRAMES, MODELS, ROTATION_WEIGHTS
 from ..core.errors import ArgumentError
 from ..core.files import GRAPH_EXTENSIONS
 from ..core.graph import PoseGraph
-from ..core.result import check_output_argument
+from ..core.pathargs import check_output_argument
 from . import arguments as arg
 
 if TYPE_CHECKING:
-    from ..evaluation.evaluate import DatasetMetrics
+    from ..models.paper.result import BoundsResult
     from ..models.results import CrlbResult, FimResult
     from ..solver.estimate import Estimate
     from ..solver.solve import SolveResult
-    from .results import BoundsResult, SelectResult
+    from .results import SelectResult
 
 # Each function imports the layers it runs on when called (start-up time: the command line
 # imports this module for one command, and ``solve`` must not load the models or the selection).
@@ -269,38 +269,7 @@ def bounds(source: Source, *, anchor: int | None = None, repeat: int | str = 1, 
     settings = EvaluationSettings(anchor=idx, rotation_weight=rotation_weight, fim_variant=variant, repeat=repeat,
                                   estimate=spec, solver={"anchor": idx} if spec == "solve" else {},
                                   ordering=ordering)
-    m = evaluate(graph, settings, estimate=given)
-    return _bounds_result(m, times, runs, ordering)
-
-
-def _bounds_result(m: DatasetMetrics, times: dict[str, float], runs: dict[str, int],
-                   ordering: str) -> BoundsResult:
-    from ..models.paper.fim import trace_fim  # noqa: PLC0415 -- lazy: start-up time
-    from .results import BoundsResult  # noqa: PLC0415 -- lazy: start-up time
-
-    g, b = m.graph, m.bounds
-    est = m.estimate
-    extra: dict[str, Any] = {}
-    all_times = {**times, **b.times}
-    all_runs: dict[str, int] = {**runs, **b.runs}
-    if est is not None and m.fim is not None:
-        extra = {"fim_logdet": m.fim_logdet, "fim_logdet_status": m.fim_logdet_status,
-                 "trace_fim": trace_fim(m.fim), "fim_variant": m.fim.variant, "estimate": est}
-        all_times.update(fim_build=m.times["fim_build"], fim_logdet=m.times["fim_logdet"],
-                         logdet_accuracy=m.times["logdet_accuracy"])
-        all_runs.update(fim_build=m.runs["fim_build"], fim_logdet=m.runs["fim_logdet"],
-                        logdet_accuracy=m.runs["logdet_accuracy"])
-        if est.solve_time is not None:
-            all_times["solve"] = est.solve_time
-            all_runs["solve"] = 1
-    return BoundsResult(
-        dataset=g.name, path=g.path, sha256=g.sha256, dim=g.dim, poses=g.n, edges=g.m, components=g.n_components,
-        anchor=b.anchor_id, rotation_weight=b.rotation_weight, lb=b.lb, ub=b.ub, ub_status=b.ub_status,
-        ub_lambda=b.ub_lambda, lambda_inf=b.lambda_inf, lambda_min_rot=b.lambda_min_rot,
-        lambda_min_rot_status=b.lambda_min_rot_status, lambda_min_rot_lower=b.lambda_min_rot_lower,
-        gap_bound=b.gap_bound, gap_bound_status=b.gap_bound_status, t_opt_graph=b.t_opt_graph,
-        t_opt_approx=b.t_opt_approx, total_degree=b.total_degree, times=all_times, runs=all_runs,
-        ordering={"requested": ordering, **m.ordering}, **extra)
+    return evaluate(graph, settings, estimate=given, times=times, runs=runs).result
 
 
 def fim(source: Source, *, model: str = "paper", estimate: EstimateSpec = "solve", anchor: int | None = None,

@@ -1,6 +1,6 @@
-"""``BoundsResult`` (``posecrb.bounds``) and ``SelectResult`` (``posecrb.select``).
+"""``SelectResult`` (``posecrb.select``).
 
-Both follow the result protocol (``posecrb.core.result``): ``to_dict()`` is the ``bounds`` /
+It follows the result protocol (``posecrb.core.result``): ``to_dict()`` is the ``bounds`` /
 ``select`` command's ``--format json`` object, field by field in the same order.
 """
 from __future__ import annotations
@@ -9,115 +9,8 @@ from collections.abc import Mapping
 from dataclasses import dataclass, field, replace
 from typing import Any
 
-from ..core.result import NESTED, Result, optional_field, status_field
-from ..core.status import Status
+from ..core.result import NESTED, Result, optional_field
 from ..solver.estimate import Estimate
-
-
-@dataclass(frozen=True, kw_only=True)
-class BoundsResult(Result):
-    """D-optimality of a pose graph: the paper's Table I/II row, what ``posecrb bounds`` prints.
-
-    The graph-only bounds on the log-determinant of the paper model's anchored FIM (section
-    VII-B): ``lb = d logdet(L_tau) + d_r logdet(L_w)`` (eq. 75 left, Algorithm 1),
-    ``ub`` the paper's Table I/II upper bound (eq. 75 middle with the measured p_ij),
-    ``ub_lambda`` eq. 75 right with lambda_inf (eq. 77), Lemma 4's bound on ``fim_logdet - lb``,
-    and T-optimality (eq. 73, 72); with an estimate, ``fim_logdet`` is the log-det of the FIM
-    itself there (``fim_variant``: ``"consistent"``, the model's Fisher information, or
-    ``"eq64"`` as printed). Natural logarithms. Translations are in the file's length units:
-    scaling every length by s scales the translation information by 1/s^2 and moves ``lb``,
-    ``ub``, ``ub_lambda`` and ``fim_logdet`` together by ``-2 d n_p log s`` (n_p = n - 1).
-    3D rotation weights by eq. (59) or the ``"table2"`` fit (``rotation_weight``).
-
-    ``to_dict()`` is the command's JSON object (``status`` is ``"uncertified"`` when the solver
-    did not certify the estimate, absent otherwise); ``to_frame()`` one row of it, so that
-    ``pandas.concat`` of several is a table over datasets.
-
-    Attributes
-    ----------
-    dataset, path, sha256 : str or None
-        The graph's name, file and the file's sha256.
-    dim, poses, edges, components : int
-        d, n, m and the number of connected components.
-    anchor : int
-        The anchored pose id.
-    rotation_weight : str
-        ``"eq59"`` or ``"table2"``.
-    lb, ub, ub_lambda : float or None
-        The bounds (``ub`` None when unavailable, see ``ub_status``).
-    lambda_inf : float
-        eq. (77)'s lambda_inf.
-    lambda_min_rot, lambda_min_rot_lower : float or None
-        lambda_min(L_w) (an upper estimate) and a certified lower bound of it.
-    gap_bound : float or None
-        Lemma 4: ``0 <= logdet F - lb <= gap_bound``.
-    t_opt_graph, t_opt_approx : float
-        T-optimality, eq. (73) and eq. (72).
-    total_degree : int
-        Sum of the degrees of the free poses.
-    times : dict of str to float
-        Seconds per step (medians of ``repeat`` runs).
-    runs : dict of str to int
-        Per key of ``times``: how many runs its median is of.
-    fim_logdet, trace_fim : float or None
-        log det and trace of the FIM at the estimate (None without one). ``fim_logdet_status``
-        is a warning when the log-det's rounding-error bound (``posecrb.linalg.accuracy``)
-        exceeds 1e-6 relative, unavailable when no digit is correct.
-    fim_variant : str or None
-        The FIM's variant.
-    estimate : Estimate or None
-        Where the poses come from (None: ``estimate=None``).
-    ordering : dict of str to str
-        ``requested`` and the ordering of each factorization (``lb``, ``ub``, ``fim``).
-
-    Examples
-    --------
-    >>> import posecrb
-    >>> res = posecrb.bounds("intel")
-    >>> round(res.lb, 3), round(res.ub, 3), round(res.fim_logdet, 3)
-    (30155.231, 30352.516, 30194.332)
-    >>> res.lb <= res.fim_logdet <= res.lb + res.gap_bound
-    True
-    """
-
-    dataset: str
-    path: str | None
-    sha256: str | None
-    dim: int
-    poses: int
-    edges: int
-    components: int
-    anchor: int
-    rotation_weight: str
-    lb: float
-    ub: float | None
-    ub_status: Status = status_field("ub")
-    ub_lambda: float
-    lambda_inf: float
-    lambda_min_rot: float | None
-    lambda_min_rot_status: Status = status_field("lambda_min(L_w)")
-    lambda_min_rot_lower: float | None
-    gap_bound: float | None
-    gap_bound_status: Status = status_field("Lemma 4 gap bound")
-    t_opt_graph: float
-    t_opt_approx: float
-    total_degree: int
-    times: dict[str, float] = field(default_factory=dict)
-    runs: dict[str, int] = field(default_factory=dict)
-    fim_logdet: float | None = optional_field()
-    fim_logdet_status: Status = status_field("FIM log-det")
-    trace_fim: float | None = optional_field()
-    fim_variant: str | None = optional_field()
-    estimate: Estimate | None = optional_field(**{NESTED: Estimate})
-    ordering: dict[str, str] = field(default_factory=dict)
-
-    def to_dict(self) -> dict[str, Any]:
-        out = super().to_dict()
-        if self.estimate is not None and self.estimate.certified is False:
-            ordering = out.pop("ordering")
-            out["status"] = "uncertified"
-            out["ordering"] = ordering
-        return out
 
 
 @dataclass(frozen=True, kw_only=True)

@@ -11,7 +11,7 @@ from typing import TYPE_CHECKING
 
 from ..core.choices import ROTATION_WEIGHTS
 from ..core.graph import PoseGraph
-from ..core.result import check_output_argument
+from ..core.pathargs import check_output_argument
 from . import arguments as arg
 from .functions import EstimateSpec, Source
 

@@ -1,0 +1,49 @@
+"""Paths given to the library: checked once, before any work, with the error naming the argument.
+
+The library's side of the command line's path options (``posecrb.cli.paths``): the same rules of
+the file layer (``posecrb.core.files``), raised as ``ArgumentError`` in Python terms
+(``path='x.npz': directory d does not exist``).
+"""
+from __future__ import annotations
+
+import os
+from typing import Any
+
+from .errors import ArgumentError, UsageError
+from .files import check_output_file
+
+
+def check_output_argument(parameter: str, path: Any, inputs: tuple[str | os.PathLike[str] | None, ...] = (), *,
+                          extensions: tuple[str, ...] | None = None, append: str | None = None) -> str:
+    """``posecrb.core.files.check_output_file`` for a library argument: the same checks (the
+    extension among ``extensions`` included), before any work, with the error naming
+    ``parameter`` (an ``ArgumentError``: ``path='x.npz': ...``; the command line shows
+    ``--path x.npz: ...``). ``append``: a suffix added unless present (numpy's rule for
+    ``.npz``), after checking that ``path`` names a file. Returns the path as a string."""
+    shown = check_input_argument(parameter, path)
+    if append and not shown.endswith(append):
+        if shown.endswith(os.sep) or os.path.basename(shown) in ("", ".", ".."):
+            raise ArgumentError(parameter, shown, "names a directory; give a file name", sep=": ")
+        shown += append
+    try:
+        check_output_file(shown, inputs, option=None, extensions=extensions)
+    except UsageError as exc:
+        text = str(exc)
+        reason = text[len(shown):] if text.startswith(shown) else f": {text}"
+        colon = reason.startswith(":")
+        raise ArgumentError(parameter, shown, reason[1:].strip() if colon else reason.strip(),
+                            sep=": " if colon else " ") from None
+    return str(shown)
+
+
+def check_input_argument(parameter: str, path: Any) -> str:
+    """``path`` as a string when it can name a file: a non-empty str or os.PathLike without NUL
+    characters (``ArgumentError`` naming ``parameter`` otherwise)."""
+    if not isinstance(path, (str, os.PathLike)) or isinstance(path, bytes):
+        raise ArgumentError(parameter, path, "is not a file name (a non-empty str or os.PathLike)")
+    text = os.fspath(path)
+    if not isinstance(text, str) or not text:
+        raise ArgumentError(parameter, path, "is not a file name (a non-empty str or os.PathLike)")
+    if "\0" in text:
+        raise ArgumentError(parameter, text, "contains a NUL character, which no file name can")
+    return text
