@@ -90,7 +90,7 @@ for _ in range(int(reps)):
     times.append(time.perf_counter() - t0)
     cpu.append(time.process_time() - c0)
 print(json.dumps({"times": times, "cpu": cpu, "value": r.value, "upper": r.upper_bound,
-                  "selected": r.selected.tolist()}))
+                  "selected": r.selected_edges.tolist()}))
 """
 
 # MAC's in-process worker (runs in MAC's interpreter): the problem from an npz file, one untimed
@@ -206,7 +206,7 @@ def speed(names: list[str], budget: str, args, mac_py: str | None) -> None:
         lam = FiedlerObjective(g, g.kappa, 0)
         with tempfile.TemporaryDirectory() as tmp:
             prob = Path(tmp) / "problem.npz"
-            write_problem(g, split, [k], [ours.selected], prob)
+            write_problem(g, split, [k], [ours.selected_edges], prob)
             programs = {"posecrb": lambda: run_process([py, "-c", OURS_WORKER, name, budget, "fiedler", "relax", "0",
                                                         str(args.reps)], env=env)}
             whole = {"posecrb": lambda: run_process([*cmd, "select", name, "--budget", budget, "--objective",
@@ -330,7 +330,7 @@ def quality(names: list[str], budgets: list[str], mac_py: str, env: dict) -> Non
                 for b in budgets]
         with tempfile.TemporaryDirectory() as tmp:
             prob = Path(tmp) / "problem.npz"
-            write_problem(g, split, ks, [r.selected for r in ours], prob)
+            write_problem(g, split, ks, [r.selected_edges for r in ours], prob)
             run = run_process([mac_py, "-c", QUALITY_DRIVER, str(prob)], env=env)
             if not run.ok:
                 raise RuntimeError(f"MAC failed ({run.status}): {run.stderr[-2000:]}")

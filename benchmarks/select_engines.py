@@ -31,7 +31,7 @@ import json, sys
 from posecrb import load
 from posecrb.selection import select_edges
 res = select_edges(load(sys.argv[1]), sys.argv[2], engine=sys.argv[3])
-print(json.dumps({"selected": res.selected.tolist(), "numba": "numba" in sys.modules}))
+print(json.dumps({"selected": res.selected_edges.tolist(), "numba": "numba" in sys.modules}))
 """
 # Untimed, once per dataset: the sizes pick_engine sees and its choice.
 SIZES = r"""

@@ -38,8 +38,11 @@ from .core.errors import (
 )
 
 if TYPE_CHECKING:
-    from .api.functions import bounds, crlb, fim, load, parse, select, solve
-    from .api.results import SelectResult
+    from .api.bounds import bounds
+    from .api.graphs import load, parse
+    from .api.models import crlb, fim
+    from .api.select import select
+    from .api.solve import solve
     from .api.timeline import timeline
     from .core.graph import PoseGraph
     from .core.status import Status
@@ -48,6 +51,7 @@ if TYPE_CHECKING:
     from .models.paper.crlb import InverseAccuracy
     from .models.paper.result import BoundsResult, FimAtEstimate
     from .models.results import CrlbResult, FimResult
+    from .selection.result import CertificateBounds, FixedEdges, SelectionCertificate, SelectResult
     from .solver.estimate import Estimate
     from .solver.solve import SolveResult
 
@@ -56,12 +60,14 @@ __version__ = "0.2.0"
 # name -> module that defines it, imported on first access (numpy, scipy and the models load
 # only when a function or a result class is used: the command line's start-up needs none).
 _LAZY = {
-    "load": "api.functions", "parse": "api.functions", "solve": "api.functions", "bounds": "api.functions",
-    "fim": "api.functions", "crlb": "api.functions", "select": "api.functions", "timeline": "api.timeline",
+    "load": "api.graphs", "parse": "api.graphs", "solve": "api.solve", "bounds": "api.bounds",
+    "fim": "api.models", "crlb": "api.models", "select": "api.select", "timeline": "api.timeline",
     "PoseGraph": "core.graph", "Status": "core.status", "Estimate": "solver.estimate",
     "SolveResult": "solver.solve", "BoundsResult": "models.paper.result",
     "GraphBounds": "models.paper.bounds", "FimAtEstimate": "models.paper.result", "FimResult": "models.results",
-    "CrlbResult": "models.results", "InverseAccuracy": "models.paper.crlb", "SelectResult": "api.results",
+    "CrlbResult": "models.results", "InverseAccuracy": "models.paper.crlb", "SelectResult": "selection.result",
+    "FixedEdges": "selection.result", "SelectionCertificate": "selection.result",
+    "CertificateBounds": "selection.result",
     "TimelineResult": "incremental.result",
 }
 
@@ -69,7 +75,7 @@ __all__ = [
     "load", "parse", "solve", "bounds", "fim", "crlb", "select", "timeline",
     "PoseGraph", "Estimate", "SolveResult", "BoundsResult", "GraphBounds", "FimAtEstimate", "FimResult", "CrlbResult",
     "InverseAccuracy",
-    "SelectResult", "TimelineResult", "Status",
+    "SelectResult", "FixedEdges", "SelectionCertificate", "CertificateBounds", "TimelineResult", "Status",
     "PosecrbError", "UsageError", "ArgumentError", "ParseError", "DatasetNotFound", "DisconnectedGraph",
     "NumericalError", "NotPositiveDefinite", "SolverError",
     "__version__",

@@ -71,7 +71,8 @@ CASES = [
     ("crlb", ["--model", "sed", "--quotient", "--frame", "body"], {"model": "sed", "quotient": True, "frame": "body"}),
     ("select", ["--budget", "3"], {"budget": 3}),
     ("select", ["--budget", "40%", "--method", "relax", "--seed", "3", "--anchor", "{a}"],
-     {"budget": "40%", "method": "relax", "seed": 3, "anchor": "{a}"}),
+     {"budget": 0.4, "method": "relax", "seed": 3, "anchor": "{a}"}),
+    ("select", ["--budget", "3", "--lazy", "--exact"], {"budget": 3, "gains": "lazy-exact"}),
     ("select", ["--budget", "2", "--objective", "fim", "--certify", "--estimate", "vertices"],
      {"budget": 2, "objective": "fim", "certify": True, "estimate": "vertices"}),
     ("timeline", [], {}),
@@ -184,7 +185,7 @@ def test_frames(results):
         np.testing.assert_array_equal(row[[f"var_{c}" for c in crlb.coordinates]].to_numpy(float), np.diag(block))
     sel = results["select"]
     sf = sel.to_frame()
-    assert sf[["id_i", "id_j", "edge"]].to_numpy().tolist() == sel.selected
+    assert sf[["id_i", "id_j", "edge"]].to_numpy().tolist() == sel.selected.tolist()
     assert sorted(sf["step"]) == list(range(1, sel.budget + 1))       # greedy: the order of the picks
     one = results["bounds"].to_frame()
     assert len(one) == 1 and one.loc[0, "lb"] == results["bounds"].lb and one.loc[0, "ordering.lb"]
@@ -211,10 +212,12 @@ def test_statuses_travel_through_the_dict():
     assert res.status.state == "unavailable" and set(res.statuses()) == {"ub", "lambda_min(L_w)", "Lemma 4 gap bound"}
     assert "status" not in res.to_dict()                             # no estimate: nothing uncertified
     unc = dict(d, fim_logdet=5.0, trace_fim=6.0, fim_variant="consistent",
-               estimate={"source": "solve", "certified": False, "objective": 1.0})
+               estimate={"source": "solve", "certified": False, "objective": 1.0}, status="uncertified")
     out = posecrb.BoundsResult.from_dict(unc).to_dict()
-    assert out["status"] == "uncertified" and list(out)[-2:] == ["status", "ordering"]
-    assert posecrb.BoundsResult.from_dict(out).to_dict() == out
+    assert out == unc and list(out)[-2:] == ["status", "ordering"]
+    # the derived key must agree with what it is derived from
+    with pytest.raises(posecrb.ArgumentError, match="key 'status' of a BoundsResult is None, which contradicts"):
+        posecrb.BoundsResult.from_dict({k: v for k, v in unc.items() if k != "status"})
 
 
 def test_from_dict_names_a_missing_key():
@@ -270,7 +273,7 @@ def test_an_estimate_of_another_graph_or_without_poses_is_refused(shifted_file, 
     ("solve", {"anchor": True}, "anchor=True is not a pose id"),
     ("crlb", {"anchor": ["{a}", "{b}"]}, "anchor=[{a}, {b}] is several anchors; the paper model takes one"),
     ("crlb", {"poses": ["{a}", 5]}, "poses=5 is not a pose id of {name}"),
-    ("crlb", {"poses": "1-x"}, "poses='1-x' is not a pose id or an id range"),
+    ("crlb", {"poses": "1-x"}, "poses='1-x' is text: pass True (or 'all') or a sequence of pose ids"),
     ("crlb", {"quotient": True}, "quotient=True applies to the sed model"),
     ("fim", {"model": "sed", "fim_variant": "eq64"}, "fim_variant='eq64' applies to the paper model"),
     ("fim", {"frame": "body"}, "frame='body' applies to the sed model"),
@@ -281,8 +284,11 @@ def test_an_estimate_of_another_graph_or_without_poses_is_refused(shifted_file, 
     ("select", {"budget": 2, "tol": 2.0}, "tol=2.0 is not in (0, 1]"),
     ("select", {"budget": 2, "max_iter": 0}, "max_iter=0 is not in 1..100000"),
     ("select", {"budget": 2, "seed": -1}, "seed=-1 is not in 0.."),
-    ("select", {"budget": 2.5}, "budget=2.5 is not a number of edges"),
-    ("select", {"budget": 2, "jl": True, "exact": True}, "exact=True excludes jl=True"),
+    ("select", {"budget": 2.5}, "budget=2.5 is not a fraction of the candidates in (0, 1]"),
+    ("select", {"budget": "20%"}, "budget='20%' is text: pass a number of edges K (an int) or a fraction"),
+    ("select", {"budget": 0}, "budget=0 is not a number of edges >= 1"),
+    ("select", {"budget": 2, "gains": "fast"}, "gains='fast' is not one of 'auto', 'lazy', 'lazy-exact', 'jl'"),
+    ("select", {"budget": 2, "exact": True}, "exact=True: is no longer a keyword of select(): use gains="),
     ("solve", {"certificate_tol": math.inf}, "certificate_tol=inf is not a finite number"),
     ("solve", {"rmax": 1}, "rmax=1 is not in 2..100"),
     ("solve", {"init": "random"}, "init='random' is not one of"),

@@ -3,19 +3,24 @@
 Every check raises ``ArgumentError`` naming the keyword as the caller wrote it
 (``anchor=-1 is not a pose id ...``); the command line shows the same error with its option
 (``--anchor -1 ...``). Library keywords are the command-line options in snake case, so the
-checks here are the library's side of the options' click types.
+checks here are the library's side of the options' click types; they take Python values, never
+the command line's spellings (a sequence of pose ids, not ``"0,5,10-12"``; ``0.2``, not
+``"20%"``), which the command line parses (``posecrb.cli.options``).
 """
 from __future__ import annotations
 
+import functools
+import inspect
 import math
 import numbers
 import os
-import re
-from collections.abc import Sequence
-from typing import TYPE_CHECKING, Any
+from collections.abc import Callable, Sequence
+from typing import TYPE_CHECKING, Any, Literal, TypeAlias, TypeVar
 
 import numpy as np
 
+from ..core.arguments import check_input_argument
+from ..core.choices import EstimateSource
 from ..core.errors import ArgumentError, UsageError
 from ..core.graph import PoseGraph
 from ..core.timing import Repeat, measure
@@ -25,22 +30,45 @@ from ..io import parse_bytes, parse_text
 
 if TYPE_CHECKING:
     from ..solver.estimate import Estimate
+    from ..solver.solve import SolveResult
 
 INT64_MAX = 2 ** 63 - 1
+F = TypeVar("F", bound=Callable[..., Any])
+
+#: A pose graph, the path of a g2o or TORO file, or a bare dataset name.
+Source: TypeAlias = "PoseGraph | str | os.PathLike[str]"
+#: Where the poses come from: the certified solver, the file's vertices, another file, a solve's
+#: result or given poses.
+EstimateSpec: TypeAlias = "EstimateSource | str | os.PathLike[str] | SolveResult | Estimate"
+#: The same, or no estimate (graph-only results): None or ``"none"``.
+OptionalEstimateSpec: TypeAlias = "EstimateSpec | Literal['none'] | None"
+#: Per-pose blocks: none (None or False), every pose (True or ``"all"``), or these pose ids.
+PoseSelection: TypeAlias = "bool | Literal['all'] | Sequence[int] | None"
 
 
-def choice(parameter: str, value: Any, choices: Sequence[str]) -> str:
-    """``value`` when it is one of ``choices`` (strings)."""
-    if not isinstance(value, str) or value not in choices:
-        raise ArgumentError(parameter, value, f"is not one of {', '.join(map(repr, choices))}")
-    return value
+def public(**removed: str) -> Callable[[F], F]:
+    """A public function's call checked as a whole: a keyword it does not have, or a positional
+    argument too many, is an ``ArgumentError`` (not Python's ``TypeError``); a keyword in
+    ``removed`` (one the library had before) says what to call instead."""
 
+    def decorate(fn: F) -> F:
+        signature = inspect.signature(fn)
 
-def flag(parameter: str, value: Any) -> bool:
-    """``value`` when it is a bool (``numpy.bool_`` included)."""
-    if not isinstance(value, (bool, np.bool_)):
-        raise ArgumentError(parameter, value, "is not True or False")
-    return bool(value)
+        @functools.wraps(fn)
+        def call(*args: Any, **kwargs: Any) -> Any:
+            for name in kwargs.keys() & removed.keys():
+                raise ArgumentError(name, kwargs[name], f"is no longer a keyword of {fn.__name__}(): "
+                                    f"{removed[name]}", sep=": ")
+            try:
+                signature.bind(*args, **kwargs)
+            except TypeError as exc:
+                raise ArgumentError(fn.__name__, "(...)", f"{exc} (see help(posecrb.{fn.__name__}))",
+                                    sep=": ") from None
+            return fn(*args, **kwargs)
+
+        return call  # type: ignore[return-value]
+
+    return decorate
 
 
 def integer(parameter: str, value: Any, low: int, high: int = INT64_MAX) -> int:
@@ -66,12 +94,8 @@ def finite(parameter: str, value: Any, low: float, high: float = math.inf, *, lo
 
 
 def path_or_none(parameter: str, value: Any) -> str | None:
-    """A non-empty ``str`` / ``os.PathLike`` as a string, or None."""
-    if value is None:
-        return None
-    if not isinstance(value, (str, os.PathLike)) or not os.fspath(value):
-        raise ArgumentError(parameter, value, "is not a path (a non-empty str or os.PathLike)")
-    return str(os.fspath(value))
+    """A non-empty ``str`` / ``os.PathLike`` (without NUL characters) as a string, or None."""
+    return None if value is None else check_input_argument(parameter, value)
 
 
 # ---- graphs -----------------------------------------------------------------------------
@@ -82,7 +106,13 @@ def _shown(value: Any) -> Any:
         return data[:24] + (b"..." if len(data) > 24 else b"")
     if isinstance(value, str) and len(value) > 60:
         return value[:40] + "..."
+    if (isinstance(value, (list, tuple)) or _vector(value)) and len(value) > 8:
+        return f"[{', '.join(map(str, list(value)[:4]))}, ... ({len(value)} items)]"
     return value
+
+
+def _vector(value: Any) -> bool:
+    return isinstance(value, np.ndarray) and value.ndim == 1
 
 
 def resolve_source(source: Any, data_dir: Any = None) -> str:
@@ -92,10 +122,11 @@ def resolve_source(source: Any, data_dir: Any = None) -> str:
     if isinstance(source, (bytes, bytearray, memoryview)):
         raise ArgumentError("source", _shown(source), "is bytes: pass a path or a dataset name, or the "
                             "file's content to posecrb.parse")
-    if not isinstance(source, (str, os.PathLike)) or not os.fspath(source):
+    if not isinstance(source, (str, os.PathLike)) or not isinstance(os.fspath(source), str) or not os.fspath(source):
         raise ArgumentError("source", _shown(source), "is not a pose graph, a path or a dataset name")
+    text = check_input_argument("source", source)
     directory = path_or_none("data_dir", data_dir)
-    return str(search.resolve(os.fspath(source), directory))
+    return str(search.resolve(text, directory))
 
 
 def load_graph(source: Any, data_dir: Any = None, *, quaternions: str = "normalize",
@@ -139,11 +170,21 @@ def anchor_ids(value: Any) -> tuple[int, ...]:
     membership is checked against the graph by ``PoseGraph.index_of``)."""
     if value is None:
         return ()
-    items = list(value) if isinstance(value, (list, tuple, np.ndarray)) else [value]
+    items = list(value) if isinstance(value, (list, tuple)) or _vector(value) else [value]
+    if isinstance(value, np.ndarray) and value.ndim == 0:
+        items = [value.item()]
     for a in items:
         if isinstance(a, (bool, np.bool_)) or not isinstance(a, numbers.Integral):
-            raise ArgumentError("anchor", value, "is not a pose id or a sequence of pose ids (integers)")
+            raise ArgumentError("anchor", _shown(value), "is not a pose id or a sequence of pose ids (integers)")
     return tuple(int(a) for a in items)
+
+
+def one_anchor(anchor: Any) -> tuple[int, ...]:
+    """``anchor_ids`` of a call that takes one anchor (empty: the default)."""
+    ids = anchor_ids(anchor)
+    if len(ids) > 1:
+        raise ArgumentError("anchor", anchor, "is several pose ids; this call takes one")
+    return ids
 
 
 def check_anchors(graph: PoseGraph, anchors: Sequence[int]) -> None:
@@ -152,38 +193,24 @@ def check_anchors(graph: PoseGraph, anchors: Sequence[int]) -> None:
         graph.index_of(a, "anchor")
 
 
-def pose_request(value: Any) -> bool | list[int]:
-    """``poses``: None or False (no per-pose blocks), True or ``"all"``, a sequence of pose ids,
-    or the command line's text ``"3,7,10-12"`` (ids and ranges)."""
-    if value is None or value is False:
+def pose_selection(value: Any) -> bool | list[int]:
+    """``poses``: None or False (no per-pose blocks), True or ``"all"`` (every pose), or a sequence
+    of pose ids (membership is checked against the graph by the model). The command line's text
+    (``"0,5,10-12"``) is refused with what to pass instead."""
+    if value is None or value is False or isinstance(value, np.bool_) and not value:
         return False
-    if value is True:
+    if value is True or isinstance(value, np.bool_) or (isinstance(value, str) and value == "all"):
         return True
     if isinstance(value, str):
-        text = value.strip()
-        if text.lower() == "all":
-            return True
-        out: list[int] = []
-        for part in text.split(","):
-            part = part.strip()
-            # digits only (int() would take 1_0 and non-ASCII digits), ids that fit int64
-            if re.fullmatch(r"[0-9]+(?:-[0-9]+)?", part) is None or max(map(int, part.split("-"))) > INT64_MAX:
-                raise ArgumentError("poses", part, "is not a pose id or an id range a-b")
-            if "-" in part:
-                lo, hi = map(int, part.split("-", 1))
-                if hi < lo or hi - lo > 10 ** 7:     # (a huge range would exhaust memory)
-                    raise ArgumentError("poses", part, "is not a pose id or an id range a-b")
-                out.extend(range(lo, hi + 1))
-            else:
-                out.append(int(part))
-        return out
-    if isinstance(value, (list, tuple, np.ndarray, range)):
+        raise ArgumentError("poses", _shown(value), "is text: pass True (or 'all') or a sequence of pose ids, "
+                            "e.g. [0, 5, *range(10, 13)] for the command line's 0,5,10-12")
+    if isinstance(value, (list, tuple, range)) or _vector(value):
         ids = list(value)
         for p in ids:
             if isinstance(p, (bool, np.bool_)) or not isinstance(p, numbers.Integral):
                 raise ArgumentError("poses", _shown(value), "is not 'all' or a sequence of pose ids (integers)")
         return [int(p) for p in ids]
-    raise ArgumentError("poses", _shown(value), "is not 'all', a sequence of pose ids or a text such as '0,5,10-12'")
+    raise ArgumentError("poses", _shown(value), "is not True, 'all' or a sequence of pose ids")
 
 
 # ---- estimates --------------------------------------------------------------------------

@@ -4,6 +4,7 @@ from __future__ import annotations
 import logging
 import math
 import re
+import shlex
 from collections.abc import Callable
 from typing import TYPE_CHECKING, Any
 
@@ -19,8 +20,8 @@ from ..core.choices import (
     ORDERINGS,
     ROTATION_WEIGHTS,
 )
-from ..core.errors import UsageError
-from ..core.timing import AUTO, Repeat, Timing, measure
+from ..core.errors import ArgumentError, PosecrbError, UsageError
+from ..core.timing import AUTO, Repeat, measure
 from ..datasets import search as datasets
 from .paths import InputDir, InputFile
 
@@ -141,18 +142,64 @@ repeat_option = click.option(
          "1 = one run. The JSON's runs says how many runs each time is the median of.")
 
 
-def load_dataset(name_or_path: str, data_dir: str | None = None, repeat: Repeat = 1) -> tuple[PoseGraph, float]:
-    """Resolve a path or bare name and parse it; returns the graph and the median parse time."""
-    timing = load_dataset_timed(name_or_path, data_dir, repeat)
-    return timing.value, timing.seconds
-
-
-def load_dataset_timed(name_or_path: str, data_dir: str | None = None, repeat: Repeat = 1) -> Timing[PoseGraph]:
-    """``load_dataset`` with the whole timing (``posecrb.core.timing.measure``: runs, warm-up)."""
+def load_dataset(name_or_path: str, data_dir: str | None = None, repeat: Repeat = 1, *,
+                 quaternions: str = "normalize") -> tuple[PoseGraph, float]:
+    """Resolve a path or bare name and parse it (``quaternions`` as ``posecrb.load``); returns the
+    graph and the median parse time (``posecrb.core.timing.measure``)."""
     from ..io import load  # noqa: PLC0415 -- lazy: start-up time (numpy)
 
     path = datasets.resolve(name_or_path, data_dir)
-    return measure(lambda: load(path), repeat=repeat)
+    timing = measure(lambda: load(path, quaternions=quaternions), repeat=repeat)
+    return timing.value, timing.seconds
+
+
+def parse_pose_ids(text: str) -> bool | list[int]:
+    """``--poses``: ``all`` (True) or pose ids and id ranges, ``0,5,10-12`` -> ``[0, 5, 10, 11, 12]``
+    (the library's ``poses=``)."""
+    text = text.strip()
+    if text.lower() == "all":
+        return True
+    out: list[int] = []
+    for part in text.split(","):
+        part = part.strip()
+        # digits only (int() would take 1_0 and non-ASCII digits), at most 19 of them (int64)
+        if re.fullmatch(r"[0-9]{1,19}(?:-[0-9]{1,19})?", part) is None or max(map(int, part.split("-"))) > INT64_MAX:
+            raise ArgumentError("poses", part, "is not a pose id or an id range a-b")
+        lo, hi = (int(x) for x in part.split("-")) if "-" in part else (int(part), int(part))
+        if hi < lo or hi - lo > 10 ** 7:     # (a huge range would exhaust memory)
+            raise ArgumentError("poses", part, "is not a pose id or an id range a-b")
+        out.extend(range(lo, hi + 1))
+    return out
+
+
+def dataset_names(names: tuple[str, ...], data_dir: str | None, option: str = "--datasets") -> list[str]:
+    """The datasets of a repeatable option that posecrb 0.1 split at commas (``tables`` and ``regress``
+    ``--datasets a,b,c``): a value that is a name or a path is taken whole (a path may contain a
+    comma); otherwise, when every comma-separated part is one, it is split, with a deprecation
+    warning naming the repeatable form; otherwise it is a usage error saying the option repeats.
+    A value without a comma is taken as it is (not found, it is reported as such)."""
+    out: list[str] = []
+    for value in names:
+        if "," not in value or _resolves(value, data_dir):
+            out.append(value)
+            continue
+        parts = [p.strip() for p in value.split(",")]
+        if all(p and _resolves(p, data_dir) for p in parts):
+            log.warning("%s %s: the comma-separated form is deprecated; repeat the option: %s", option, value,
+                        " ".join(f"{option} {shlex.quote(p)}" for p in parts))
+            out += parts
+            continue
+        raise UsageError(f"{option} {value}: no dataset or file of that name; {option} is repeatable and takes one "
+                         f"name or path each ({option} A {option} B), and not every part of {value!r} is one")
+    return out
+
+
+def _resolves(name: str, data_dir: str | None) -> bool:
+    try:
+        datasets.resolve(name, data_dir)
+    except PosecrbError:
+        return False
+    return True
 
 
 def executor_settings(executor: str, jobs: int, scheduler: str | None) -> dict:

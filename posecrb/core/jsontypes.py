@@ -8,6 +8,7 @@ converted back where ``plain`` changed it (``"inf"`` and None of a float: infini
 from __future__ import annotations
 
 import math
+import numbers
 import types
 import typing
 from collections.abc import Mapping
@@ -60,13 +61,13 @@ def conform(value: Any, tp: Any, nested: Any = None) -> tuple[bool, Any]:
     if tp is bool:
         return isinstance(value, bool), value
     if tp is int:
-        return isinstance(value, int) and not isinstance(value, bool), value
+        return isinstance(value, numbers.Integral) and not _is_bool(value), value
     if tp is float:
         if value is None:
             return True, math.nan
         if isinstance(value, str) and value in ("inf", "-inf"):
             return True, float(value)
-        return isinstance(value, (int, float)) and not isinstance(value, bool), value
+        return isinstance(value, numbers.Real) and not _is_bool(value), value
     if tp is str:
         return isinstance(value, str), value
     if tp is Status:
@@ -78,6 +79,10 @@ def conform(value: Any, tp: Any, nested: Any = None) -> tuple[bool, Any]:
     if isinstance(tp, type) and hasattr(tp, "from_dict") and nested is not None:
         return isinstance(value, Mapping), nested(tp, value) if isinstance(value, Mapping) else value
     return isinstance(tp, type) and isinstance(value, tp), value
+
+
+def _is_bool(value: Any) -> bool:
+    return isinstance(value, bool) or type(value).__name__ in ("bool_", "bool")
 
 
 def _items(value: Any, item: Any, nested: Any) -> tuple[bool, Any]:

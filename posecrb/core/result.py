@@ -53,10 +53,10 @@ from typing import Any, TypeVar
 
 import numpy as np
 
+from .arguments import check_input_argument, check_output_argument
 from .errors import ArgumentError, ParseError
 from .files import atomic_write, read_regular_file
 from .jsontypes import conform, is_status_json, short, type_hints, type_name
-from .pathargs import check_input_argument, check_output_argument
 from .status import OK, Status, worst
 
 R = TypeVar("R", bound="Result")
@@ -202,13 +202,12 @@ class Result:
             if isinstance(value, Status) and _is_status_field(f):
                 _put_status(out, key[: -len("_status")], value)
                 continue
-            if value is None and f.metadata.get(OMIT_NONE):
+            shared = getattr(self, f.metadata[STATUS_OF]) if f.metadata.get(STATUS_OF) else OK
+            if value is None and f.metadata.get(OMIT_NONE) and shared.ok:
                 continue
             codec = f.metadata.get(CODEC)
             out[key] = plain(codec[0](value) if codec else value)
-            shared = f.metadata.get(STATUS_OF)
-            if shared is not None:
-                _put_status(out, key, getattr(self, shared))
+            _put_status(out, key, shared)
         return out
 
     @classmethod
@@ -222,7 +221,19 @@ class Result:
         unknown = [k for k in d if k not in cls.json_keys()]
         if unknown:
             raise _bad(cls, d, f"has keys a {cls.__name__} does not have: {', '.join(map(repr, unknown[:5]))}")
-        return cls._from_mapping(d)
+        res = cls._from_mapping(d)
+        back = res.to_dict()
+        if back != dict(d):    # a key derived from others, or a status that contradicts them
+            missing = object()
+            key = next(k for k in (*d, *back) if back.get(k, missing) != d.get(k, missing))
+            raise _bad(cls, d, f"key {key!r} of a {cls.__name__} is {short(d.get(key))}, which contradicts the "
+                               f"other keys (they give {short(back.get(key))})")
+        return res
+
+    @classmethod
+    def _restore(cls, kwargs: dict[str, Any], d: Mapping[str, Any]) -> None:
+        """Set in ``kwargs`` the fields that ``from_dict`` reads from keys other than their own
+        (a status that several numbers share); nothing by default."""
 
     @classmethod
     def _from_mapping(cls: type[R], d: Mapping[str, Any]) -> R:
@@ -262,6 +273,7 @@ class Result:
             if f.metadata.get(STATUS_OF) is not None and d.get(f"{key}_status") is not None:
                 _status(cls, d, f"{key}_status", d[f"{key}_status"])
             kwargs[f.name] = value
+        cls._restore(kwargs, d)
         try:
             return cls(**kwargs)
         except (TypeError, ValueError) as exc:

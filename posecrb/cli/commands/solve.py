@@ -2,15 +2,16 @@
 from __future__ import annotations
 
 import logging
+from dataclasses import replace
 
 import click
 
-from ...api.functions import solve
+from ...api.solve import solve, solve_times
 from ...core.choices import INITS
 from ...core.errors import SolverError
 from ...core.status import log_status
 from ...report.render import print_rows
-from ..options import POSE_ID, FiniteFloat, PlainInt, data_dir_option, format_option
+from ..options import POSE_ID, FiniteFloat, PlainInt, data_dir_option, format_option, load_dataset
 from ..paths import GRAPH_EXTENSIONS, Command, DatasetArg, OutputFile
 
 log = logging.getLogger("posecrb")
@@ -55,8 +56,16 @@ def command(file, out, fmt, r0, rmax, init, anchor, certificate_tol, sesync_comp
     With --sesync-compat the rotation term is SE-Sync's kappa(2d - 2 tr(R_j^T R_i R~)) with
     R~ from the unnormalised quaternions (posecrb.io.load(..., quaternions="raw")).
     """
-    res = solve(file, r0=r0, rmax=rmax, init=init, anchor=anchor, certificate_tol=certificate_tol,
-                sesync_compat=sesync_compat, out=out, data_dir=data_dir)
+    graph, parse_seconds = load_dataset(file, data_dir, quaternions="raw" if sesync_compat else "normalize")
+    res = solve(graph, r0=r0, rmax=rmax, init=init, anchor=anchor, certificate_tol=certificate_tol,
+                sesync_compat=sesync_compat)
+    res = replace(res, times=solve_times(res.times, parse_seconds))
+    if out is not None:    # checked before the work (posecrb.cli.paths)
+        from ...io import load, write_g2o  # noqa: PLC0415 -- lazy: start-up time
+
+        # edges as the normalised reading: a raw, non-orthogonal R~ has no quaternion of its own
+        write_g2o(load(graph.path) if sesync_compat and graph.path else graph, out, res.rot, res.trans)
+        res = replace(res, saved=out)
     row = res.to_dict()
     human = fmt in ("table", "markdown")
     if human:   # the table formatter keeps 5 digits; the objective deserves all of SE-Sync's

@@ -85,7 +85,11 @@ def command(file, estimate, every, start, stop, rotation_weight, fim_variant, pl
     markdown give every row.
     """
     res = timeline(file, estimate=estimate, every=every, start=start, stop=stop, rotation_weight=rotation_weight,
-                   fim_variant=fim_variant, plot=plot_path, data_dir=data_dir)
+                   fim_variant=fim_variant, data_dir=data_dir)
+    if plot_path is not None:    # checked before the work (posecrb.cli.paths)
+        from ...report.plots import plot_timeline  # noqa: PLC0415 -- matplotlib, only for a figure
+
+        plot_timeline(res, plot_path)
     log_statuses(log, res.dataset, res.statuses())
     uncertified = res.estimate is not None and res.estimate.get("certified") is False
     if fmt == "json":

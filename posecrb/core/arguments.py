@@ -1,16 +1,33 @@
-"""Paths given to the library: checked once, before any work, with the error naming the argument.
+"""Arguments of the library checked once, before any work, with the error naming the argument.
 
-The library's side of the command line's path options (``posecrb.cli.paths``): the same rules of
-the file layer (``posecrb.core.files``), raised as ``ArgumentError`` in Python terms
-(``path='x.npz': directory d does not exist``).
+Choices (``posecrb.core.choices``) and flags, and paths: the library's side of the command line's
+path options (``posecrb.cli.paths``), the same rules of the file layer (``posecrb.core.files``),
+raised as ``ArgumentError`` in Python terms (``path='x.npz': directory d does not exist``).
 """
 from __future__ import annotations
 
 import os
+from collections.abc import Sequence
 from typing import Any
 
 from .errors import ArgumentError, UsageError
 from .files import check_output_file
+
+
+def choice(parameter: str, value: Any, choices: Sequence[str]) -> Any:
+    """``value`` when it is one of ``choices`` (strings; typed ``Any``, so that it fills the
+    ``Literal`` of those choices)."""
+    if not isinstance(value, str) or value not in choices:
+        raise ArgumentError(parameter, value, f"is not one of {', '.join(map(repr, choices))}")
+    return value
+
+
+def flag(parameter: str, value: Any) -> bool:
+    """``value`` when it is a bool (``numpy.bool_`` included: its type's name is ``bool_``/``bool``)."""
+    if not isinstance(value, bool) and type(value).__name__ not in ("bool_", "bool"):
+        raise ArgumentError(parameter, value, "is not True or False")
+    return bool(value)
+
 
 
 def check_output_argument(parameter: str, path: Any, inputs: tuple[str | os.PathLike[str] | None, ...] = (), *,
