@@ -172,7 +172,7 @@ def parse_pose_ids(text: str) -> bool | list[int]:
     return out
 
 
-def dataset_names(names: tuple[str, ...], data_dir: str | None, option: str = "--datasets") -> list[str]:
+def repeatable_datasets(names: tuple[str, ...], data_dir: str | None, option: str = "--datasets") -> list[str]:
     """The datasets of a repeatable option that posecrb 0.1 split at commas (``tables`` and ``regress``
     ``--datasets a,b,c``): a value that is a name or a path is taken whole (a path may contain a
     comma); otherwise, when every comma-separated part is one, it is split, with a deprecation

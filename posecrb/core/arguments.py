@@ -11,7 +11,7 @@ from collections.abc import Sequence
 from typing import Any
 
 from .errors import ArgumentError, UsageError
-from .files import check_output_file
+from .files import check_output_file, same_file
 
 
 def choice(parameter: str, value: Any, choices: Sequence[str]) -> Any:
@@ -51,6 +51,16 @@ def check_output_argument(parameter: str, path: Any, inputs: tuple[str | os.Path
         raise ArgumentError(parameter, shown, reason[1:].strip() if colon else reason.strip(),
                             sep=": " if colon else " ") from None
     return str(shown)
+
+
+def refuse_inputs(parameter: str, path: Any, inputs: Sequence[str | os.PathLike[str] | None]) -> None:
+    """``ArgumentError`` naming ``parameter`` when ``path`` is one of ``inputs`` (links included):
+    what a writer given a graph or a result checks, so that it never replaces the data it came from."""
+    text = check_input_argument(parameter, path)
+    for inp in inputs:
+        if inp is not None and os.path.lexists(text) and same_file(text, inp):
+            raise ArgumentError(parameter, text, f"is the input file {os.fspath(inp)}: refusing to overwrite an "
+                                "input; write to another path", sep=": ")
 
 
 def check_input_argument(parameter: str, path: Any) -> str:

@@ -36,6 +36,7 @@ from ..options import (
     make_rotation_weight_option,
     ordering_option,
     repeat_option,
+    repeatable_datasets,
 )
 from ..paths import FIGURE_EXTENSIONS, Command, DatasetArg, OutputDir, OutputFile
 from ..progress import progress
@@ -129,7 +130,7 @@ def command(all_, tables, names, repeat, jobs, fmt, out_dir, compare_paper, rota
     if all_ and names:
         raise click.UsageError("--all and --datasets are exclusive")
     # --out and --plot were checked before the work, against the inputs (posecrb.cli.paths)
-    requested = list(names) or None
+    requested = repeatable_datasets(names, data_dir) or None
     explicit = bool(tables)
     tables = sorted(set(tables)) or [1, 2, 3, 4]
     if as_published:
