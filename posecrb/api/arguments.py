@@ -20,8 +20,9 @@ from typing import TYPE_CHECKING, Any, Literal, TypeAlias, TypeVar
 import numpy as np
 
 from ..core.arguments import check_input_argument
-from ..core.choices import EstimateSource
+from ..core.choices import ESTIMATE_SOURCES, EstimateSource
 from ..core.errors import ArgumentError, UsageError
+from ..core.files import check_input_file
 from ..core.graph import PoseGraph
 from ..core.timing import Repeat, measure
 from ..datasets import search
@@ -53,16 +54,22 @@ def public(**removed: str) -> Callable[[F], F]:
 
     def decorate(fn: F) -> F:
         signature = inspect.signature(fn)
+        params = signature.parameters
+        open_keywords = any(p.kind is p.VAR_KEYWORD for p in params.values())
 
         @functools.wraps(fn)
         def call(*args: Any, **kwargs: Any) -> Any:
             for name in kwargs.keys() & removed.keys():
                 raise ArgumentError(name, kwargs[name], f"is no longer a keyword of {fn.__name__}(): "
                                     f"{removed[name]}", sep=": ")
+            for name in kwargs:
+                if name not in params and not open_keywords:
+                    raise ArgumentError(name, kwargs[name], f"is not a keyword of {fn.__name__}() (see "
+                                        f"help(posecrb.{fn.__name__}))")
             try:
                 signature.bind(*args, **kwargs)
             except TypeError as exc:
-                raise ArgumentError(fn.__name__, "(...)", f"{exc} (see help(posecrb.{fn.__name__}))",
+                raise ArgumentError(fn.__name__, _shown(args), f"{exc} (see help(posecrb.{fn.__name__}))",
                                     sep=": ") from None
             return fn(*args, **kwargs)
 
@@ -84,7 +91,10 @@ def finite(parameter: str, value: Any, low: float, high: float = math.inf, *, lo
     """``value`` when it is a finite real number in [low, high] (``(low, high]`` with ``low_open``)."""
     if isinstance(value, (bool, np.bool_)) or not isinstance(value, numbers.Real):
         raise ArgumentError(parameter, value, "is not a number")
-    x = float(value)
+    try:
+        x = float(value)
+    except OverflowError:
+        x = math.inf
     if not math.isfinite(x):
         raise ArgumentError(parameter, value, "is not a finite number")
     if x < low or (low_open and x == low) or x > high:
@@ -141,9 +151,10 @@ def load_graph_timed(source: Any, data_dir: Any = None, *, quaternions: str = "n
                      repeat: Repeat = 1) -> tuple[PoseGraph, dict[str, float], dict[str, int]]:
     """``(graph, times, runs)`` as ``load_graph``; the parse time is the median of ``runs["parse"]``
     runs by the timing protocol (``posecrb.core.timing.measure``)."""
+    directory = path_or_none("data_dir", data_dir)
     if isinstance(source, PoseGraph):
         return source, {}, {}
-    path = resolve_source(source, data_dir)
+    path = resolve_source(source, directory)
     parsed = measure(lambda: read_graph(path, quaternions=quaternions), repeat)
     return parsed.value, {"parse": parsed.seconds}, {"parse": parsed.runs}
 
@@ -223,13 +234,17 @@ def is_pose_object(value: Any) -> bool:
 
 
 def estimate_spec(value: Any, *, allow_none: bool = False) -> str:
-    """``estimate`` given as text: ``"solve"``, ``"vertices"``, a path, or (``allow_none``)
+    """``estimate`` given as text: ``"solve"``, ``"vertices"``, a path (a readable regular file,
+    as the command line checks ``--estimate`` even where it is not used), or (``allow_none``)
     None / ``"none"`` -> ``"none"``."""
     if value is None and allow_none:
         return "none"
-    if isinstance(value, (str, os.PathLike)) and os.fspath(value):
+    if isinstance(value, (str, os.PathLike)) and isinstance(os.fspath(value), str) and os.fspath(value):
         text = str(os.fspath(value))
-        if text != "none" or allow_none:
+        if text in ESTIMATE_SOURCES or (text == "none" and allow_none):
+            return text
+        if text != "none":
+            check_input_file(check_input_argument("estimate", text))
             return text
     raise ArgumentError("estimate", _shown(value), "is not 'solve', 'vertices', a path, a SolveResult or an "
                         "Estimate" + (" (or None)" if allow_none else ""))

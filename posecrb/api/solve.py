@@ -2,6 +2,7 @@
 from __future__ import annotations
 
 import math
+import numbers
 import os
 from dataclasses import fields, replace
 from typing import TYPE_CHECKING, Any
@@ -109,7 +110,8 @@ def _check_options(options_type: type, options: dict[str, Any]) -> None:
         if name in names and name != "trust_region":
             if not conform(value, hints[name])[0]:
                 raise ArgumentError(name, value, f"is not {type_name(hints[name])}")
-        if isinstance(value, float) and not math.isfinite(value):
+        if isinstance(value, numbers.Real) and not isinstance(value, numbers.Integral) \
+                and not math.isfinite(float(value)):
             raise ArgumentError(name, value, "is not a finite number")
-        if name in _COUNTS and isinstance(value, int):
+        if name in _COUNTS and isinstance(value, numbers.Integral):
             arg.integer(name, value, _COUNTS[name])

@@ -21,6 +21,7 @@ component sizes for disconnected graphs.
 from __future__ import annotations
 
 import shlex
+from collections.abc import Callable
 from dataclasses import dataclass
 
 
@@ -159,18 +160,29 @@ class ArgumentError(UsageError):
 
     def __init__(self, parameter: str, value: object, reason: str, *, sep: str = " "):
         self.parameter, self.value, self.reason, self.sep = parameter, value, reason, sep
-        super().__init__(f"{parameter}={value!r}{sep}{reason}")
+        super().__init__(f"{parameter}={_shown(value, repr)}{sep}{reason}")
 
     def cli_message(self) -> str:
         """The message with the command-line spelling: ``--max-iter 0 ...`` for ``max_iter=0``;
         ``source`` (the file argument) as ``FILE``; ``start``/``stop`` as ``--from``/``--to``."""
         if self.parameter == "source":
-            return f"FILE {self.value}{self.sep}{self.reason}"
+            return f"FILE {_shown(self.value, str)}{self.sep}{self.reason}"
         flag = _CLI_SPELLING.get(self.parameter) or "--" + self.parameter.replace("_", "-")
         if isinstance(self.value, bool):   # a flag: given or not
             return f"{flag}{self.sep}{self.reason}"
-        shown = " ".join(map(str, self.value)) if isinstance(self.value, (list, tuple)) else str(self.value)
+        shown = " ".join(_shown(v, str) for v in self.value) if isinstance(self.value, (list, tuple)) else \
+            _shown(self.value, str)
         return f"{flag} {shown}{self.sep}{self.reason}"
+
+
+def _shown(value: object, form: Callable[[object], str]) -> str:
+    """``form(value)`` (``repr`` or ``str``); an integer too long for Python to print (over 4300
+    digits) by its number of digits."""
+    try:
+        return form(value)
+    except ValueError:
+        digits = int(value.bit_length() * 0.30103) + 1 if isinstance(value, int) else 0
+        return f"<an integer of about {digits} digits>"
 
 
 class NumericalError(PosecrbError):

@@ -360,9 +360,12 @@ class Result:
         and ``ArgumentError`` for a path that is not one."""
         name = check_input_argument("path", path)
         try:
-            with np.load(io.BytesIO(read_regular_file(name)), allow_pickle=False) as npz:
+            archive = np.load(io.BytesIO(read_regular_file(name)), allow_pickle=False)
+            if not hasattr(archive, "files"):
+                raise ValueError("a single array (.npy), not an archive")
+            with archive as npz:
                 data = {k: npz[k] for k in npz.files}
-        except (ValueError, OSError, EOFError, KeyError, AttributeError, zipfile.BadZipFile) as exc:
+        except (ValueError, OSError, EOFError, KeyError, zipfile.BadZipFile) as exc:
             raise ParseError(name, None, f"not a posecrb result file ({type(exc).__name__}: {exc})") from None
         kind = str(data.pop("result_type", ""))
         if kind != cls.__name__ or "result" not in data:
