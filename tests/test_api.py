@@ -121,30 +121,7 @@ def results(shifted_file):
             "crlb": posecrb.crlb(f, poses="all"), "select": posecrb.select(f, budget=2, certify=True)}
 
 
-@pytest.mark.parametrize("name", ["solve", "bounds", "fim", "crlb", "select"])
-def test_from_dict_inverts_to_dict(results, name):
-    res = results[name]
-    d = res.to_dict()
-    back = type(res).from_dict(d)
-    assert back.to_dict() == d
-    assert type(back).from_dict(json.loads(json.dumps(d))).to_dict() == d
-    assert back.status == res.status
-
-
-@pytest.mark.parametrize("name", ["solve", "bounds", "fim", "crlb", "select"])
-def test_save_and_load_keep_the_dict_and_the_arrays(results, name, tmp_path):
-    res = results[name]
-    written = res.save(tmp_path / name)
-    assert written == str(tmp_path / name) + ".npz"
-    back = type(res).load(written)
-    assert back.to_dict() == res.to_dict()
-    for f in dataclasses.fields(res):
-        if f.metadata.get("array") and getattr(res, f.name) is not None:
-            a, b = getattr(res, f.name), getattr(back, f.name)
-            if sp.issparse(a):
-                assert (a != b).nnz == 0
-            else:
-                np.testing.assert_array_equal(np.asarray(a), np.asarray(b))
+# (to_dict, from_dict, save and load of every result type: tests/library/test_protocol.py)
 
 
 def test_a_saved_fim_is_a_scipy_sparse_file_with_its_index_map(results, tmp_path):

@@ -441,3 +441,15 @@ def _scalars(d: Mapping[str, Any], prefix: str = "") -> dict[str, Any]:
         else:
             out[f"{prefix}{k}"] = v
     return out
+
+
+@dataclasses.dataclass(frozen=True, kw_only=True)
+class GraphKeys(Result):
+    """The first keys of the result of one graph file: its name, file, the file's sha256, d, n and m."""
+
+    dataset: str
+    path: str | None
+    sha256: str | None
+    dim: int
+    poses: int
+    edges: int

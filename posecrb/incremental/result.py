@@ -9,7 +9,7 @@ from typing import TYPE_CHECKING, Any
 
 from ..core.errors import ArgumentError
 from ..core.jsontypes import conform, is_status_json, short, type_hints, type_name
-from ..core.result import Result, inputs_field
+from ..core.result import GraphKeys, inputs_field
 from ..core.status import OK, Status
 from ..solver.estimate import Estimate
 from .parts import ClosureTable, LoopClosure, Monotonicity, TimelineRows
@@ -27,7 +27,7 @@ _SCALARS = ("dataset", "path", "sha256", "dim", "poses", "edges", "anchor", "rot
 
 
 @dataclass(frozen=True, kw_only=True, eq=False)
-class TimelineResult(Result):
+class TimelineResult(GraphKeys):
     """What ``posecrb.timeline`` computes: the information timeline (docs/design.md#timeline).
 
     Graph: ``dataset``, ``path``, ``sha256``, ``dim``, ``poses`` and ``edges`` (n and m of the whole
@@ -60,12 +60,6 @@ class TimelineResult(Result):
     True
     """
 
-    dataset: str
-    path: str | None
-    sha256: str | None
-    dim: int
-    poses: int
-    edges: int
     anchor: int
     rotation_weight: str
     fim_variant: str | None

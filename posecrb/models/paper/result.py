@@ -9,7 +9,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass, field
 
-from ...core.result import KEY, NESTED, Result, derived_field, inputs_field, part_field, status_field
+from ...core.result import KEY, NESTED, GraphKeys, Result, derived_field, inputs_field, part_field, status_field
 from ...core.status import Status
 from ...solver.estimate import Estimate
 from .bounds import GraphBounds
@@ -57,7 +57,7 @@ def _solver_status(res: BoundsResult) -> str | None:
 
 
 @dataclass(frozen=True, kw_only=True)
-class BoundsResult(Result):
+class BoundsResult(GraphKeys):
     """D-optimality of a pose graph: the paper's Table I/II row, what ``posecrb bounds`` prints.
 
     Two parts: ``bounds``, the graph-only bounds on the log-determinant of the paper model's
@@ -102,12 +102,6 @@ class BoundsResult(Result):
     True
     """
 
-    dataset: str
-    path: str | None
-    sha256: str | None
-    dim: int
-    poses: int
-    edges: int
     components: int
     bounds: GraphBounds = part_field(GraphBounds)
     times: dict[str, float] = field(default_factory=dict)
