@@ -4,9 +4,14 @@ The library (``__all__``) in one page:
 
 * ``load(source)`` reads a g2o or TORO file by path or dataset name, ``parse(text)`` its content;
 * ``solve``, ``bounds``, ``fim``, ``crlb``, ``select`` and ``timeline`` take a graph, a path or a name, and
-  keywords named as the command-line options (snake case, same defaults; timing runs once);
+  keywords named as the command-line options (snake case, same defaults; timing runs once) with Python
+  values (pose ids as a sequence, a budget as a number; each choice a ``Literal`` of
+  ``posecrb.core.choices``);
 * each returns a frozen dataclass with ``to_dict()`` (the command's ``--format json`` object),
-  ``from_dict()``, ``to_frame()`` (pandas), ``save``/``load`` (npz) and a ``status``;
+  ``from_dict()``, ``to_frame()`` (pandas), ``save``/``load`` (npz) and a ``status``; results with natural
+  parts hold them as typed results (``BoundsResult.bounds``, ``SelectResult.certificate``, ...);
+* no function writes a file: ``result.save(path)``, ``posecrb.io.write_g2o(graph, path, ...)`` and
+  ``posecrb.report.plot_timeline(result, path)`` do, and refuse the files they were given;
 * errors derive from ``PosecrbError``; a wrong argument is an ``ArgumentError`` naming it.
 
 Conventions: pose ids as in the file (never internal indices), natural logarithms, translations
