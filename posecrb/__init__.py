@@ -51,6 +51,7 @@ if TYPE_CHECKING:
     from .api.timeline import timeline
     from .core.graph import PoseGraph
     from .core.status import Status
+    from .incremental.parts import LoopClosure, Monotonicity
     from .incremental.result import TimelineResult
     from .models.paper.bounds import GraphBounds
     from .models.paper.crlb import InverseAccuracy
@@ -73,14 +74,15 @@ _LAZY = {
     "CrlbResult": "models.results", "InverseAccuracy": "models.paper.crlb", "SelectResult": "selection.result",
     "FixedEdges": "selection.result", "SelectionCertificate": "selection.result",
     "CertificateBounds": "selection.result",
-    "TimelineResult": "incremental.result",
+    "TimelineResult": "incremental.result", "LoopClosure": "incremental.parts", "Monotonicity": "incremental.parts",
 }
 
 __all__ = [
     "load", "parse", "solve", "bounds", "fim", "crlb", "select", "timeline",
     "PoseGraph", "Estimate", "SolveResult", "BoundsResult", "GraphBounds", "FimAtEstimate", "FimResult", "CrlbResult",
     "InverseAccuracy",
-    "SelectResult", "FixedEdges", "SelectionCertificate", "CertificateBounds", "TimelineResult", "Status",
+    "SelectResult", "FixedEdges", "SelectionCertificate", "CertificateBounds", "TimelineResult",
+    "LoopClosure", "Monotonicity", "Status",
     "PosecrbError", "UsageError", "ArgumentError", "ParseError", "DatasetNotFound", "DisconnectedGraph",
     "NumericalError", "NotPositiveDefinite", "SolverError",
     "__version__",

@@ -33,12 +33,13 @@ def results(tmp_path_factory) -> dict[str, Result]:
     bounds = posecrb.bounds(g3)
     select = posecrb.select(g2, budget=0.5, certify=True, objective="fim", estimate=sol)
     crlb3 = posecrb.crlb(g3, poses="all")
+    line = posecrb.timeline(g3, estimate="vertices", every=2)
     out: dict[str, Result] = {
         "SolveResult": sol, "BoundsResult": bounds, "GraphBounds": bounds.bounds, "FimAtEstimate": bounds.fim,
         "FimResult": posecrb.fim(g3, model="sed", frame="body"), "CrlbResult": crlb3, "InverseAccuracy": crlb3.accuracy,
         "SelectResult": select, "FixedEdges": select.fixed, "SelectionCertificate": select.certificate,
         "CertificateBounds": select.certificate.bounds, "Estimate": posecrb.Estimate(sol.rot, sol.trans),
-        "TimelineResult": posecrb.timeline(g3, estimate="vertices", every=2),
+        "TimelineResult": line, "LoopClosure": line.closures[0], "Monotonicity": line.monotonicity["lb"]["raw"],
     }
     return out
 

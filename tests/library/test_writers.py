@@ -10,7 +10,7 @@ import pytest
 
 import posecrb
 from posecrb.io import save, write_g2o, write_toro
-from posecrb.report.plots import plot_timeline
+from posecrb.report import plot_timeline
 
 DATA = Path(__file__).resolve().parents[1] / "data" / "cli_json"
 
