@@ -30,7 +30,8 @@ Field metadata (``field(metadata=...)``) tells the codec what a field is:
 * ``derived``: a function of the result that gives the value (not an argument of the class; what
   the JSON shows of it is not read back);
 * ``key``: the JSON key when it differs from the field's name;
-* ``codec``: a pair ``(encode, decode)`` of functions between the Python value and the JSON value;
+* ``codec``: a pair ``(encode, decode)`` of functions between the Python value and the JSON value
+  (per-pose blocks: ``posecrb.models.results.pose_blocks_codec``);
 * ``status_of``: the name of the attribute holding the ``Status`` of this number, when several
   numbers share one (they are rendered as a ``<key>_status`` field is);
 * ``label``: for a ``Status`` field, the quantity it is about, as the command line names it
@@ -155,18 +156,6 @@ def shared_status_field(status_of: str, default: Any = dataclasses.MISSING, *, o
     """A number whose ``Status`` is the attribute ``status_of`` (shared with other numbers)."""
     meta = {STATUS_OF: status_of, OMIT_NONE: omit_none}
     return dataclasses.field(default=default, metadata=meta)
-
-
-def pose_blocks_codec() -> tuple[Callable[[Any], Any], Callable[[Any], Any]]:
-    """Per-pose matrices: ``{pose id: array}`` in Python, ``{"id": [[...]]}`` in JSON."""
-
-    def encode(blocks: Mapping[int, np.ndarray] | None) -> Any:
-        return None if blocks is None else {str(k): plain(np.asarray(v)) for k, v in blocks.items()}
-
-    def decode(blocks: Mapping[str, Any] | None) -> Any:
-        return None if blocks is None else {int(k): np.asarray(v, dtype=float) for k, v in blocks.items()}
-
-    return encode, decode
 
 
 def _key(f: dataclasses.Field[Any]) -> str:

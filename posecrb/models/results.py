@@ -5,7 +5,7 @@ Both follow the result protocol (``posecrb.core.result``): ``to_dict()`` is the 
 """
 from __future__ import annotations
 
-from collections.abc import Mapping
+from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -22,7 +22,7 @@ from ..core.result import (
     inputs_field,
     internal_field,
     optional_field,
-    pose_blocks_codec,
+    plain,
     shared_status_field,
     status_field,
 )
@@ -31,6 +31,18 @@ from ..linalg.accuracy import LogdetAccuracy
 from ..solver.estimate import Estimate
 from .paper.crlb import InverseAccuracy
 from .sed.frames import coordinates_description
+
+
+def pose_blocks_codec() -> tuple[Callable[[Any], Any], Callable[[Any], Any]]:
+    """Per-pose matrices: ``{pose id: array}`` in Python, ``{"id": [[...]]}`` in JSON."""
+
+    def encode(blocks: Mapping[int, np.ndarray] | None) -> Any:
+        return None if blocks is None else {str(k): plain(np.asarray(v)) for k, v in blocks.items()}
+
+    def decode(blocks: Mapping[str, Any] | None) -> Any:
+        return None if blocks is None else {int(k): np.asarray(v, dtype=float) for k, v in blocks.items()}
+
+    return encode, decode
 
 
 def graph_keys(graph: PoseGraph, model: str) -> dict[str, Any]:
