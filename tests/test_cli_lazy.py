@@ -248,16 +248,37 @@ def test_library_import_changes_no_import_machinery():
 
 
 def test_option_choices_are_the_librarys():
-    from posecrb.cli import options
-    from posecrb.core.noise import ROTATION_WEIGHTS
-    from posecrb.models import MODELS
-    from posecrb.models.paper.fim import FIM_VARIANTS
-    from posecrb.report.render import FORMATS
+    """Every choice is defined once (posecrb.core.choices): the library's tuples are those tuples, and
+    every click.Choice of the command tree (and every keyword of an InputFile) offers one of them."""
+    from posecrb.cli.paths import InputFile
+    from posecrb.core import choices, noise
+    from posecrb.io import reader
+    from posecrb.linalg import ordering
+    from posecrb.models import paper, sed
+    from posecrb.selection import objectives, select
+    from posecrb.sim import generators, sampling
 
-    assert options.FORMATS == FORMATS
-    assert options.MODELS == MODELS
-    assert options.FIM_VARIANTS == FIM_VARIANTS
-    assert options.ROTATION_WEIGHTS == ROTATION_WEIGHTS
+    assert noise.ROTATION_WEIGHTS is choices.ROTATION_WEIGHTS and ordering.ORDERINGS is choices.ORDERINGS
+    assert paper.fim.FIM_VARIANTS is choices.FIM_VARIANTS and sed.frames.FRAMES is choices.FRAMES
+    assert objectives.OBJECTIVES is choices.OBJECTIVES and select.METHODS is choices.METHODS
+    assert reader.QUATERNION_MODES is choices.QUATERNION_MODES and generators.KINDS is choices.SYNTH_KINDS
+    assert sampling.NOISE_SCALES is choices.NOISE_SCALES
+    defined = {v for k, v in vars(choices).items() if k.isupper() and isinstance(v, tuple)}
+
+    def walk(command):
+        if isinstance(command, click.Group):
+            for name in command.list_commands(None):
+                yield from walk(command.get_command(None, name))
+            return
+        for p in command.params:
+            if isinstance(p.type, click.Choice):
+                yield command.name, p.name, tuple(p.type.choices)
+            if isinstance(p.type, InputFile) and p.type.keywords:
+                yield command.name, p.name, p.type.keywords
+
+    seen = list(walk(cli))
+    assert len(seen) > 15
+    assert [s for s in seen if s[2] not in defined] == []
 
 
 def test_solve_of_weak_rotations_imports_no_bessel_functions(tmp_path):

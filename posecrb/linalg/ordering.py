@@ -39,11 +39,11 @@ import numpy as np
 import scipy.sparse as sp
 from sksparse.cholmod import analyze
 
+from ..core.choices import ORDERINGS
 from ..core.errors import UsageError
 from .accuracy import LogdetAccuracy, logdet_accuracy
 from .cholesky import Factor, PermutedFactor, SymbolicCholesky
 
-ORDERINGS = ("auto", "amd", "colamd", "metis", "nesdis")
 POSE_LEVEL = ("metis", "nesdis")
 MATRICES = ("lb", "ub", "fim", "crlb", "solver")
 # 3D graphs from this many poses on get nested dissection under ``auto`` (benchmarks/orderings.py
