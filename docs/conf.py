@@ -44,7 +44,8 @@ myst_heading_anchors = 4
 myst_enable_extensions = ["deflist"]
 
 # autodoc + numpydoc (API reference generated from posecrb.__all__ by posecrb_docs)
-autodoc_typehints = "none"          # numpydoc's Parameters sections carry the types
+autodoc_typehints = "signature"     # the typed signatures (choices as their Literal); numpydoc's Parameters say more
+autodoc_typehints_format = "short"
 autodoc_member_order = "bysource"
 autodoc_preserve_defaults = True    # signatures show ``lb_status=OK`` as written, not the object's repr
 numpydoc_show_class_members = False

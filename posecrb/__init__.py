@@ -4,9 +4,14 @@ The library (``__all__``) in one page:
 
 * ``load(source)`` reads a g2o or TORO file by path or dataset name, ``parse(text)`` its content;
 * ``solve``, ``bounds``, ``fim``, ``crlb``, ``select`` and ``timeline`` take a graph, a path or a name, and
-  keywords named as the command-line options (snake case, same defaults; timing runs once);
+  keywords named as the command-line options (snake case, same defaults; timing runs once) with Python
+  values (pose ids as a sequence, a budget as a number; each choice a ``Literal`` of
+  ``posecrb.core.choices``);
 * each returns a frozen dataclass with ``to_dict()`` (the command's ``--format json`` object),
-  ``from_dict()``, ``to_frame()`` (pandas), ``save``/``load`` (npz) and a ``status``;
+  ``from_dict()``, ``to_frame()`` (pandas), ``save``/``load`` (npz) and a ``status``; results with natural
+  parts hold them as typed results (``BoundsResult.bounds``, ``SelectResult.certificate``, ...);
+* no function writes a file: ``result.save(path)``, ``posecrb.io.write_g2o(graph, path, ...)`` and
+  ``posecrb.report.plot_timeline(result, path)`` do, and refuse the files they were given;
 * errors derive from ``PosecrbError``; a wrong argument is an ``ArgumentError`` naming it.
 
 Conventions: pose ids as in the file (never internal indices), natural logarithms, translations
@@ -38,14 +43,21 @@ from .core.errors import (
 )
 
 if TYPE_CHECKING:
-    from .api.functions import bounds, crlb, fim, load, parse, select, solve
-    from .api.results import BoundsResult, SelectResult
+    from .api.bounds import bounds
+    from .api.graphs import load, parse
+    from .api.models import crlb, fim
+    from .api.select import select
+    from .api.solve import solve
     from .api.timeline import timeline
     from .core.graph import PoseGraph
     from .core.status import Status
+    from .incremental.parts import LoopClosure, Monotonicity
     from .incremental.result import TimelineResult
+    from .models.paper.bounds import GraphBounds
     from .models.paper.crlb import InverseAccuracy
+    from .models.paper.result import BoundsResult, FimAtEstimate
     from .models.results import CrlbResult, FimResult
+    from .selection.result import CertificateBounds, FixedEdges, SelectionCertificate, SelectResult
     from .solver.estimate import Estimate
     from .solver.solve import SolveResult
 
@@ -54,18 +66,23 @@ __version__ = "0.2.0"
 # name -> module that defines it, imported on first access (numpy, scipy and the models load
 # only when a function or a result class is used: the command line's start-up needs none).
 _LAZY = {
-    "load": "api.functions", "parse": "api.functions", "solve": "api.functions", "bounds": "api.functions",
-    "fim": "api.functions", "crlb": "api.functions", "select": "api.functions", "timeline": "api.timeline",
+    "load": "api.graphs", "parse": "api.graphs", "solve": "api.solve", "bounds": "api.bounds",
+    "fim": "api.models", "crlb": "api.models", "select": "api.select", "timeline": "api.timeline",
     "PoseGraph": "core.graph", "Status": "core.status", "Estimate": "solver.estimate",
-    "SolveResult": "solver.solve", "BoundsResult": "api.results", "FimResult": "models.results",
-    "CrlbResult": "models.results", "InverseAccuracy": "models.paper.crlb", "SelectResult": "api.results",
-    "TimelineResult": "incremental.result",
+    "SolveResult": "solver.solve", "BoundsResult": "models.paper.result",
+    "GraphBounds": "models.paper.bounds", "FimAtEstimate": "models.paper.result", "FimResult": "models.results",
+    "CrlbResult": "models.results", "InverseAccuracy": "models.paper.crlb", "SelectResult": "selection.result",
+    "FixedEdges": "selection.result", "SelectionCertificate": "selection.result",
+    "CertificateBounds": "selection.result",
+    "TimelineResult": "incremental.result", "LoopClosure": "incremental.parts", "Monotonicity": "incremental.parts",
 }
 
 __all__ = [
     "load", "parse", "solve", "bounds", "fim", "crlb", "select", "timeline",
-    "PoseGraph", "Estimate", "SolveResult", "BoundsResult", "FimResult", "CrlbResult", "InverseAccuracy",
-    "SelectResult", "TimelineResult", "Status",
+    "PoseGraph", "Estimate", "SolveResult", "BoundsResult", "GraphBounds", "FimAtEstimate", "FimResult", "CrlbResult",
+    "InverseAccuracy",
+    "SelectResult", "FixedEdges", "SelectionCertificate", "CertificateBounds", "TimelineResult",
+    "LoopClosure", "Monotonicity", "Status",
     "PosecrbError", "UsageError", "ArgumentError", "ParseError", "DatasetNotFound", "DisconnectedGraph",
     "NumericalError", "NotPositiveDefinite", "SolverError",
     "__version__",

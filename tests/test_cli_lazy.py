@@ -153,6 +153,33 @@ def test_small_inversions_import_no_numba(solvable_g2o, command):
     assert _loaded(modules, "numba") == []
 
 
+def test_anchored_sed_logdet_of_a_large_grid_imports_no_numba(tmp_path):
+    """The log-det's accuracy bound of a factor that the selected inversion would take through the
+    compiled kernels (the SE(d) FIM of the 3D grid of 1,728 poses) comes from the lambda_min tier
+    (posecrb.linalg.accuracy): no numba, and the exact tier's status."""
+    from posecrb.linalg import selinv
+    from posecrb.linalg.ordering import ordered_symbolic
+    from posecrb.models.sed.fim import sed_fim
+    from posecrb.sim.generators import grid
+
+    g = grid(3, 12)
+    path = tmp_path / "grid3d.g2o"
+    write_g2o(g, path)
+    fim = sed_fim(g, g.vertex_rot, g.vertex_trans)
+    dofs = (np.arange(1, g.n)[:, None] * 6 + np.arange(6)).ravel()
+    free = fim.matrix[dofs][:, dofs].tocsc()
+    symbolic, _ = ordered_symbolic(free, "auto", dim=3, poses=g.n, matrix="fim",
+                                   pose_of_row=np.repeat(np.arange(g.n - 1), 6), n_poses=g.n - 1)
+    lower = symbolic.factor(free).L().tocsc()
+    indptr = lower.indptr.astype(np.int64)
+    assert selinv.inversion_steps(indptr, selinv.supernode_bounds(indptr, lower.indices)) > selinv._BLOCK_MAX_STEPS
+    out, modules = _run(["fim", str(path), "--model", "sed", "--anchor", "0", "--format", "json"], listing=True)
+    assert out.returncode == 0, out.stderr
+    row = json.loads(out.stdout)
+    assert row["poses"] == 1728 and "logdet_status" not in row
+    assert _loaded(modules, "numba") == []
+
+
 def test_select_fiedler_imports_no_numba(tmp_path):
     """lambda_2 needs no compiled kernel: numba (0.2-0.5 s) and scipy's graph and eigen modules stay
     unloaded (320 poses: the sparse path, Lanczos on the pseudo-inverse). Neither does the tree
@@ -221,16 +248,37 @@ def test_library_import_changes_no_import_machinery():
 
 
 def test_option_choices_are_the_librarys():
-    from posecrb.cli import options
-    from posecrb.core.noise import ROTATION_WEIGHTS
-    from posecrb.models import MODELS
-    from posecrb.models.paper.fim import FIM_VARIANTS
-    from posecrb.report.render import FORMATS
+    """Every choice is defined once (posecrb.core.choices): the library's tuples are those tuples, and
+    every click.Choice of the command tree (and every keyword of an InputFile) offers one of them."""
+    from posecrb.cli.paths import InputFile
+    from posecrb.core import choices, noise
+    from posecrb.io import reader
+    from posecrb.linalg import ordering
+    from posecrb.models import paper, sed
+    from posecrb.selection import objectives, select
+    from posecrb.sim import generators, sampling
 
-    assert options.FORMATS == FORMATS
-    assert options.MODELS == MODELS
-    assert options.FIM_VARIANTS == FIM_VARIANTS
-    assert options.ROTATION_WEIGHTS == ROTATION_WEIGHTS
+    assert noise.ROTATION_WEIGHTS is choices.ROTATION_WEIGHTS and ordering.ORDERINGS is choices.ORDERINGS
+    assert paper.fim.FIM_VARIANTS is choices.FIM_VARIANTS and sed.frames.FRAMES is choices.FRAMES
+    assert objectives.OBJECTIVES is choices.OBJECTIVES and select.METHODS is choices.METHODS
+    assert reader.QUATERNION_MODES is choices.QUATERNION_MODES and generators.KINDS is choices.SYNTH_KINDS
+    assert sampling.NOISE_SCALES is choices.NOISE_SCALES
+    defined = {v for k, v in vars(choices).items() if k.isupper() and isinstance(v, tuple)}
+
+    def walk(command):
+        if isinstance(command, click.Group):
+            for name in command.list_commands(None):
+                yield from walk(command.get_command(None, name))
+            return
+        for p in command.params:
+            if isinstance(p.type, click.Choice):
+                yield command.name, p.name, tuple(p.type.choices)
+            if isinstance(p.type, InputFile) and p.type.keywords:
+                yield command.name, p.name, p.type.keywords
+
+    seen = list(walk(cli))
+    assert len(seen) > 15
+    assert [s for s in seen if s[2] not in defined] == []
 
 
 def test_solve_of_weak_rotations_imports_no_bessel_functions(tmp_path):

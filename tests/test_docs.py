@@ -55,6 +55,13 @@ def test_api_reference_lists_every_public_name(site: Path) -> None:
     assert not missing, f"not in the API reference: {missing}"
 
 
+def test_api_reference_shows_the_typed_signatures(site: Path) -> None:
+    """Each signature with its types, and each choice's type with its values."""
+    text = html.unescape(re.sub(r"<[^>]+>", "", (site / "reference" / "api.html").read_text(encoding="utf-8")))
+    assert "model: Model = 'paper'" in text and "budget: int | float" in text and "gains: Gains = 'auto'" in text
+    assert "alias of Literal[‘paper’, ‘sed’]" in text and "alias of Literal[‘auto’, ‘lazy’, ‘lazy-exact’, ‘jl’]" in text
+
+
 def _commands(group: click.Command, ctx: click.Context, path: tuple[str, ...]):
     """(command path, command) for the group and every command below it, lazy ones included."""
     yield path, group

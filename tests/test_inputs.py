@@ -330,10 +330,10 @@ def test_fuzz_pairs_file_reader(tmp_path_factory, data):
 @pytest.mark.parametrize("spec", ["1e308", "1:1e300", "1:2:1e-300", "nan", "1,,2", "0", "-1", "1:", ":", "1e309",
                                   "\u0661", "1_0", "1" * 400])
 def test_option_parsers_give_usage_errors(spec):
-    from posecrb.api.arguments import pose_request
+    from posecrb.cli.options import parse_pose_ids
     from posecrb.experiments.crlb_sweep import parse_levels
 
-    for parse in (parse_levels, pose_request):
+    for parse in (parse_levels, parse_pose_ids):
         try:
             parse(spec)
         except PosecrbError:

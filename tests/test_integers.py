@@ -3,6 +3,7 @@ thousands of digits, where Python's int(str) and repr(int) raise "Exceeds the li
 are usage errors, parse errors with the line and ArgumentErrors, never internal errors."""
 from __future__ import annotations
 
+import importlib
 import inspect
 import sys
 
@@ -163,6 +164,13 @@ def test_long_ids_with_leading_zeros_are_their_value():
 
 
 # ---------------------------------------------------------------- every public function's integer keywords
+def _annotation(fn, annotation) -> str:
+    """The annotation as text, a type alias of the function's module spelled out."""
+    text = str(annotation)
+    alias = getattr(importlib.import_module(fn.__module__), text, None)
+    return str(alias) if isinstance(alias, str) else text
+
+
 def _integer_keywords():
     out = []
     for name in posecrb.__all__:
@@ -170,7 +178,7 @@ def _integer_keywords():
         if not inspect.isfunction(fn):
             continue
         for p in inspect.signature(fn).parameters.values():
-            if "int" in str(p.annotation) and p.kind is p.KEYWORD_ONLY:
+            if "int" in _annotation(fn, p.annotation) and p.kind is p.KEYWORD_ONLY:
                 out.append((name, p.name))
     return out
 

@@ -381,7 +381,7 @@ def test_result_npz_write_failure_keeps_the_previous_file(tmp_path, monkeypatch)
     monkeypatch.setattr(result.np, "savez", broken_savez)
     fim = FimResult(dataset="g", model="paper", dim=2, poses=2, edges=1, components=1, anchors=[0], layout="blocks",
                     size=3, nnz=3, logdet=0.0, trace=3.0, rank=3, nullity=0, frame="mixed",
-                    coordinates_description="", matrix=sp.eye(3), row_ids=np.arange(3), row_coord=np.zeros(3),
+                    matrix=sp.eye(3), row_ids=np.arange(3), row_coord=np.zeros(3),
                     coordinate_names=["x"])
     # a full disk is the system's answer, reported with the path (exit 1), not an internal error
     from posecrb.core.errors import OutputError

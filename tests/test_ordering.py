@@ -223,9 +223,14 @@ def test_lb_laplacian_pattern_is_the_pose_graph():
 
 
 def test_cli_choices_match_the_library():
-    from posecrb.cli.options import ORDERING_CHOICES
+    from posecrb.cli.options import ordering_option
 
-    assert tuple(ORDERING_CHOICES) == ORDERINGS
+    @ordering_option
+    def command(ordering):
+        pass
+
+    (param,) = command.__click_params__
+    assert tuple(param.type.choices) == ORDERINGS
 
 
 @pytest.mark.parametrize("ordering", ["auto", "colamd", "nesdis"])

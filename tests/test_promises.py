@@ -453,6 +453,36 @@ def test_tables_datasets_is_repeatable_and_never_splits_a_path(tmp_path, capsys,
     assert [r["dataset"] for r in json.loads(out)["rows"]] == ["a,b", "c"]
 
 
+@pytest.mark.parametrize("command", ["tables", "regress"])
+def test_datasets_comma_form_of_0_1_is_split_with_a_warning_or_refused_as_usage(tmp_path, capsys, monkeypatch,
+                                                                                  command):
+    """`--datasets a,b,c` was split at commas in 0.1; later it failed with "1 dataset(s) failed: a,b,c (not
+    found)", exit 1. A value that names a file is taken whole; else one whose every part does is split,
+    with a deprecation warning naming the repeatable form; else a usage error says the option repeats."""
+    monkeypatch.delenv("POSECRB_DATA", raising=False)
+    monkeypatch.chdir(tmp_path)
+    for name in ("a.g2o", "b.g2o", "c,d.g2o"):
+        (tmp_path / name).write_text(text(graph2()))
+
+    def call(value):
+        args = ["tables", "--datasets", value, "--repeat", "1", "--format", "json"] if command == "tables" else \
+            ["regress", "--datasets", value, "--expected", str(tmp_path / "e.json"), "--update"]
+        return run(args, capsys)
+
+    rc, out, err = call("a.g2o,b.g2o")
+    assert rc == 0, err
+    assert "--datasets a.g2o,b.g2o: the comma-separated form is deprecated" in err
+    assert "--datasets a.g2o --datasets b.g2o" in err
+    if command == "tables":
+        assert [r["dataset"] for r in json.loads(out)["rows"]] == ["a.g2o", "b.g2o"]
+    else:
+        assert sorted(json.loads((tmp_path / "e.json").read_text())["datasets"]) == ["a.g2o", "b.g2o"]
+    rc, out, err = call("c,d.g2o")            # a path with a comma is taken whole
+    assert rc == 0 and "deprecated" not in err, err
+    rc, _, err = call("a.g2o,nope.g2o")
+    assert rc == 2 and "--datasets is repeatable" in err and "--datasets A --datasets B" in err
+
+
 def test_markdown_and_latex_escape_dataset_names(tmp_path, capsys, monkeypatch):
     """Dataset names were written into Markdown and LaTeX unescaped (a | split the row, a $ or a
     backslash broke the document)."""

@@ -128,9 +128,9 @@ def test_polished_relaxation_against_exhaustive_search(dim, seed):
         rounded = select_edges(g, k, objective="fiedler", method="relax", polish=0, max_iter=20)
         polished = select_edges(g, k, objective="fiedler", method="relax", max_iter=20)
         for res in (rounded, polished):
-            kept = np.r_[split.fixed, res.selected]
-            assert res.selected.size == k and np.isin(res.selected, cand).all()
-            assert np.array_equal(res.kept_edges, np.union1d(split.fixed, res.selected))
+            kept = np.r_[split.fixed, res.selected_edges]
+            assert res.selected_edges.size == k and np.isin(res.selected_edges, cand).all()
+            assert np.array_equal(res.kept_edges, np.union1d(split.fixed, res.selected_edges))
             assert res.value == pytest.approx(dense_value("fiedler", g, kept), abs=t)
             assert res.value <= opt + t
             assert res.upper_bound >= opt - t

@@ -132,7 +132,7 @@ def test_absolute_terms_match_the_dense_sum(monkeypatch, wide, case):
     supernode during the selected inversion, against the dense ``|Z| (|L| |L^T|)``."""
     from posecrb.linalg import selinv
 
-    monkeypatch.setattr(selinv, "_BLOCK_BUDGET_SECONDS", np.inf if wide is None else -1.0)
+    monkeypatch.setattr(selinv, "_BLOCK_MAX_STEPS", np.inf if wide is None else -1.0)
     if wide is not None:
         monkeypatch.setattr(selinv, "_WIDE", wide)
     rng = np.random.default_rng(11)
@@ -187,7 +187,7 @@ def test_large_separators_run_threaded_with_the_same_inverse(monkeypatch, block)
     # a 2D grid of 3x3 blocks: separators 9-12 columns wide with 30-42 rows below and a root of 60
     # columns (24,000-144,000 flops of inversion each), so that some run threaded and some not
     monkeypatch.setattr(selinv, "_WIDE", 8)
-    monkeypatch.setattr(selinv, "_BLOCK_BUDGET_SECONDS", np.inf if block else -1.0)
+    monkeypatch.setattr(selinv, "_BLOCK_MAX_STEPS", np.inf if block else -1.0)
     wide = 0 if block else 8
     monkeypatch.setattr(selinv, "_THREADED_FLOPS", 3e4)
     side = 14

@@ -88,7 +88,7 @@ KERNEL_PATHS = {"block": None, "lapack-all": 1, "lapack-8": 8, "default": selinv
 def use_kernel_path(monkeypatch, path: str) -> None:
     """Force ``path`` (``KERNEL_PATHS``) on every factor, whatever its size."""
     wide = KERNEL_PATHS[path]
-    monkeypatch.setattr(selinv, "_BLOCK_BUDGET_SECONDS", np.inf if wide is None else -1.0)
+    monkeypatch.setattr(selinv, "_BLOCK_MAX_STEPS", np.inf if wide is None else -1.0)
     if wide is not None:
         monkeypatch.setattr(selinv, "_WIDE", wide)
 
@@ -154,10 +154,10 @@ def test_supernode_bounds_of_tiny_factors(n):
 
 
 @pytest.mark.parametrize("case", ["grid2d", "grid3d", "chain"])
-def test_block_kernels_are_chosen_by_their_predicted_cost(case, monkeypatch):
-    """A step per supernode and a lookup per entry of the lower triangle of each ``Z_SS`` (``s``
-    rows below a supernode: ``s (s + 1) / 2``), counted here from the definition; the block kernels
-    are taken exactly when that is within the budget."""
+def test_block_kernels_are_chosen_by_their_step_count(case, monkeypatch):
+    """A step per supernode and one per ``_ENTRIES_PER_STEP`` entries of the lower triangle of each
+    ``Z_SS`` (``s`` rows below a supernode: ``s (s + 1) / 2``), counted here from the definition;
+    the block kernels are taken exactly when that is within ``_BLOCK_MAX_STEPS``."""
     sel = SelectedInverse(factor_of(CASES[case](np.random.default_rng(5))), case)
     lower = sp.csc_matrix((sel.zval, sel.indices, sel.indptr), shape=(sel.n, sel.n))
     bounds = reference_supernodes(lower)
@@ -165,11 +165,11 @@ def test_block_kernels_are_chosen_by_their_predicted_cost(case, monkeypatch):
     for first, end in zip(bounds[:-1], bounds[1:]):
         below = len([r for r in lower.indices[lower.indptr[first]:lower.indptr[first + 1]] if r >= end])
         entries += below * (below + 1) // 2
-    expected = selinv._BLOCK_SECONDS_PER_SUPERNODE * (len(bounds) - 1) + selinv._BLOCK_SECONDS_PER_ENTRY * entries
-    got = selinv.block_kernel_seconds(sel.indptr, np.asarray(bounds))
+    expected = (len(bounds) - 1) + entries / selinv._ENTRIES_PER_STEP
+    got = selinv.inversion_steps(sel.indptr, np.asarray(bounds))
     assert got == pytest.approx(expected, rel=1e-12)
     for budget, block in ((expected * 1.01, True), (expected * 0.99, False)):
-        monkeypatch.setattr(selinv, "_BLOCK_BUDGET_SECONDS", budget)
+        monkeypatch.setattr(selinv, "_BLOCK_MAX_STEPS", budget)
         kernels = selinv._inversion_kernels(sel.indptr, sel.indices, np.asarray(bounds))
         assert isinstance(kernels, selinv._BlockKernels) is block
         # a caller that inverts many factors takes the compiled kernels whatever the budget

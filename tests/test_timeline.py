@@ -95,7 +95,7 @@ def reference_rows(g, variant="consistent"):
 
 def check_rows(res, ref):
     seen = 0
-    for row in res.rows():
+    for row in res.row_dicts():
         t = row["poses"] - 1
         if ref[t] is None:
             assert row["components"] > 1 and row["status"]["status"] == "unavailable"
@@ -125,7 +125,7 @@ def test_every_row_equals_a_dense_computation_of_its_prefix(dim):
     for g in graphs(dim):
         res = timeline(g, estimate="vertices")
         total += check_rows(res, reference_rows(g))
-        assert res.poses.tolist() == list(range(2, g.n + 1))
+        assert res.rows.poses.tolist() == list(range(2, g.n + 1))
     assert total > 30
 
 
@@ -140,7 +140,7 @@ def test_last_row_equals_bounds_and_the_fim_at_the_same_estimate():
     for dim in (2, 3):
         for g in graphs(dim)[3:]:
             res = timeline(g, estimate="vertices")
-            last = res.rows()[-1]
+            last = res.row_dicts()[-1]
             b = compute_bounds(g)
             m = evaluate(g, EvaluationSettings(estimate="vertices"))
             lt, lw, mm, fim = dense_matrices(g)
@@ -148,7 +148,7 @@ def test_last_row_equals_bounds_and_the_fim_at_the_same_estimate():
             assert abs(last["lb"] - b.lb) <= tol
             assert abs(last["ub"] - b.ub) <= tol
             assert abs(last["t_opt_graph"] - b.t_opt_graph) <= sum_atol([b.t_opt_graph] * g.m)
-            assert abs(last["fim_logdet"] - m.fim_logdet) <= tol
+            assert abs(last["fim_logdet"] - m.result.fim_logdet) <= tol
 
 
 def _processing_order(g):
@@ -195,7 +195,7 @@ def test_loop_closure_gains_are_sequential_increases_of_lb():
                 else:
                     assert abs(got - exp[0]) <= exp[1]
             # a step's gain is the sum of its loop closures' gains
-            for row in res.rows():
+            for row in res.row_dicts():
                 if row["gain"] is not None:
                     mine = [c.gain for c in res.closures if c.poses == row["poses"]]
                     assert row["gain"] == pytest.approx(sum(mine), abs=sum_atol(mine) + 0.0)
@@ -245,7 +245,7 @@ def test_drift_tolerance_follows_the_rounding_of_the_sums_on_a_long_chain():
     assert checks["checkpoints"] <= tracker.FIRST_SEGMENTS       # no halving: the first, then doubling
     assert checks["max_drift"] <= checks["tolerance"]
     # every row within the tolerance of the exact prefix lb (lb = 3 logdet L_tau here)
-    assert np.max(np.abs(res.lb - exact_lb)) <= 3 * checks["tolerance"]
+    assert np.max(np.abs(res.rows.lb - exact_lb)) <= 3 * checks["tolerance"]
     # the tolerance is the rounding of sums of n terms: of the order of n u sum |terms|, no looser
     terms = np.abs(np.log(g.tau)).sum()
     assert checks["tolerance"] <= 8 * tracker.SUM_MARGIN * n * np.finfo(float).eps * terms
@@ -271,12 +271,12 @@ def test_running_error_bounds_hold_against_exact_sums(kind):
 
 def test_every_from_to_select_rows_of_the_same_computation():
     g = graphs(2)[3]
-    full = {r["poses"]: r for r in timeline(g, estimate="vertices").rows()}
+    full = {r["poses"]: r for r in timeline(g, estimate="vertices").row_dicts()}
     part = timeline(g, estimate="vertices", every=3, start=4, stop=11)
-    assert part.poses.tolist() == [4, 7, 10, 11]
+    assert part.rows.poses.tolist() == [4, 7, 10, 11]
     tol = max(c["tolerance"] for c in part.checks.values()) + max(c["tolerance"] for c in
                                                                  timeline(g, estimate="vertices").checks.values())
-    for row in part.rows():
+    for row in part.row_dicts():
         for key in ("lb", "ub", "fim_logdet", "gain", "t_opt_graph"):
             assert row[key] == pytest.approx(full[row["poses"]][key], abs=tol + 1e-300)
     assert (part.first, part.last, part.every) == (4, 11, 3)
@@ -296,9 +296,9 @@ def test_two_poses_and_parallel_edges():
     two = replace(g, src=np.r_[g.src, g.dst], dst=np.r_[g.dst, g.src], rot=np.r_[g.rot, np.swapaxes(g.rot, 1, 2)],
                   trans=np.r_[g.trans, -g.trans], info=np.r_[g.info, g.info])
     res = timeline(two, estimate="vertices")
-    assert res.poses.tolist() == [2] and res.loop_closures.tolist() == [1]
+    assert res.rows.poses.tolist() == [2] and res.rows.loop_closures.tolist() == [1]
     check_rows(res, reference_rows(two))
-    assert res.closures[0].gain == pytest.approx(res.gain[0])
+    assert res.closures[0].gain == pytest.approx(res.rows.gain[0])
 
 
 def test_whole_graph_disconnected_keeps_the_connected_prefixes():
@@ -308,7 +308,29 @@ def test_whole_graph_disconnected_keeps_the_connected_prefixes():
     assert component_count(g) == 2
     res = timeline(g, estimate="vertices")
     assert check_rows(res, reference_rows(g)) == 8
-    assert res.components[-1] == 2
+    assert res.rows.components[-1] == 2
+
+
+def test_a_range_in_which_every_prefix_is_disconnected_is_unavailable_not_clean(tmp_path, capsys):
+    """`timeline disc.g2o --estimate none --from 3` said "monotone: yes" for every metric, with status
+    ok, no statuses and an empty figure: every prefix of that range is disconnected, so it has no value."""
+    disc = tmp_path / "disc.g2o"
+    disc.write_text("EDGE_SE2 0 1 1 0 0 100 0 0 100 0 1000\nEDGE_SE2 2 3 1 0 0 100 0 0 100 0 1000\n"
+                    "EDGE_SE2 3 4 1 0 0 100 0 0 100 0 1000\n")
+    res = timeline(load(disc), estimate="none", start=3)
+    assert res.rows.components.tolist() == [2, 2, 2]
+    assert res.status.state == "unavailable" and "has no values" in res.lb_status.reason
+    assert {m: {s: v.monotone for s, v in d.items()} for m, d in res.monotonicity.items()} == \
+        {m: {"raw": None, "per_dimension": None} for m in ("lb", "ub", "t_opt_graph")}
+    assert TimelineResult.from_dict(res.to_dict()).status == res.status
+    figure = tmp_path / "disc.png"
+    code, out, err = run_cli(["timeline", str(disc), "--estimate", "none", "--from", "3", "--format", "json",
+                              "--plot", str(figure)], capsys)
+    d = json.loads(out)
+    assert code == 0 and set(d["statuses"]) == {"lb", "ub"} and "has no values" in err
+    assert not figure.exists() and f"no figure written to {figure}" in err
+    # a range with values keeps its statuses clean
+    assert timeline(load(disc), estimate="none", stop=2).status.ok
 
 
 def test_protocol_round_trip_and_frames():
@@ -328,7 +350,7 @@ def test_protocol_round_trip_and_frames():
 def test_monotonicity_against_the_rows():
     g = graphs(2)[3]
     res = timeline(g, estimate="vertices")
-    rows = res.rows()
+    rows = res.row_dicts()
     q = g.q
     for metric in ("lb", "ub", "t_opt_graph", "fim_logdet"):
         for scale in ("raw", "per_dimension"):
@@ -352,7 +374,7 @@ def _real(shared_datasets, name):
 def test_intel_prefixes_against_dense_and_bounds(shared_datasets):
     g = _real(shared_datasets, "intel")
     res = timeline(g, estimate="vertices")
-    rows = {r["poses"]: r for r in res.rows()}
+    rows = {r["poses"]: r for r in res.row_dicts()}
     for k in (2, 60, 271, 700):
         s = prefix(g, k - 1)
         lt, lw, m, fim = dense_matrices(s)
@@ -365,7 +387,7 @@ def test_intel_prefixes_against_dense_and_bounds(shared_datasets):
     assert last["lb"] == pytest.approx(b.lb, abs=tol) and last["ub"] == pytest.approx(b.ub, abs=tol)
     assert last["t_opt_graph"] == pytest.approx(b.t_opt_graph, abs=sum_atol([b.t_opt_graph] * g.m))
     m = evaluate(g, EvaluationSettings(estimate="vertices"))
-    assert last["fim_logdet"] == pytest.approx(m.fim_logdet, abs=res.checks["fim"]["tolerance"])
+    assert last["fim_logdet"] == pytest.approx(m.result.fim_logdet, abs=res.checks["fim"]["tolerance"])
     # every 100th prefix against bounds from scratch (sparse Cholesky), to the timeline's tolerance
     for k in range(100, g.n, 100):
         bk = compute_bounds(prefix(g, k - 1))
@@ -399,8 +421,8 @@ def test_cubicle_disconnected_prefixes(shared_datasets):
                 comps -= 1
             k += 1
         expected.append(comps)
-    assert res.components.tolist() == expected[1:]
-    rows = res.rows()
+    assert res.rows.components.tolist() == expected[1:]
+    rows = res.row_dicts()
     bad = [r for r in rows if r["components"] > 1]
     assert len(bad) == sum(c > 1 for c in expected[1:]) >= 1
     assert all(r["lb"] is None and r["status"]["status"] == "unavailable" for r in bad)

@@ -1,10 +1,12 @@
-"""The public library: the functions ``posecrb`` exports and the two results built here.
+"""The public library: the functions ``posecrb`` exports, one module per concept.
 
-``functions``: ``load``, ``parse``, ``solve``, ``bounds``, ``fim``, ``crlb``, ``select``, each
-taking a graph, a path or a dataset name, keywords named as the command-line options (snake
-case, same defaults; timing repeats once). ``arguments``: the checks of their arguments, raising
-``ArgumentError`` in Python terms. ``results``: ``BoundsResult`` and ``SelectResult`` (the other
-results come from the layers that compute them: ``SolveResult`` from ``posecrb.solver``,
-``FimResult`` and ``CrlbResult`` from ``posecrb.models``). The command line calls these
-functions and renders their results; ``posecrb/__init__.py`` imports them on first use.
+``graphs``: ``load`` and ``parse``; ``solve``; ``bounds``; ``models``: ``fim`` and ``crlb``;
+``select``; ``timeline``. Each takes a graph, a path or a dataset name and keywords named as the
+command-line options (snake case, same defaults; timing repeats once), checked once by
+``arguments`` (``ArgumentError`` in Python terms), and returns the result its compute package
+made (``BoundsResult`` from ``posecrb.models.paper``, ``FimResult`` and ``CrlbResult`` from
+``posecrb.models``, ``SolveResult`` from ``posecrb.solver``, ``SelectResult`` from
+``posecrb.selection``, ``TimelineResult`` from ``posecrb.incremental``). No function writes a file:
+results are written by ``Result.save``, graphs by ``posecrb.io.write_g2o``, figures by
+``posecrb.report.plot_*``. ``posecrb/__init__.py`` imports the functions on first use.
 """

@@ -3,22 +3,28 @@
 Every check raises ``ArgumentError`` naming the keyword as the caller wrote it
 (``anchor=-1 is not a pose id ...``); the command line shows the same error with its option
 (``--anchor -1 ...``). Library keywords are the command-line options in snake case, so the
-checks here are the library's side of the options' click types.
+checks here are the library's side of the options' click types; they take Python values, never
+the command line's spellings (a sequence of pose ids, not ``"0,5,10-12"``; ``0.2``, not
+``"20%"``), which the command line parses (``posecrb.cli.options``).
 """
 from __future__ import annotations
 
+import functools
+import inspect
 import math
 import numbers
 import os
-import re
-from collections.abc import Sequence
-from typing import TYPE_CHECKING, Any
+from collections.abc import Callable, Sequence
+from typing import TYPE_CHECKING, Any, Literal, TypeAlias, TypeVar
 
 import numpy as np
 
+from ..core.arguments import check_input_argument
+from ..core.choices import ESTIMATE_SOURCES, EstimateSource
 from ..core.errors import ArgumentError, UsageError
+from ..core.files import check_input_file
 from ..core.graph import PoseGraph
-from ..core.integers import IntegerError, check_int, parse_int
+from ..core.integers import IntegerError, check_int
 from ..core.timing import Repeat, measure
 from ..datasets import search
 from ..io import load as read_graph
@@ -26,22 +32,51 @@ from ..io import parse_bytes, parse_text
 
 if TYPE_CHECKING:
     from ..solver.estimate import Estimate
+    from ..solver.solve import SolveResult
 
 INT64_MAX = 2 ** 63 - 1
+F = TypeVar("F", bound=Callable[..., Any])
+
+#: A pose graph, the path of a g2o or TORO file, or a bare dataset name.
+Source: TypeAlias = "PoseGraph | str | os.PathLike[str]"
+#: Where the poses come from: the certified solver, the file's vertices, another file, a solve's
+#: result or given poses.
+EstimateSpec: TypeAlias = "EstimateSource | str | os.PathLike[str] | SolveResult | Estimate"
+#: The same, or no estimate (graph-only results): None or ``"none"``.
+OptionalEstimateSpec: TypeAlias = "EstimateSpec | Literal['none'] | None"
+#: Per-pose blocks: none (None or False), every pose (True or ``"all"``), or these pose ids.
+PoseSelection: TypeAlias = "bool | Literal['all'] | Sequence[int] | None"
 
 
-def choice(parameter: str, value: Any, choices: Sequence[str]) -> str:
-    """``value`` when it is one of ``choices`` (strings)."""
-    if not isinstance(value, str) or value not in choices:
-        raise ArgumentError(parameter, value, f"is not one of {', '.join(map(repr, choices))}")
-    return value
+def public(**removed: str) -> Callable[[F], F]:
+    """A public function's call checked as a whole: a keyword it does not have, or a positional
+    argument too many, is an ``ArgumentError`` (not Python's ``TypeError``); a keyword in
+    ``removed`` (one the library had before) says what to call instead."""
 
+    def decorate(fn: F) -> F:
+        signature = inspect.signature(fn)
+        params = signature.parameters
+        open_keywords = any(p.kind is p.VAR_KEYWORD for p in params.values())
 
-def flag(parameter: str, value: Any) -> bool:
-    """``value`` when it is a bool (``numpy.bool_`` included)."""
-    if not isinstance(value, (bool, np.bool_)):
-        raise ArgumentError(parameter, value, "is not True or False")
-    return bool(value)
+        @functools.wraps(fn)
+        def call(*args: Any, **kwargs: Any) -> Any:
+            for name in kwargs.keys() & removed.keys():
+                raise ArgumentError(name, kwargs[name], f"is no longer a keyword of {fn.__name__}(): "
+                                    f"{removed[name]}", sep=": ")
+            for name in kwargs:
+                if name not in params and not open_keywords:
+                    raise ArgumentError(name, kwargs[name], f"is not a keyword of {fn.__name__}() (see "
+                                        f"help(posecrb.{fn.__name__}))")
+            try:
+                signature.bind(*args, **kwargs)
+            except TypeError as exc:
+                raise ArgumentError(fn.__name__, _shown(args), f"{exc} (see help(posecrb.{fn.__name__}))",
+                                    sep=": ") from None
+            return fn(*args, **kwargs)
+
+        return call  # type: ignore[return-value]
+
+    return decorate
 
 
 def integer(parameter: str, value: Any, low: int, high: int = INT64_MAX) -> int:
@@ -56,7 +91,10 @@ def finite(parameter: str, value: Any, low: float, high: float = math.inf, *, lo
     """``value`` when it is a finite real number in [low, high] (``(low, high]`` with ``low_open``)."""
     if isinstance(value, (bool, np.bool_)) or not isinstance(value, numbers.Real):
         raise ArgumentError(parameter, value, "is not a number")
-    x = float(value)
+    try:
+        x = float(value)
+    except OverflowError:
+        x = math.inf
     if not math.isfinite(x):
         raise ArgumentError(parameter, value, "is not a finite number")
     if x < low or (low_open and x == low) or x > high:
@@ -66,12 +104,8 @@ def finite(parameter: str, value: Any, low: float, high: float = math.inf, *, lo
 
 
 def path_or_none(parameter: str, value: Any) -> str | None:
-    """A non-empty ``str`` / ``os.PathLike`` as a string, or None."""
-    if value is None:
-        return None
-    if not isinstance(value, (str, os.PathLike)) or not os.fspath(value):
-        raise ArgumentError(parameter, value, "is not a path (a non-empty str or os.PathLike)")
-    return str(os.fspath(value))
+    """A non-empty ``str`` / ``os.PathLike`` (without NUL characters) as a string, or None."""
+    return None if value is None else check_input_argument(parameter, value)
 
 
 # ---- graphs -----------------------------------------------------------------------------
@@ -82,7 +116,13 @@ def _shown(value: Any) -> Any:
         return data[:24] + (b"..." if len(data) > 24 else b"")
     if isinstance(value, str) and len(value) > 60:
         return value[:40] + "..."
+    if (isinstance(value, (list, tuple)) or _vector(value)) and len(value) > 8:
+        return f"[{', '.join(map(str, list(value)[:4]))}, ... ({len(value)} items)]"
     return value
+
+
+def _vector(value: Any) -> bool:
+    return isinstance(value, np.ndarray) and value.ndim == 1
 
 
 def resolve_source(source: Any, data_dir: Any = None) -> str:
@@ -92,10 +132,11 @@ def resolve_source(source: Any, data_dir: Any = None) -> str:
     if isinstance(source, (bytes, bytearray, memoryview)):
         raise ArgumentError("source", _shown(source), "is bytes: pass a path or a dataset name, or the "
                             "file's content to posecrb.parse")
-    if not isinstance(source, (str, os.PathLike)) or not os.fspath(source):
+    if not isinstance(source, (str, os.PathLike)) or not isinstance(os.fspath(source), str) or not os.fspath(source):
         raise ArgumentError("source", _shown(source), "is not a pose graph, a path or a dataset name")
+    text = check_input_argument("source", source)
     directory = path_or_none("data_dir", data_dir)
-    return str(search.resolve(os.fspath(source), directory))
+    return str(search.resolve(text, directory))
 
 
 def load_graph(source: Any, data_dir: Any = None, *, quaternions: str = "normalize",
@@ -110,9 +151,10 @@ def load_graph_timed(source: Any, data_dir: Any = None, *, quaternions: str = "n
                      repeat: Repeat = 1) -> tuple[PoseGraph, dict[str, float], dict[str, int]]:
     """``(graph, times, runs)`` as ``load_graph``; the parse time is the median of ``runs["parse"]``
     runs by the timing protocol (``posecrb.core.timing.measure``)."""
+    directory = path_or_none("data_dir", data_dir)
     if isinstance(source, PoseGraph):
         return source, {}, {}
-    path = resolve_source(source, data_dir)
+    path = resolve_source(source, directory)
     parsed = measure(lambda: read_graph(path, quaternions=quaternions), repeat)
     return parsed.value, {"parse": parsed.seconds}, {"parse": parsed.runs}
 
@@ -139,11 +181,21 @@ def anchor_ids(value: Any) -> tuple[int, ...]:
     membership is checked against the graph by ``PoseGraph.index_of``)."""
     if value is None:
         return ()
-    items = list(value) if isinstance(value, (list, tuple, np.ndarray)) else [value]
+    items = list(value) if isinstance(value, (list, tuple)) or _vector(value) else [value]
+    if isinstance(value, np.ndarray) and value.ndim == 0:
+        items = [value.item()]
     for a in items:
         if isinstance(a, (bool, np.bool_)) or not isinstance(a, numbers.Integral):
-            raise ArgumentError("anchor", value, "is not a pose id or a sequence of pose ids (integers)")
+            raise ArgumentError("anchor", _shown(value), "is not a pose id or a sequence of pose ids (integers)")
     return tuple(int(a) for a in items)
+
+
+def one_anchor(anchor: Any) -> tuple[int, ...]:
+    """``anchor_ids`` of a call that takes one anchor (empty: the default)."""
+    ids = anchor_ids(anchor)
+    if len(ids) > 1:
+        raise ArgumentError("anchor", anchor, "is several pose ids; this call takes one")
+    return ids
 
 
 def check_anchors(graph: PoseGraph, anchors: Sequence[int]) -> None:
@@ -152,42 +204,24 @@ def check_anchors(graph: PoseGraph, anchors: Sequence[int]) -> None:
         graph.index_of(a, "anchor")
 
 
-def pose_request(value: Any) -> bool | list[int]:
-    """``poses``: None or False (no per-pose blocks), True or ``"all"``, a sequence of pose ids,
-    or the command line's text ``"3,7,10-12"`` (ids and ranges)."""
-    if value is None or value is False:
+def pose_selection(value: Any) -> bool | list[int]:
+    """``poses``: None or False (no per-pose blocks), True or ``"all"`` (every pose), or a sequence
+    of pose ids (membership is checked against the graph by the model). The command line's text
+    (``"0,5,10-12"``) is refused with what to pass instead."""
+    if value is None or value is False or isinstance(value, np.bool_) and not value:
         return False
-    if value is True:
+    if value is True or isinstance(value, np.bool_) or (isinstance(value, str) and value == "all"):
         return True
     if isinstance(value, str):
-        text = value.strip()
-        if text.lower() == "all":
-            return True
-        out: list[int] = []
-        for part in text.split(","):
-            part = part.strip()
-            # digits only (int() would take 1_0 and non-ASCII digits), ids that fit int64
-            try:
-                if re.fullmatch(r"[0-9]+(?:-[0-9]+)?", part) is None:
-                    raise IntegerError("is not a pose id or an id range a-b")
-                bounds = [parse_int(x, lo=0, hi=INT64_MAX) for x in part.split("-")]
-            except IntegerError:
-                raise ArgumentError("poses", part, "is not a pose id or an id range a-b") from None
-            if len(bounds) == 2:
-                lo, hi = bounds
-                if hi < lo or hi - lo > 10 ** 7:     # (a huge range would exhaust memory)
-                    raise ArgumentError("poses", part, "is not a pose id or an id range a-b")
-                out.extend(range(lo, hi + 1))
-            else:
-                out.append(bounds[0])
-        return out
-    if isinstance(value, (list, tuple, np.ndarray, range)):
+        raise ArgumentError("poses", _shown(value), "is text: pass True (or 'all') or a sequence of pose ids, "
+                            "e.g. [0, 5, *range(10, 13)] for the command line's 0,5,10-12")
+    if isinstance(value, (list, tuple, range)) or _vector(value):
         ids = list(value)
         for p in ids:
             if isinstance(p, (bool, np.bool_)) or not isinstance(p, numbers.Integral):
                 raise ArgumentError("poses", _shown(value), "is not 'all' or a sequence of pose ids (integers)")
         return [int(p) for p in ids]
-    raise ArgumentError("poses", _shown(value), "is not 'all', a sequence of pose ids or a text such as '0,5,10-12'")
+    raise ArgumentError("poses", _shown(value), "is not True, 'all' or a sequence of pose ids")
 
 
 # ---- estimates --------------------------------------------------------------------------
@@ -200,13 +234,17 @@ def is_pose_object(value: Any) -> bool:
 
 
 def estimate_spec(value: Any, *, allow_none: bool = False) -> str:
-    """``estimate`` given as text: ``"solve"``, ``"vertices"``, a path, or (``allow_none``)
+    """``estimate`` given as text: ``"solve"``, ``"vertices"``, a path (a readable regular file,
+    as the command line checks ``--estimate`` even where it is not used), or (``allow_none``)
     None / ``"none"`` -> ``"none"``."""
     if value is None and allow_none:
         return "none"
-    if isinstance(value, (str, os.PathLike)) and os.fspath(value):
+    if isinstance(value, (str, os.PathLike)) and isinstance(os.fspath(value), str) and os.fspath(value):
         text = str(os.fspath(value))
-        if text != "none" or allow_none:
+        if text in ESTIMATE_SOURCES or (text == "none" and allow_none):
+            return text
+        if text != "none":
+            check_input_file(check_input_argument("estimate", text))
             return text
     raise ArgumentError("estimate", _shown(value), "is not 'solve', 'vertices', a path, a SolveResult or an "
                         "Estimate" + (" (or None)" if allow_none else ""))

@@ -1,26 +1,21 @@
-"""``posecrb.timeline``: the information timeline of a pose graph (the ``timeline`` command).
-
-A module of its own beside ``posecrb.api.functions``, with the same conventions: sources, keywords
-named as the command's options, arguments checked in Python terms, a result whose ``to_dict()`` is
-the command's JSON.
-"""
+"""``posecrb.timeline``: the information timeline of a pose graph (the ``timeline`` command)."""
 from __future__ import annotations
 
 import os
 from typing import TYPE_CHECKING
 
-from ..core.graph import PoseGraph
-from ..core.result import check_output_argument
+from ..core.arguments import choice
+from ..core.choices import FIM_VARIANTS, ROTATION_WEIGHTS, FimVariant, RotationWeight
 from . import arguments as arg
-from .functions import ROTATION_WEIGHTS, EstimateSpec, Source
+from .arguments import OptionalEstimateSpec, Source, public
 
 if TYPE_CHECKING:
     from ..incremental.result import TimelineResult
 
 
-def timeline(source: Source, *, estimate: EstimateSpec = "solve", every: int = 1, start: int | None = None,
-             stop: int | None = None, rotation_weight: str = "eq59", fim_variant: str | None = None,
-             plot: str | os.PathLike[str] | None = None,
+@public(plot="draw the figure with posecrb.report.plot_timeline(res, path)")
+def timeline(source: Source, *, estimate: OptionalEstimateSpec = "solve", every: int = 1, start: int | None = None,
+             stop: int | None = None, rotation_weight: RotationWeight = "eq59", fim_variant: FimVariant | None = None,
              data_dir: str | os.PathLike[str] | None = None) -> TimelineResult:
     """D- and T-optimality of every prefix of a pose graph as it grows, and which loop closures
     matter: the information timeline.
@@ -50,9 +45,6 @@ def timeline(source: Source, *, estimate: EstimateSpec = "solve", every: int = 1
         3D rotation weight, as for ``bounds``.
     fim_variant : {"consistent", "eq64"}, optional
         The FIM's variant (default ``"consistent"``, the model's Fisher information).
-    plot : str or os.PathLike, optional
-        Also draw the timeline into this figure (``.png``, ``.svg`` or ``.pdf``; checked before
-        the work, never onto an input).
     data_dir : str or os.PathLike, optional
         Searched first for a bare dataset name.
 
@@ -61,12 +53,13 @@ def timeline(source: Source, *, estimate: EstimateSpec = "solve", every: int = 1
     TimelineResult
         One row per kept step (``to_frame()``), the monotonicity of every metric, raw and per
         dimension (``monotonicity``), every loop closure's gain (``closures_frame()``); log-dets
-        are natural logarithms. ``to_dict()`` is the ``timeline`` command's JSON object.
+        are natural logarithms. ``to_dict()`` is the ``timeline`` command's JSON object;
+        ``posecrb.report.plot_timeline(res, path)`` draws it.
 
     Raises
     ------
     ArgumentError
-        A bad range, ``every``, estimate or output path.
+        A bad range, ``every`` or estimate.
     ParseError, DatasetNotFound
         The file cannot be read.
     SolverError
@@ -82,31 +75,18 @@ def timeline(source: Source, *, estimate: EstimateSpec = "solve", every: int = 1
     >>> m["raw"].monotone, m["per_dimension"].monotone  # the per-dimension D-criterion does not
     (True, False)
     """
-    from ..core.files import FIGURE_EXTENSIONS  # noqa: PLC0415 -- lazy: start-up time
     from ..incremental import timeline as compute_timeline  # noqa: PLC0415 -- lazy: start-up time
-    from ..models.paper.fim import FIM_VARIANTS  # noqa: PLC0415 -- lazy: start-up time
 
     every = arg.integer("every", every, 1)
     start = None if start is None else arg.integer("start", start, 2)
     stop = None if stop is None else arg.integer("stop", stop, 2)
-    arg.choice("rotation_weight", rotation_weight, ROTATION_WEIGHTS)
-    variant = "consistent" if fim_variant is None else arg.choice("fim_variant", fim_variant, FIM_VARIANTS)
-    target = None
-    if plot is not None:
-        inputs = () if isinstance(source, PoseGraph) else (arg.resolve_source(source, data_dir),)
-        est_input = (os.fspath(estimate),) if isinstance(estimate, (str, os.PathLike)) and \
-            os.fspath(estimate) not in ("solve", "vertices", "none") else ()
-        target = check_output_argument("plot", plot, inputs + est_input, extensions=FIGURE_EXTENSIONS)
+    choice("rotation_weight", rotation_weight, ROTATION_WEIGHTS)
+    variant = "consistent" if fim_variant is None else choice("fim_variant", fim_variant, FIM_VARIANTS)
     graph, _ = arg.load_graph(source, data_dir)
     if arg.is_pose_object(estimate):
         poses = arg.resolve_estimate(graph, estimate)
     else:
         poses = None if arg.estimate_spec(estimate, allow_none=True) == "none" else \
             arg.resolve_estimate(graph, arg.estimate_spec(estimate))
-    res = compute_timeline(graph, estimate=poses, every=every, start=start, stop=stop,
-                           rotation_weight=rotation_weight, fim_variant=variant)
-    if target is not None:
-        from ..report.plots import plot_timeline  # noqa: PLC0415 -- matplotlib, only for a figure
-
-        plot_timeline(res, target)
-    return res
+    return compute_timeline(graph, estimate=poses, every=every, start=start, stop=stop,
+                            rotation_weight=rotation_weight, fim_variant=variant)

@@ -4,14 +4,25 @@ from __future__ import annotations
 import logging
 import math
 import re
+import shlex
 from collections.abc import Callable
 from typing import TYPE_CHECKING, Any
 
 import click
 
-from ..core.errors import UsageError
+from ..core.choices import (
+    ESTIMATE_SOURCES,
+    ESTIMATE_SOURCES_OR_NONE,
+    FIM_VARIANTS,
+    FORMATS,
+    FRAMES,
+    MODELS,
+    ORDERINGS,
+    ROTATION_WEIGHTS,
+)
+from ..core.errors import ArgumentError, PosecrbError, UsageError
 from ..core.integers import INT64_MAX, IntegerError, check_int, parse_int, shown
-from ..core.timing import AUTO, Repeat, Timing, measure
+from ..core.timing import AUTO, Repeat, measure
 from ..datasets import search as datasets
 from .paths import InputDir, InputFile
 
@@ -22,15 +33,6 @@ log = logging.getLogger("posecrb")
 
 # What click.option(...) returns: a decorator of command functions.
 OptionDecorator = Callable[[Callable[..., Any]], Callable[..., Any]]
-
-# Option choices, spelled out rather than imported: importing the modules that define them
-# (posecrb.models, posecrb.core.noise, posecrb.report.render) would load numpy, scipy and numba
-# before the command line is even parsed (start-up time). tests/test_cli_lazy.py checks that
-# each tuple equals the library's own.
-FORMATS = ("table", "json", "csv", "markdown")              # posecrb.report.render.FORMATS
-MODELS = ("paper", "sed")                                    # posecrb.models.MODELS
-FIM_VARIANTS = ("eq64", "consistent")                        # posecrb.models.paper.fim.FIM_VARIANTS
-ROTATION_WEIGHTS = ("eq59", "table2")                        # posecrb.core.noise.ROTATION_WEIGHTS
 
 _PLAIN_NUMBER = re.compile(r"[+-]?(?:[0-9]+\.?[0-9]*|\.[0-9]+)(?:[eE][+-]?[0-9]+)?")
 
@@ -100,9 +102,6 @@ def format_option(choices=FORMATS, default="table"):
                         show_default=True, help="Output format (results on stdout).")
 
 
-TABLE_FORMATS = ("table", "markdown", "csv", "json", "latex")   # `tables` adds LaTeX
-
-
 data_dir_option = click.option(
     "--data-dir", type=InputDir(), default=None,
     help="Directory searched first for bare dataset names (must exist).")
@@ -141,18 +140,64 @@ repeat_option = click.option(
          "1 = one run. The JSON's runs says how many runs each time is the median of.")
 
 
-def load_dataset(name_or_path: str, data_dir: str | None = None, repeat: Repeat = 1) -> tuple[PoseGraph, float]:
-    """Resolve a path or bare name and parse it; returns the graph and the median parse time."""
-    timing = load_dataset_timed(name_or_path, data_dir, repeat)
-    return timing.value, timing.seconds
-
-
-def load_dataset_timed(name_or_path: str, data_dir: str | None = None, repeat: Repeat = 1) -> Timing[PoseGraph]:
-    """``load_dataset`` with the whole timing (``posecrb.core.timing.measure``: runs, warm-up)."""
+def load_dataset(name_or_path: str, data_dir: str | None = None, repeat: Repeat = 1, *,
+                 quaternions: str = "normalize") -> tuple[PoseGraph, float]:
+    """Resolve a path or bare name and parse it (``quaternions`` as ``posecrb.load``); returns the
+    graph and the median parse time (``posecrb.core.timing.measure``)."""
     from ..io import load  # noqa: PLC0415 -- lazy: start-up time (numpy)
 
     path = datasets.resolve(name_or_path, data_dir)
-    return measure(lambda: load(path), repeat=repeat)
+    timing = measure(lambda: load(path, quaternions=quaternions), repeat=repeat)
+    return timing.value, timing.seconds
+
+
+def parse_pose_ids(text: str) -> bool | list[int]:
+    """``--poses``: ``all`` (True) or pose ids and id ranges, ``0,5,10-12`` -> ``[0, 5, 10, 11, 12]``
+    (the library's ``poses=``)."""
+    text = text.strip()
+    if text.lower() == "all":
+        return True
+    out: list[int] = []
+    for part in text.split(","):
+        part = part.strip()
+        # digits only (int() would take 1_0 and non-ASCII digits), at most 19 of them (int64)
+        if re.fullmatch(r"[0-9]{1,19}(?:-[0-9]{1,19})?", part) is None or max(map(int, part.split("-"))) > INT64_MAX:
+            raise ArgumentError("poses", part, "is not a pose id or an id range a-b")
+        lo, hi = (int(x) for x in part.split("-")) if "-" in part else (int(part), int(part))
+        if hi < lo or hi - lo > 10 ** 7:     # (a huge range would exhaust memory)
+            raise ArgumentError("poses", part, "is not a pose id or an id range a-b")
+        out.extend(range(lo, hi + 1))
+    return out
+
+
+def repeatable_datasets(names: tuple[str, ...], data_dir: str | None, option: str = "--datasets") -> list[str]:
+    """The datasets of a repeatable option that posecrb 0.1 split at commas (``tables`` and ``regress``
+    ``--datasets a,b,c``): a value that is a name or a path is taken whole (a path may contain a
+    comma); otherwise, when every comma-separated part is one, it is split, with a deprecation
+    warning naming the repeatable form; otherwise it is a usage error saying the option repeats.
+    A value without a comma is taken as it is (not found, it is reported as such)."""
+    out: list[str] = []
+    for value in names:
+        if "," not in value or _resolves(value, data_dir):
+            out.append(value)
+            continue
+        parts = [p.strip() for p in value.split(",")]
+        if all(p and _resolves(p, data_dir) for p in parts):
+            log.warning("%s %s: the comma-separated form is deprecated; repeat the option: %s", option, value,
+                        " ".join(f"{option} {shlex.quote(p)}" for p in parts))
+            out += parts
+            continue
+        raise UsageError(f"{option} {value}: no dataset or file of that name; {option} is repeatable and takes one "
+                         f"name or path each ({option} A {option} B), and not every part of {value!r} is one")
+    return out
+
+
+def _resolves(name: str, data_dir: str | None) -> bool:
+    try:
+        datasets.resolve(name, data_dir)
+    except PosecrbError:
+        return False
+    return True
 
 
 def executor_settings(executor: str, jobs: int, scheduler: str | None) -> dict:
@@ -174,11 +219,8 @@ def plot_target(plot_path: str | None, out_dir: str | None, name: str) -> str | 
 
 
 
-# posecrb.linalg.ordering.ORDERINGS, spelled out so that --help imports no scipy (a test checks both agree).
-ORDERING_CHOICES = ("auto", "amd", "colamd", "metis", "nesdis")
-
 ordering_option = click.option(
-    "--ordering", type=click.Choice(ORDERING_CHOICES), default="auto", show_default=True,
+    "--ordering", type=click.Choice(ORDERINGS), default="auto", show_default=True,
     help="Fill-reducing ordering of the sparse Cholesky factorizations (cost only: the numbers agree "
          "to rounding). amd: CHOLMOD's AMD. colamd: true COLAMD (the paper's Algorithm 1; CHOLMOD "
          "would apply AMD to a symmetric matrix, so COLAMD's permutation of A A^T is computed and passed "
@@ -198,7 +240,7 @@ def make_estimate_option(dest: str = "estimate_source", *, allow_none: bool = Fa
     """``--estimate``: where the poses come from; ``allow_none`` adds ``none`` (graph-only columns)."""
     return click.option(
         "--estimate", dest, default="solve", show_default=True,
-        type=InputFile(("solve", "vertices", "none") if allow_none else ("solve", "vertices")),
+        type=InputFile(ESTIMATE_SOURCES_OR_NONE if allow_none else ESTIMATE_SOURCES),
         metavar="solve|vertices|none|FILE" if allow_none else "solve|vertices|FILE",
         help="Where the poses (at which the FIM is evaluated) come from: the certified solver (global "
              "optimum), the file's own VERTEX lines, "
@@ -230,7 +272,7 @@ fim_variant_option = click.option(
 
 
 frame_option = click.option(
-    "--frame", type=click.Choice(("world", "body")), default=None,
+    "--frame", type=click.Choice(FRAMES), default=None,
     help="sed model: coordinates of the FIM and of every per-pose number. world: the thesis' X_i -> Exp(-delta) X_i, "
          "about the world origin, rotation first (omega, v). body: GTSAM's and g2o's X_i -> X_i Exp(xi), "
          "in GTSAM's order (Pose2 x, y, theta; Pose3 rotation, translation), comparable with "

@@ -94,12 +94,16 @@ class DatasetArg(click.ParamType):
         return text
 
     def input_paths(self, value: str, data_dir: str | None) -> list[str]:
+        """The file ``value`` names; for a value that names none, the files of its comma-separated
+        parts when each names one (the 0.1 form of ``--datasets``, ``posecrb.cli.options.dataset_names``)."""
         from ..datasets.search import locate_input  # noqa: PLC0415 -- the manifest only when a name needs it
 
-        try:
-            return [os.fspath(locate_input(value, data_dir))]
-        except PosecrbError:
-            return []          # not found: the command itself reports it
+        for names in ([value], value.split(",") if "," in value else []):
+            try:
+                return [os.fspath(locate_input(n.strip(), data_dir)) for n in names]
+            except PosecrbError:
+                continue
+        return []          # not found: the command itself reports it
 
 
 class InputFile(click.ParamType):

@@ -167,7 +167,7 @@ class ArgumentError(UsageError):
         """The message with the command-line spelling: ``--max-iter 0 ...`` for ``max_iter=0``;
         ``source`` (the file argument) as ``FILE``; ``start``/``stop`` as ``--from``/``--to``."""
         if self.parameter == "source":
-            return f"FILE {self.value}{self.sep}{self.reason}"
+            return f"FILE {shown_text(self.value)}{self.sep}{self.reason}"
         flag = _CLI_SPELLING.get(self.parameter) or "--" + self.parameter.replace("_", "-")
         if isinstance(self.value, bool):   # a flag: given or not
             return f"{flag}{self.sep}{self.reason}"

@@ -15,6 +15,7 @@ from math import factorial
 import numpy as np
 import numpy.typing as npt
 
+from .choices import ROTATION_WEIGHTS
 from .errors import UsageError
 
 # Table II of the paper is reproduced by w = TABLE2_FIT * kappa^2 (an empirical fit
@@ -22,8 +23,6 @@ from .errors import UsageError
 # reproduces the printed FIM column); see docs/design.md#rotation-weights.
 TABLE2_FIT = 0.5515
 
-
-ROTATION_WEIGHTS = ("eq59", "table2")
 
 
 def isotropic_precisions(info: np.ndarray, dim: int) -> tuple[np.ndarray, np.ndarray]:

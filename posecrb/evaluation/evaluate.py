@@ -1,8 +1,9 @@
 """The one pipeline behind ``bounds``, ``tables`` and ``regress``: graph -> bounds -> estimate ->
 paper FIM -> log-det (docs/design.md#tables, timing regions as in #timing-protocol).
 
-``posecrb.bounds`` builds its ``BoundsResult`` from the ``DatasetMetrics``, ``tables`` and
-``regress`` their rows; the numbers come from here only.
+``evaluate`` returns the ``BoundsResult`` of the graph (``posecrb.bounds`` passes it through) with
+the FIM it was computed from and, when the pipeline stopped after the bounds, the error; ``tables``
+and ``regress`` make their rows of it. The numbers come from here only.
 """
 from __future__ import annotations
 
@@ -13,11 +14,12 @@ from typing import Any
 
 from ..core.errors import PosecrbError
 from ..core.graph import PoseGraph
-from ..core.status import OK, Status
 from ..core.timing import Repeat, measure
 from ..linalg.accuracy import logdet_accuracy
-from ..models.paper.bounds import GraphBounds, compute_bounds
-from ..models.paper.fim import PaperFim, fim_symbolic_choice, paper_fim
+from ..models.inputs import input_files
+from ..models.paper.bounds import compute_bounds
+from ..models.paper.fim import PaperFim, fim_symbolic_choice, paper_fim, trace_fim
+from ..models.paper.result import BoundsResult, FimAtEstimate
 from ..solver.estimate import Estimate, get_estimate
 
 
@@ -27,7 +29,7 @@ class EvaluationSettings:
     or "none" (bounds only); ``solver``: options of the certified solver; ``repeat``: the timing
     protocol's repeats (``posecrb.core.timing.measure``; 1: each step runs once, untimed warm-up
     skipped; "auto": adaptive); ``ordering``: the
-    fill-reducing ordering of every factorization (``posecrb.linalg.ordering.ORDERINGS``; the
+    fill-reducing ordering of every factorization (``posecrb.core.choices.ORDERINGS``; the
     values never depend on it beyond rounding)."""
 
     anchor: int = 0
@@ -41,27 +43,24 @@ class EvaluationSettings:
 
 @dataclass(frozen=True, kw_only=True)
 class DatasetMetrics:
-    """What the pipeline computed, as far as it got: ``error`` is the PosecrbError that stopped it
-    after the bounds (only with ``errors="keep"``)."""
+    """What the pipeline computed, as far as it got: ``result`` (the graph-only bounds, and the FIM's
+    log-det when it got there), the estimate (also when the FIM failed after it), the FIM itself, and
+    ``error``, the PosecrbError that stopped it after the bounds (only with ``errors="keep"``)."""
 
     graph: PoseGraph
-    bounds: GraphBounds
+    result: BoundsResult
     estimate: Estimate | None = None
     fim: PaperFim | None = None
-    fim_logdet: float | None = None
-    fim_logdet_status: Status = OK      # its accuracy (posecrb.linalg.accuracy.logdet_accuracy)
-    times: dict[str, float] = field(default_factory=dict)    # fim_build, fim_logdet (median of repeat)
-    runs: dict[str, int] = field(default_factory=dict)       # per key of times: how many runs its median is of
     error: PosecrbError | None = None
-    ordering: dict[str, str] = field(default_factory=dict)   # orderings used: lb, ub (bounds), fim
 
 
 def evaluate(graph: PoseGraph, settings: EvaluationSettings, *, step: Callable[[str], None] | None = None,
-             errors: str = "raise", estimate: Estimate | None = None) -> DatasetMetrics:
+             errors: str = "raise", estimate: Estimate | None = None, times: Mapping[str, float] | None = None,
+             runs: Mapping[str, int] | None = None) -> DatasetMetrics:
     """Bounds (section VII-B), the estimate, the anchored paper FIM there and its log-det.
 
     ``estimate``: poses to evaluate at instead of ``settings.estimate``'s (posecrb.bounds with an
-    estimate object).
+    estimate object). ``times`` / ``runs``: stages timed before (the parse), first in the result's.
 
     ``step`` is told each stage's name ("bounds", "solve", "fim") before it starts.
     ``errors="keep"``: a PosecrbError after the bounds ends the pipeline and is returned in
@@ -71,8 +70,17 @@ def evaluate(graph: PoseGraph, settings: EvaluationSettings, *, step: Callable[[
     b = compute_bounds(graph, settings.anchor, settings.rotation_weight, settings.repeat,
                        ordering=settings.ordering)
     used = dict(b.ordering)
+    all_times = {**(times or {}), **b.times}
+    all_runs = {**(runs or {}), **b.runs}
+
+    def result(part: FimAtEstimate | None = None) -> BoundsResult:
+        return BoundsResult(dataset=graph.name, path=graph.path, sha256=graph.sha256, dim=graph.dim, poses=graph.n,
+                            edges=graph.m, components=graph.n_components, bounds=b, times=all_times, runs=all_runs,
+                            fim=part, ordering={"requested": settings.ordering, **used},
+                            inputs=input_files(graph, part.estimate if part is not None else None))
+
     if settings.estimate == "none" and estimate is None:
-        return DatasetMetrics(graph=graph, bounds=b, ordering=used)
+        return DatasetMetrics(graph=graph, result=result())
     est: Estimate | None = None
     try:
         say("solve")
@@ -101,10 +109,13 @@ def evaluate(graph: PoseGraph, settings: EvaluationSettings, *, step: Callable[[
     except PosecrbError as exc:
         if errors != "keep":
             raise
-        return DatasetMetrics(graph=graph, bounds=b, estimate=est, error=exc, ordering=used)
-    return DatasetMetrics(graph=graph, bounds=b, estimate=est, fim=fim, fim_logdet=ld,
-                          fim_logdet_status=accuracy.status,
-                          times={"fim_build": m_build.seconds, "fim_logdet": m_ld.seconds,
-                                 "logdet_accuracy": accuracy_seconds},
-                          runs={"fim_build": m_build.runs, "fim_logdet": m_ld.runs, "logdet_accuracy": 1},
-                          ordering=used)
+        return DatasetMetrics(graph=graph, result=result(), estimate=est, error=exc)
+    all_times.update(fim_build=m_build.seconds, fim_logdet=m_ld.seconds, logdet_accuracy=accuracy_seconds)
+    all_runs.update(fim_build=m_build.runs, fim_logdet=m_ld.runs, logdet_accuracy=1)
+    if est.solve_time is not None:
+        all_times["solve"] = est.solve_time
+        all_runs["solve"] = 1
+    part = FimAtEstimate(logdet=ld, logdet_status=accuracy.status, trace=trace_fim(fim), variant=fim.variant,
+                         estimate=est)
+    return DatasetMetrics(graph=graph, result=result(part), estimate=est, fim=fim)
+

@@ -112,14 +112,14 @@ def compute_metrics(name: str, data_dir: str | None = None, variant: str = "cons
     path = datasets.resolve(name, data_dir)
     graph = load(path)
     m = evaluate(graph, EvaluationSettings(fim_variant=variant))
-    b, est, fim = m.bounds, m.estimate, m.fim
-    if est is None or fim is None:
+    b, est, fim = m.result.bounds, m.estimate, m.fim
+    if est is None or fim is None or m.result.fim is None:
         raise InternalError("evaluate() returned no FIM and no error")
     if not est.certified:
         raise PosecrbError(f"{name}: the solver did not certify its estimate")
     crlb = crlb_from_fim(fim, graph)   # the same FIM, built once
     return {"sha256": graph.sha256, "fim_variant": fim.variant, "lb": b.lb, "ub": b.ub, "ub_lambda": b.ub_lambda,
-            "fim_logdet": m.fim_logdet, "objective": est.objective,
+            "fim_logdet": m.result.fim.logdet, "objective": est.objective,
             "trace_crlb": crlb.trace_crlb,
             "trace_crlb_error_bound": crlb.accuracy.error_bound if crlb.accuracy is not None else 0.0}
 

@@ -28,6 +28,7 @@ from typing import Any
 import numpy as np
 
 from ..core import provenance
+from ..core.choices import EXECUTORS
 from ..core.errors import ArgumentError, DatasetNotFound, InternalError, PosecrbError, UsageError, status_of
 from ..core.status import log_status, put
 from ..core.timing import Repeat, timed
@@ -126,7 +127,8 @@ def dataset_row(name: str, settings: TableSettings,
                                                fim_variant=settings.fim_variant, repeat=settings.repeat,
                                                solver=settings.solver, ordering=settings.ordering),
                      step=step, errors="keep")
-        b = m.bounds
+        res = m.result
+        b = res.bounds
         row.update(lb=b.lb)
         put(row, "ub", b.ub, b.ub_status)
         row.update(ub_lambda=b.ub_lambda, lb_time=b.times["lb"], ub_time=b.times["ub"],
@@ -143,18 +145,19 @@ def dataset_row(name: str, settings: TableSettings,
         row["runs"] = runs
         if m.error is not None:
             raise m.error       # reported below, with what was computed before it
-        if est is None or m.fim is None or m.fim_logdet is None:
+        fim = res.fim
+        if est is None or fim is None:
             raise InternalError("evaluate() returned no FIM and no error")
-        ld = m.fim_logdet
-        put(row, "fim_logdet", ld, m.fim_logdet_status)
-        if not m.fim_logdet_status.ok:
-            log.warning("%s: %s", name, m.fim_logdet_status.message("FIM log-det"))
-        row.update(fim_variant=m.fim.variant, rotation_weight=settings.rotation_weight,
-                   fim_time=m.times["fim_logdet"], fim_build_time=m.times["fim_build"])
+        ld = fim.logdet
+        put(row, "fim_logdet", ld, fim.logdet_status)
+        if not fim.logdet_status.ok:
+            log.warning("%s: %s", name, fim.logdet_status.message("FIM log-det"))
+        row.update(fim_variant=fim.variant, rotation_weight=settings.rotation_weight,
+                   fim_time=res.times["fim_logdet"], fim_build_time=res.times["fim_build"])
         row.update(gap_ub_rel=None if b.ub is None else (b.ub - b.lb) / b.lb,
-                   gap_fim_rel=(ld - b.lb) / b.lb if m.fim_logdet_status.available else None,
-                   parse_time=t_parse, ordering=m.ordering)
-        runs.update(fim_time=m.runs["fim_logdet"], fim_build_time=m.runs["fim_build"])
+                   gap_fim_rel=(ld - b.lb) / b.lb if ld is not None and fim.logdet_status.available else None,
+                   parse_time=t_parse, ordering={k: v for k, v in res.ordering.items() if k != "requested"})
+        runs.update(fim_time=res.runs["fim_logdet"], fim_build_time=res.runs["fim_build"])
         if not est.certified:
             row["status"] = "uncertified"
     except PosecrbError as exc:
@@ -176,7 +179,6 @@ def _dataset_task(context: tuple[str, TableSettings], task: object) -> dict:
     return row
 
 
-EXECUTORS = ("local", "dask")
 
 
 def build_rows(names: Sequence[str], settings: TableSettings, jobs: int = 1,

@@ -6,6 +6,7 @@ beside it (a subpackage of that name would replace the attribute when imported).
 from __future__ import annotations
 
 from .compute import timeline
-from .result import LoopClosure, Monotonicity, TimelineResult
+from .parts import LoopClosure, Monotonicity, TimelineRows
+from .result import TimelineResult
 
-__all__ = ["LoopClosure", "Monotonicity", "TimelineResult", "timeline"]
+__all__ = ["LoopClosure", "Monotonicity", "TimelineResult", "TimelineRows", "timeline"]

@@ -38,18 +38,21 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
+from ..core.choices import ESTIMATE_SOURCES_OR_NONE
 from ..core.errors import ArgumentError, UsageError
 from ..core.graph import PoseGraph
 from ..core.noise import rotation_weights
-from ..core.status import OK, worst
-from .result import ClosureTable, TimelineResult, monotonicity
+from ..core.status import OK, Status, worst
+from ..models.inputs import input_files
+from .parts import ClosureTable, TimelineRows, monotonicity
+from .result import TimelineResult
 from .schedule import Schedule, schedule
 from .tracker import Family, Group, Parts, Tracked
 
 if TYPE_CHECKING:
     from ..solver.estimate import Estimate
 
-ESTIMATES = ("solve", "vertices", "none")
+ESTIMATES = ESTIMATE_SOURCES_OR_NONE
 # Keys of ``TimelineResult.checks``: the matrices tracked.
 _CHECK_NAMES = {"tau": "L_tau", "w": "L_w", "ub": "ub", "fim": "fim"}
 _SQRT_HALF = np.sqrt(0.5)
@@ -314,21 +317,25 @@ def timeline(graph: PoseGraph, *, estimate: str | Estimate | None = "solve", eve
     checks = {_CHECK_NAMES[name]: {"checkpoints": len(t.checkpoints) - 1, "max_drift": t.max_drift,
                                    "tolerance": t.tolerance}
               for name, t in tracked.items() if not (proportional and name == "w")}
-    est_info = None if est is None else est.to_dict()
+    fim_status = tracked["fim"].status if est is not None else OK
+    if not all_conn.any():    # a range without values is not a clean one
+        empty = Status.unavailable(f"every prefix from {first + 1} to {last + 1} poses is disconnected: the range "
+                                   "has no values", "start the range where the prefixes are connected")
+        lb_status, ub_status, fim_status = empty, empty, empty if est is not None else OK
+    rows = TimelineRows(poses=keep + 1, pose=graph.ids[keep].astype(np.int64), edges=sch.edges[keep],
+                        loop_closures=sch.closures[keep], components=sch.components[keep],
+                        lb=np.where(connected, lb[keep], np.nan), ub=np.where(connected, ub[keep], np.nan),
+                        t_opt_graph=np.where(connected, t_opt[keep], np.nan),
+                        fim_logdet=None if fim_vals is None else np.where(connected, fim_vals[keep], np.nan),
+                        gain=np.where(connected & gain_ok[keep], gain_step[keep], np.nan))
     return TimelineResult(
-        dataset=graph.name, path=graph.path, sha256=graph.sha256, dim=d, n_poses=n, n_edges=graph.m,
+        dataset=graph.name, path=graph.path, sha256=graph.sha256, dim=d, poses=n, edges=graph.m,
         anchor=int(graph.ids[0]), rotation_weight=rotation_weight,
-        fim_variant=fim_variant if est is not None else None, estimate=est_info,
-        every=every, first=first + 1, last=last + 1,
-        poses=keep + 1, pose=graph.ids[keep].astype(np.int64), edges=sch.edges[keep],
-        loop_closures=sch.closures[keep], components=sch.components[keep],
-        lb=np.where(connected, lb[keep], np.nan), ub=np.where(connected, ub[keep], np.nan),
-        t_opt_graph=np.where(connected, t_opt[keep], np.nan),
-        fim_logdet=None if fim_vals is None else np.where(connected, fim_vals[keep], np.nan),
-        gain=np.where(connected & gain_ok[keep], gain_step[keep], np.nan),
-        lb_status=lb_status, ub_status=ub_status,
-        fim_status=tracked["fim"].status if est is not None else OK,
+        fim_variant=fim_variant if est is not None else None, estimate=est,
+        every=every, first=first + 1, last=last + 1, rows=rows,
+        lb_status=lb_status, ub_status=ub_status, fim_status=fim_status,
         monotonicity=mono, closure_table=table, checks=checks,
         times={"estimate": t_est, "timeline": time.perf_counter() - t0 - t_est},
+        inputs=input_files(graph, est),
     )
 

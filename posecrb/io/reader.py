@@ -15,6 +15,7 @@ from collections.abc import Mapping
 
 import numpy as np
 
+from ..core.choices import QUATERNION_MODES
 from ..core.errors import ParseError, UsageError
 from ..core.graph import PoseGraph
 from ..core.noise import isotropic_precisions, rotation_weights
@@ -22,8 +23,6 @@ from .records import SKIPPED_TAGS, Format, RecordKind
 from .text import MAX_INFORMATION, MAX_TRANSLATION, PRECISION_RANGE, Tokens, check_magnitude, fmt_number
 
 log = logging.getLogger("posecrb")
-
-QUATERNION_MODES = ("normalize", "raw")
 
 
 def _upper_to_full(vals: np.ndarray, q: int) -> np.ndarray:

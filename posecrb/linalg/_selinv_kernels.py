@@ -2,7 +2,7 @@
 
 A module of their own so that importing ``posecrb.linalg.selinv`` (and the models that use it)
 does not import numba: ``selinv`` imports this module on the first inversion of a factor too
-large for its numpy block kernels (``selinv.block_kernel_seconds``). Compiled with
+large for its numpy block kernels (``selinv.inversion_steps``). Compiled with
 ``cache=True``: the first call in a process loads the cached machine code.
 """
 from __future__ import annotations

@@ -1,9 +1,13 @@
 """How many digits of a computed log-determinant or inverse can be trusted (docs/design.md#statuses).
 
 ``logdet_accuracy``: a first-order bound on the rounding error of a Cholesky log-determinant,
-from the componentwise backward error of the assembly and of the factorization and the exact
-entries of the inverse on the factor's pattern (selected inversion). ``onenorm_inverse``: Hager's
-and Higham's estimate of ``||A^{-1}||_1`` (LAPACK's xLACON), used for condition estimates.
+from the componentwise backward error of the assembly and of the factorization and the entries of
+the inverse on the factor's pattern, in two tiers (docs/decisions/logdet-accuracy-tiers.md): an
+upper bound of those entries from a certified lower bound of the smallest eigenvalue of the
+diagonally scaled matrix (Lanczos and one inertia check: ``"lambda_min"``), and their exact values
+(selected inversion: ``"selected_inversion"``) where the first cannot prove the printed digits.
+``onenorm_inverse``: Hager's and Higham's estimate of ``||A^{-1}||_1`` (LAPACK's xLACON), used
+for condition estimates.
 """
 from __future__ import annotations
 
@@ -13,11 +17,39 @@ from typing import Any
 
 import numpy as np
 
+from ..core.errors import UsageError
 from ..core.status import OK, Status
 
 # A log-det whose error bound exceeds this fraction of max(1, |log det|) carries a warning: the
 # 6 significant digits the tables print, and the relative tolerance of `posecrb regress`.
 LOGDET_WARN = 1e-6
+
+# The tiers of ``logdet_accuracy`` ("auto": the first that proves the printed digits).
+TIERS = ("auto", "lambda_min", "selected_inversion")
+
+EPS = float(np.finfo(float).eps)
+
+# "auto" goes straight to the selected inversion when it takes at most this many steps of its
+# Python loop (``posecrb.linalg.selinv.inversion_steps``): then it costs no more than the Lanczos
+# iterations and the second factorization of the lambda_min tier, and gives the exact sum.
+EXACT_FIRST_STEPS = 500
+
+# The lambda_min tier's Lanczos runs: relative residuals and restarts. A first run to 1e-2 decides
+# whether the tier can prove the digits at all (its Ritz value is a lower bound of the largest
+# eigenvalue, so a bound from it that fails the threshold fails it with any later value too): where
+# it cannot (the 3D grid of 21,952 poses), the selected inversion follows after a few solves only.
+# Otherwise a second run, from the first one's vector, goes on to 1e-4. The largest eigenvalues of
+# the scaled inverse are the anchored graph's global modes, often a cluster within a percent of each
+# other (the SE(d) FIM of a 3D grid: 31,950 and 31,769), and a run may stop on the second of them
+# at any tolerance: ``_MU_MARGIN`` covers such clusters, and the retry below what it does not.
+_LANCZOS_FIRST_TOL = 1e-2
+_LANCZOS_TOL = 1e-4
+_LANCZOS_RESTARTS = 4
+# mu is taken this much below the Lanczos estimate, and once more this many times lower after a
+# failed inertia check (a top eigenvalue the Krylov space had not yet seen): a looser bound, which
+# may still prove the digits, for one more factorization in that rare case only.
+_MU_MARGIN = 1.05
+_MU_RETRY = 8.0
 
 
 def onenorm_inverse(solve: Callable[[np.ndarray], np.ndarray], n: int) -> float:
@@ -58,58 +90,212 @@ class LogdetAccuracy:
 
         |error| <= gamma * sum_ij |(A^{-1})_ij| (|L| |L^T|)_ij = ``error_bound``,
 
-    a sum over the factor's pattern only, where selected inversion gives ``A^{-1}`` exactly.
-    ``condition = error_bound / gamma`` is the log-det's componentwise condition number; it is
-    invariant under diagonal scaling (equilibration changes neither) and large where information
-    of very different magnitudes is summed on the same pose (the digits lost there are lost when
-    A is assembled, before any factorization). ``status``: a warning above ``LOGDET_WARN * max(1,
-    |log det|)``, unavailable when the bound reaches ``max(1, |log det|)`` (no correct digit).
+    a sum over the factor's pattern only. ``condition = error_bound / gamma`` is the log-det's
+    componentwise condition number; it is invariant under diagonal scaling (equilibration changes
+    neither) and large where information of very different magnitudes is summed on the same pose
+    (the digits lost there are lost when A is assembled, before any factorization).
+
+    ``tier`` names how the sum was bounded: ``"selected_inversion"`` takes the entries of
+    ``A^{-1}`` on the pattern exactly (``condition_kind`` ``"exact"``); ``"lambda_min"`` bounds
+    them by ``|(A^{-1})_ij| <= 1 / (lambda sqrt(A_ii A_jj))``, ``lambda`` a certified lower bound of
+    the smallest eigenvalue of ``D^{-1/2} A D^{-1/2}`` (``D = diag A``), so that ``condition`` is an
+    upper bound of the exact sum (``condition_kind`` ``"upper bound"``) and ``error_bound`` stays an
+    upper bound of the error. ``status``: a warning above ``LOGDET_WARN * max(1, |log det|)``,
+    unavailable when the bound reaches ``max(1, |log det|)`` (no correct digit).
     """
 
     condition: float
     error_bound: float
     status: Status = OK
+    tier: str = "selected_inversion"
+    condition_kind: str = "exact"
 
     def as_json(self) -> dict:
-        return {"condition": self.condition, "error_bound": self.error_bound, **self.status.as_json()}
+        return {"condition": self.condition, "error_bound": self.error_bound, "tier": self.tier,
+                "condition_kind": self.condition_kind, **self.status.as_json()}
 
 
-def logdet_accuracy(factor: Any, logdet: float, name: str = "matrix") -> LogdetAccuracy:
-    """``LogdetAccuracy`` of ``logdet`` computed from ``factor`` (a Cholesky factor; None for an empty
-    matrix): the bound reads the factor only, never the matrix itself. One
-    selected inversion that also sums ``|Z| (|L| |L^T|)`` supernode by supernode (dense products
-    of the blocks it forms anyway, never the product ``|L| |L^T|`` itself), about twice the flops
-    of the factorization, no other factorization."""
+def logdet_accuracy(factor: Any, logdet: float, name: str = "matrix", *, matrix: Any = None,
+                    tier: str = "auto") -> LogdetAccuracy:
+    """``LogdetAccuracy`` of ``logdet`` computed from ``factor`` (a Cholesky factor of ``matrix``;
+    None for an empty matrix).
+
+    ``tier="auto"``: with ``matrix`` (the sparse matrix ``factor`` factors, in the caller's
+    ordering), the ``"lambda_min"`` tier first: a Lanczos run on the scaled inverse (a few dozen
+    solves with ``factor``), one pass over the factor and one more factorization with its symbolic
+    analysis (``posecrb.linalg.cholesky.refactor``: the inertia check that certifies the
+    eigenvalue); it is kept when it proves ``LOGDET_WARN``, and skipped before the factorization when
+    even the eigenvalue's estimate could not. Otherwise, and without ``matrix``, the
+    ``"selected_inversion"`` tier: one selected inversion that also sums ``|Z| (|L| |L^T|)``
+    supernode by supernode, about twice the flops of the factorization. A status other than ok
+    therefore always comes from the exact sum, with the same bound and message as that tier alone.
+    ``tier="lambda_min"`` or ``"selected_inversion"`` takes that tier only (a lambda_min bound that
+    cannot be certified is infinite, and unavailable with that reason).
+
+    Examples
+    --------
+    >>> import scipy.sparse as sp
+    >>> from posecrb.linalg.cholesky import cholesky
+    >>> a = sp.csc_matrix(sp.diags([-1.0, 4.0, -1.0], [-1, 0, 1], shape=(50, 50)))
+    >>> f = cholesky(a)
+    >>> exact = logdet_accuracy(f, f.logdet(), matrix=a, tier="selected_inversion")
+    >>> cheap = logdet_accuracy(f, f.logdet(), matrix=a, tier="lambda_min")
+    >>> (exact.condition_kind, cheap.condition_kind, exact.error_bound <= cheap.error_bound)
+    ('exact', 'upper bound', True)
+    """
+    if tier not in TIERS:
+        raise UsageError(f"tier must be one of {', '.join(TIERS)}, got {tier!r}")
+    if factor is None or factor.P().size == 0:
+        return LogdetAccuracy(0.0, 0.0)
+    if tier != "selected_inversion" and matrix is None:
+        if tier == "lambda_min":
+            raise UsageError("the lambda_min tier needs the factored matrix (matrix=...)")
+        tier = "selected_inversion"
+    lower = _lower(factor)
+    if tier == "auto":
+        from .selinv import inversion_steps, supernode_bounds  # noqa: PLC0415 -- import cycle: selinv builds on cholesky
+
+        indptr = lower.indptr.astype(np.int64)
+        tier = ("selected_inversion" if inversion_steps(indptr, supernode_bounds(indptr, lower.indices))
+                <= EXACT_FIRST_STEPS else "auto")
+    if tier != "selected_inversion":
+        from .threads import controller  # noqa: PLC0415 -- loaded with the factor's module
+
+        # every BLAS at one thread: solves and vector products too small for threads to pay, which
+        # only spin and stall under load (posecrb.linalg.threads)
+        with controller().limit(limits=1, user_api="blas"):
+            cheap = _lambda_min_tier(factor, lower, matrix, logdet, name, tier == "auto")
+        if cheap is not None:
+            return cheap
+    return _selected_inversion_tier(factor, lower, logdet, name)
+
+
+def _lower(factor: Any) -> Any:
+    """The factor's L as CSC with sorted rows (CHOLMOD's copy of its supernodal factor)."""
+    import scipy.sparse as sp  # noqa: PLC0415 -- the factor's module has loaded it already
+
+    lower = factor.L()
+    if not sp.isspmatrix_csc(lower):  # pragma: no cover - CHOLMOD returns CSC
+        lower = sp.csc_matrix(lower)
+    lower.sort_indices()
+    return lower
+
+
+def _gamma(lower: Any) -> float:
+    """``(c + 2) eps`` for factor columns of at most ``c`` entries (``LogdetAccuracy``)."""
+    return (int(np.diff(lower.indptr).max()) + 2) * EPS
+
+
+def _status(bound: float, logdet: float, name: str) -> Status:
+    """The status of a log-det whose rounding error is at most ``bound`` (``LogdetAccuracy``)."""
+    scale = max(1.0, abs(logdet))
+    if not np.isfinite(bound) or bound >= scale:
+        return Status.unavailable(
+            f"the {name} is numerically singular: its log-det {logdet:.6g} may be off by {bound:.2g} or more "
+            "(no correct digit): information of very different magnitudes is summed on the same poses",
+            "the information spans more orders of magnitude than double precision resolves; check the "
+            "information matrices")
+    if bound > LOGDET_WARN * scale:
+        return Status.warning(
+            f"the {name} is ill-conditioned: its log-det may be off by up to about {bound:.1g} (rounding of "
+            "information of very different magnitudes summed on the same poses)",
+            "treat the digits beyond that as uncertain")
+    return OK
+
+
+def _selected_inversion_tier(factor: Any, lower: Any, logdet: float, name: str) -> LogdetAccuracy:
+    """The exact sum ``sum_ij |Z_ij| (|L| |L^T|)_ij`` from one selected inversion
+    (``posecrb.linalg.selinv.SelectedInverse`` with ``absolute_terms``): the bound reads the factor
+    only, never the matrix itself."""
     from ..core.errors import NumericalError  # noqa: PLC0415
     from .selinv import SelectedInverse  # noqa: PLC0415 -- import cycle: selinv builds on cholesky
 
-    if factor is None or factor.P().size == 0:
-        return LogdetAccuracy(0.0, 0.0)
-    eps = float(np.finfo(float).eps)
     try:
-        sel = SelectedInverse(factor, name, absolute_terms=True)
+        sel = SelectedInverse(factor, name, absolute_terms=True, lower=lower)
     except NumericalError as exc:
         return LogdetAccuracy(float("inf"), float("inf"), Status.unavailable(
             f"the {name} is numerically singular: {exc}", "check the information matrices"))
     total = sel.absolute_terms
     assert total is not None   # requested with absolute_terms=True
-    cmax = int(np.diff(sel.indptr).max())
-    bound = (cmax + 2) * eps * total
-    scale = max(1.0, abs(logdet))
-    if not np.isfinite(bound) or bound >= scale:
-        status = Status.unavailable(
-            f"the {name} is numerically singular: its log-det {logdet:.6g} may be off by {bound:.2g} or more "
-            "(no correct digit): information of very different magnitudes is summed on the same poses",
-            "the information spans more orders of magnitude than double precision resolves; check the "
-            "information matrices")
-    elif bound > LOGDET_WARN * scale:
-        status = Status.warning(
-            f"the {name} is ill-conditioned: its log-det may be off by up to about {bound:.1g} (rounding of "
-            "information of very different magnitudes summed on the same poses)",
-            "treat the digits beyond that as uncertain")
-    else:
-        status = OK
-    return LogdetAccuracy(float(total), float(bound), status)
+    bound = _gamma(lower) * total
+    return LogdetAccuracy(float(total), float(bound), _status(bound, logdet, name))
 
 
-__all__ = ["LOGDET_WARN", "LogdetAccuracy", "logdet_accuracy", "onenorm_inverse"]
+def _lambda_min_tier(factor: Any, lower: Any, matrix: Any, logdet: float, name: str,
+                     only_if_ok: bool) -> LogdetAccuracy | None:
+    """The bound from a certified lower bound ``lam`` of ``lambda_min(D^{-1/2} A D^{-1/2})``.
+
+    With ``Z = A^{-1}`` (both in the factor's ordering), ``|Z_ij| <= sqrt(Z_ii Z_jj)`` (Z is positive
+    definite) and ``A_ii Z_ii <= 1 / lam``, so the exact sum is at most
+    ``sum_ij s_i s_j (|L| |L^T|)_ij / lam = || |L|^T s ||^2 / lam`` with ``s = diag(A)^{-1/2}`` (the
+    pattern of ``|L| |L^T|`` lies in the factor's, a closed pattern): one pass over L.
+
+    ``lam``: the largest eigenvalue ``theta`` of ``D^{1/2} A^{-1} D^{1/2}`` by Lanczos (solves with
+    the factor) gives ``mu = 1 / ((theta + 2 r) _MU_MARGIN)``, r the Ritz pair's residual (once
+    ``_MU_RETRY`` times lower when the check below fails); the factorization of
+    ``A - mu D`` with the factor's symbolic analysis then succeeds only if no eigenvalue of the
+    scaled matrix lies below mu, up to that factorization's own backward error (``|E| <= gamma
+    |L'| |L'^T|``, whose scaled 2-norm is at most ``gamma (1 + gamma)`` times the longest row of
+    the pattern, plus the rounding of ``A_ii - mu A_ii``), so ``lam = mu - delta``.
+
+    ``only_if_ok``: return None instead of a bound that does not prove ``LOGDET_WARN`` (and skip the
+    factorization when the Lanczos estimate alone shows it would not). None too when the inertia
+    check fails with ``only_if_ok``; without it that is an infinite bound, unavailable."""
+    import scipy.sparse as sp  # noqa: PLC0415 -- the factor's module has loaded it already
+
+    from ..core.errors import NotPositiveDefinite  # noqa: PLC0415
+    from .cholesky import refactor  # noqa: PLC0415 -- the factor's module has loaded it already
+    from .lanczos import largest_eigenpair  # noqa: PLC0415
+
+    perm = np.asarray(factor.P(), dtype=np.int64)
+    d = np.asarray(matrix.diagonal(), dtype=float)
+    if not (np.all(np.isfinite(d)) and np.all(d > 0)):
+        return None if only_if_ok else _not_certified(name, "a diagonal entry is not positive and finite")
+    gamma = _gamma(lower)
+    # || |L|^T s ||^2: column k's sum of |L_ik| s_i, one sparse product (|L|^T is |L|'s CSC read as CSR)
+    s = 1.0 / np.sqrt(d[perm])
+    col = sp.csr_matrix((np.abs(lower.data), lower.indices, lower.indptr), shape=lower.shape[::-1]) @ s
+    scaled_sum = float(col @ col)
+    limit = LOGDET_WARN * max(1.0, abs(logdet))
+    root = np.sqrt(d)
+    def scaled_inverse(v: np.ndarray) -> np.ndarray:
+        return root * factor.solve_A(root * v)
+
+    ritz = largest_eigenpair(scaled_inverse, np.ones(d.size), tol=_LANCZOS_FIRST_TOL, max_restarts=_LANCZOS_RESTARTS)
+    if only_if_ok and not gamma * scaled_sum * ritz.value <= limit:
+        return None      # even lambda_min = 1 / theta would not prove the printed digits
+    ritz = largest_eigenpair(scaled_inverse, ritz.vector, tol=_LANCZOS_TOL, max_restarts=_LANCZOS_RESTARTS)
+    if only_if_ok and not gamma * scaled_sum * ritz.value <= limit:
+        return None
+    rows = np.bincount(lower.indices, minlength=d.size) + np.diff(lower.indptr) - 1   # pattern of L + L^T
+    delta = gamma * (1.0 + gamma) * float(rows.max()) + 2.0 * EPS
+    mu = 1.0 / ((ritz.value + 2.0 * ritz.residual) * _MU_MARGIN)
+    for attempt in range(2):
+        lam = mu - delta
+        if not (np.isfinite(lam) and lam > 0 and gamma * scaled_sum / lam <= (limit if only_if_ok else np.inf)):
+            # (also the retry's looser bound when it could no longer prove the digits)
+            return None if only_if_ok else _not_certified(name, f"its estimate {mu:.3g} is below the rounding level")
+        try:
+            # (a pattern within the analysed one: CHOLMOD takes any subset, so a pruned zero is harmless)
+            refactor(factor, matrix - sp.diags(mu * d, format="csc"), name)
+            break
+        except NotPositiveDefinite:
+            if attempt:
+                return None if only_if_ok else _not_certified(name, f"the inertia check at {mu:.3g} failed")
+            mu /= _MU_RETRY
+    condition = scaled_sum / lam
+    bound = gamma * condition
+    if only_if_ok and not bound <= limit:
+        return None
+    return LogdetAccuracy(condition, bound, _status(bound, logdet, name), tier="lambda_min",
+                          condition_kind="upper bound")
+
+
+def _not_certified(name: str, why: str) -> LogdetAccuracy:
+    return LogdetAccuracy(float("inf"), float("inf"), Status.unavailable(
+        f"the {name}'s smallest scaled eigenvalue could not be certified ({why}): its log-det's accuracy "
+        "is not bounded by the lambda_min tier", "use the selected_inversion tier"),
+        tier="lambda_min", condition_kind="upper bound")
+
+
+__all__ = ["LOGDET_WARN", "TIERS", "LogdetAccuracy", "logdet_accuracy", "onenorm_inverse"]

@@ -275,3 +275,23 @@ def lambda_min(a: sp.spmatrix, factor: Factor | None = None, name: str = "matrix
                              f"(residual {ritz.residual:.2g} after {ritz.matvecs} products)")
     return 1.0 / ritz.value
 
+
+
+def refactor(factor: Factor | PermutedFactor, a: sp.spmatrix, name: str = "matrix") -> Factor | PermutedFactor:
+    """Factor ``a``, a matrix with the sparsity pattern of the one ``factor`` factors, with
+    ``factor``'s own symbolic analysis (its ordering and supernodes: no new analysis), on one BLAS
+    thread. Raises NotPositiveDefinite when ``a`` is not positive definite: a successful call is an
+    inertia check (``posecrb.linalg.accuracy``'s certified lower bound of an eigenvalue)."""
+    a = _as_csc(a)
+    inner, perm = (factor._inner, factor._perm) if isinstance(factor, PermutedFactor) else (factor, None)
+    if perm is not None:
+        a = a[perm][:, perm].tocsc()
+        a.sort_indices()
+    try:
+        with cholmod_single_threaded(), cholmod_openmp_serial():
+            f = inner.cholesky(a)
+    except CholmodNotPositiveDefiniteError as exc:
+        raise NotPositiveDefinite(name, str(exc).split(": ", 1)[-1]) from None
+    out: Factor | PermutedFactor = f if perm is None else PermutedFactor(f, perm, factor._inverse_perm)
+    _checked_logdet(out, name)
+    return out

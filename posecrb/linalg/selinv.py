@@ -23,11 +23,12 @@ blocks of one supernode (``Z_SS`` gathered from the ancestors, at most the facto
 Supernodes at least ``_WIDE`` columns wide, the separators near the root that carry nearly all
 the flops, go through LAPACK/BLAS (dtrsm, dpotri, dsymm, dgemm: about twice the flops of the
 factorization); the narrow ones run in a loop compiled with numba (``cache=True``; the first call
-in a process imports numba and loads the cached machine code, 0.7-0.9 s; the kernels live in
+in a process imports numba and loads the cached machine code, as much interpreter work as about
+``_BLOCK_MAX_STEPS`` supernodes of the block kernels; the kernels live in
 ``posecrb.linalg._selinv_kernels``, imported only then). Small factors, whose whole inversion
 costs less than that, never load numba: ``_BlockKernels`` takes every supernode through
-LAPACK/BLAS with numpy's gathers and scatters (``block_kernel_seconds`` predicts its overhead,
-``_BLOCK_BUDGET_SECONDS`` bounds it). Without numba the compiled code runs as plain Python,
+LAPACK/BLAS with numpy's gathers and scatters (``inversion_steps`` counts its Python steps,
+``_BLOCK_MAX_STEPS`` bounds them). Without numba the compiled code runs as plain Python,
 correct but slow. numpy's BLAS runs with one thread (many small calls), except in the
 supernodes of at least ``_THREADED_FLOPS``, the top separators of large graphs, which take the cores
 no other process keeps busy (``posecrb.linalg.threads.python_blas_usable_threads``).
@@ -44,8 +45,9 @@ from types import ModuleType
 import numpy as np
 import scipy.sparse as sp
 
-from ..core.errors import InternalError, NumericalError, UsageError
+from ..core.errors import NumericalError, UsageError
 from ..core.status import OK, Status
+from ._selinv_block import _BlockKernels
 from .cholesky import Factor, SymbolicCholesky
 
 log = logging.getLogger("posecrb")
@@ -54,7 +56,7 @@ EPS = float(np.finfo(float).eps)
 
 def _kernels():
     """The compiled kernels (``posecrb.linalg._selinv_kernels``), imported on first use: numba's
-    import costs ~0.1-0.3 s of start-up that commands which never invert anything should not pay."""
+    import is start-up work that commands which never invert anything should not pay."""
     from . import _selinv_kernels  # noqa: PLC0415 -- lazy: start-up time (numba)
 
     return _selinv_kernels
@@ -75,97 +77,6 @@ def supernode_bounds(indptr: np.ndarray, indices: np.ndarray) -> np.ndarray:
     return np.concatenate(([0], np.flatnonzero(~joins) + 1, [n])).astype(np.int64)
 
 
-class _BlockKernels:
-    """The kernels of ``posecrb.linalg._selinv_kernels`` in numpy, for small factors
-    (``_inversion_kernels``): every supernode goes through ``_wide_supernode``
-    (LAPACK/BLAS), its gathers and scatters are fancy indexing, and no supernode is left to the
-    compiled loop. The Python step per supernode (a dozen numpy and BLAS calls, 0.05-0.1 ms)
-    costs less on such factors than numba's import and first call (0.7-0.9 s) that the compiled
-    kernels need in a fresh process."""
-
-    def __init__(self, indptr: np.ndarray, indices: np.ndarray):
-        self._n = indptr.size - 1
-        # index arrays per block shape: supernodes of a pose graph repeat a few shapes
-        self._lower: dict[int, tuple[np.ndarray, np.ndarray, np.ndarray]] = {}
-        self._blocks: dict[tuple[int, int], tuple[np.ndarray, np.ndarray]] = {}
-        cols = np.repeat(np.arange(self._n, dtype=np.int64), np.diff(indptr))
-        # (column, row) of every entry as one integer: sorted, since CSC rows are sorted
-        self._keys = cols * self._n + indices
-
-    def _positions(self, rows: np.ndarray, cols: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """Positions of entries (rows, cols), rows >= cols, in the factor's values, and which exist."""
-        target = cols * self._n + rows
-        pos = np.minimum(np.searchsorted(self._keys, target), self._keys.size - 1)
-        return pos, self._keys[pos] == target
-
-    def _tril(self, m: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        """Rows and columns of the lower triangle of an ``m x m`` matrix, and weights 2 off the
-        diagonal and 1 on it (a symmetric matrix's sum from its lower triangle)."""
-        if m not in self._lower:
-            u, b = np.tril_indices(m)
-            self._lower[m] = (u, b, np.where(u == b, 1.0, 2.0))
-        return self._lower[m]
-
-    def _block(self, indptr: np.ndarray, j0: int, w: int, s: int) -> tuple[np.ndarray, np.ndarray]:
-        """Positions of the supernode's dense ``(w + s, w)`` block ``[L_JJ; L_SJ]`` in the values
-        and the mask of its stored (lower) part: column c holds rows c.. of the block."""
-        if (w, s) not in self._blocks:
-            r = np.arange(w + s)[:, None]
-            c = np.arange(w)
-            self._blocks[w, s] = (r - c, r >= c)
-        offset, stored = self._blocks[w, s]
-        return np.maximum(indptr[j0:j0 + w] + offset, 0), stored
-
-    @staticmethod
-    def _row_squares(indptr: np.ndarray, indices: np.ndarray, val: np.ndarray, n: int) -> np.ndarray:
-        return np.bincount(indices, weights=val * val, minlength=n)
-
-    @staticmethod
-    def _count_nonfinite(val: np.ndarray) -> int:
-        return int(np.count_nonzero(~np.isfinite(val)))
-
-    @staticmethod
-    def _takahashi_range(indptr: np.ndarray, indices: np.ndarray, val: np.ndarray, bounds: np.ndarray,
-                         col2sn: np.ndarray, hi: int, lo: int, posbuf: np.ndarray, terms: np.ndarray) -> int:
-        if hi != lo:
-            raise InternalError("the block kernels leave no supernode to the compiled loop")
-        return 0
-
-    def _gather_l(self, indptr: np.ndarray, val: np.ndarray, j0: int, w: int, s: int, ljj: np.ndarray,
-                  lsj: np.ndarray) -> None:
-        pos, stored = self._block(indptr, j0, w, s)
-        block = np.where(stored, val[pos], 0.0)
-        ljj[:] = block[:w]
-        lsj[:] = block[w:]
-
-    def _scatter(self, indptr: np.ndarray, val: np.ndarray, j0: int, w: int, s: int, zjj: np.ndarray,
-                 zsj: np.ndarray) -> None:
-        pos, stored = self._block(indptr, j0, w, s)
-        val[pos[stored]] = np.concatenate((zjj, zsj))[stored]
-
-    def _gather_zss(self, indptr: np.ndarray, indices: np.ndarray, val: np.ndarray, bounds: np.ndarray,
-                    col2sn: np.ndarray, j0: int, w: int, s: int, zss: np.ndarray, posbuf: np.ndarray,
-                    mirror: bool) -> int:
-        if mirror:   # only the compiled loop reads the upper triangle; _wide_supernode never asks
-            raise InternalError("the block kernels gather the lower triangle of Z_SS only")
-        rows = np.asarray(indices[indptr[j0] + w: indptr[j0] + w + s], dtype=np.int64)
-        u, b, _ = self._tril(s)
-        pos, found = self._positions(rows[u], rows[b])
-        if not found.all():
-            return j0 + 1
-        zss[u, b] = val[pos]
-        return 0
-
-    def _abs_lower_dot(self, z: np.ndarray, v: np.ndarray) -> float:
-        u, b, weight = self._tril(z.shape[0])
-        return float((np.abs(z[u, b]) * v[u, b]) @ weight)
-
-    def _lookup(self, indptr: np.ndarray, indices: np.ndarray, zval: np.ndarray, rows: np.ndarray,
-                cols: np.ndarray) -> np.ndarray:
-        pos, found = self._positions(rows, cols)
-        return np.where(found, zval[pos], np.nan)
-
-
 # Supernodes at least this wide go through LAPACK/BLAS from Python (triangular solve, dpotri,
 # symmetric product), one call each; narrower ones run inside one compiled loop. On nested-
 # dissection orderings of pose graphs the wide ones are the few hundred separators near the root
@@ -178,18 +89,20 @@ _WIDE = 32
 # they save.
 _THREADED_FLOPS = 1e9
 
-# A factor is inverted without numba (``_BlockKernels``) when the block kernels' overhead is
-# predicted to cost at most ``_BLOCK_BUDGET_SECONDS``: a Python step per supernode and a lookup per
-# entry of the ``Z_SS`` blocks it gathers, measured on the shared datasets' FIMs (`python
-# benchmarks/selinv_paths.py`, docs/performance.md). numba's import and first call cost 0.7-0.9 s
-# in a fresh process, so below the budget the block kernels are the faster path of a command that
-# inverts once or twice. A caller that inverts many factors in one process (a selection's
-# iterations) shares that one-time cost and takes the compiled kernels (``repeated``): with the
-# block kernels, `select --method relax` on intel took 1.63 s in-process instead of 0.20 s
-# (docs/performance.md).
-_BLOCK_SECONDS_PER_SUPERNODE = 60e-6
-_BLOCK_SECONDS_PER_ENTRY = 200e-9
-_BLOCK_BUDGET_SECONDS = 0.3
+# A factor is inverted without numba (``_BlockKernels``) when the block kernels' overhead, counted
+# in steps of their Python loop (``inversion_steps``), is at most what numba's import and cache load
+# cost: one step per supernode (a dozen numpy and BLAS calls on its blocks) and one per
+# ``_ENTRIES_PER_STEP`` entries of the ``Z_SS`` blocks it gathers by fancy indexing. Both are counts
+# of interpreter work, so the threshold is a ratio of costs on one interpreter, not seconds on one
+# machine: on the shared datasets' FIMs a step cost as much CPU as 400-450 gathered entries, and a
+# fresh process's numba import and first compiled call as much as 7,600-9,500 steps (`python
+# benchmarks/selinv_paths.py`, docs/decisions/logdet-accuracy-tiers.md). The flops are the same on
+# both paths (LAPACK/BLAS for every wide supernode) and do not enter. A caller that inverts many
+# factors in one process (a selection's iterations) shares numba's one-time cost and takes the
+# compiled kernels (``repeated``): with the block kernels, `select --method relax` on intel took
+# 1.63 s in-process instead of 0.20 s (docs/performance.md).
+_ENTRIES_PER_STEP = 400
+_BLOCK_MAX_STEPS = 8_000.0
 
 
 def _supernode_flops(w: np.ndarray, s: np.ndarray) -> np.ndarray:
@@ -251,22 +164,22 @@ def _wide_supernode(k: ModuleType | _BlockKernels, indptr: np.ndarray, indices: 
 def _inversion_kernels(indptr: np.ndarray, indices: np.ndarray, bounds: np.ndarray,
                        repeated: bool = False) -> ModuleType | _BlockKernels:
     """The kernels for a factor with supernodes ``bounds``: numpy's (``_BlockKernels``) where
-    ``block_kernel_seconds`` is within ``_BLOCK_BUDGET_SECONDS``, the compiled ones otherwise, and
+    ``inversion_steps`` is within ``_BLOCK_MAX_STEPS``, the compiled ones otherwise, and
     always the compiled ones for ``repeated`` inversions (``SelectedInverse``). The choice depends
     on the factor and the caller alone, so one matrix always gets the same digits from a caller."""
-    if not repeated and block_kernel_seconds(indptr, bounds) <= _BLOCK_BUDGET_SECONDS:
+    if not repeated and inversion_steps(indptr, bounds) <= _BLOCK_MAX_STEPS:
         return _BlockKernels(indptr, indices)
     return _kernels()
 
 
-def block_kernel_seconds(indptr: np.ndarray, bounds: np.ndarray) -> float:
-    """Predicted overhead of ``_BlockKernels`` on a factor (CSC ``indptr``, supernodes ``bounds``):
-    a Python step per supernode and a lookup per entry of the lower triangles of the ``Z_SS``
-    blocks, ``s (s + 1) / 2`` for a supernode with ``s`` rows below it."""
+def inversion_steps(indptr: np.ndarray, bounds: np.ndarray) -> float:
+    """Steps of ``_BlockKernels``' Python loop on a factor (CSC ``indptr``, supernodes ``bounds``):
+    one per supernode and one per ``_ENTRIES_PER_STEP`` entries of the lower triangles of the
+    ``Z_SS`` blocks it gathers, ``s (s + 1) / 2`` for a supernode with ``s`` rows below it."""
     width = np.diff(bounds)
     below = (indptr[bounds[:-1] + 1] - indptr[bounds[:-1]] - width).astype(float)
     entries = float(np.sum(below * (below + 1) / 2))
-    return _BLOCK_SECONDS_PER_SUPERNODE * width.size + _BLOCK_SECONDS_PER_ENTRY * entries
+    return width.size + entries / _ENTRIES_PER_STEP
 
 
 def _takahashi_inplace(indptr: np.ndarray, indices: np.ndarray, val: np.ndarray,
@@ -280,9 +193,8 @@ def _takahashi_inplace(indptr: np.ndarray, indices: np.ndarray, val: np.ndarray,
     ``sum_ij |Z_ij| (|L| |L^T|)_ij`` on the way (``SelectedInverse.absolute_terms``). Returns None
     or why it failed. ``bounds`` (``supernode_bounds``) and ``k`` (``_inversion_kernels``) are
     computed here when not given. With the block kernels every supernode is a step of the Python
-    loop below; they are only chosen where ``block_kernel_seconds`` bounds those steps (at most
-    ``_BLOCK_BUDGET_SECONDS / _BLOCK_SECONDS_PER_SUPERNODE`` = 5000), so the loop does not grow
-    with the dataset."""
+    loop below; they are only chosen where ``inversion_steps`` bounds those steps (at most
+    ``_BLOCK_MAX_STEPS``), so the loop does not grow with the dataset."""
     terms = np.zeros(0) if terms is None else terms
     n = indptr.size - 1
     bounds = supernode_bounds(indptr, indices) if bounds is None else bounds
@@ -358,15 +270,18 @@ class SelectedInverse:
 
     ``repeated``: the caller inverts many factors in one process (a selection's iterations), so the
     compiled kernels' one-time cost is shared and they are used whatever the factor's size; by
-    default small factors are inverted without numba (``_inversion_kernels``).
+    default small factors are inverted without numba (``_inversion_kernels``). ``lower``: the
+    factor's L as CSC with sorted rows when the caller has it already; its values are then
+    overwritten with the inverse's (no second copy of the factor).
 """
 
     def __init__(self, factor: Factor, name: str = "matrix", absolute_terms: bool = False,
-                 repeated: bool = False) -> None:
-        lower = factor.L()
-        if not sp.isspmatrix_csc(lower):  # pragma: no cover - CHOLMOD returns CSC
-            lower = sp.csc_matrix(lower)
-        lower.sort_indices()  # CHOLMOD's are sorted: a check only
+                 repeated: bool = False, lower: sp.csc_matrix | None = None) -> None:
+        if lower is None:
+            lower = factor.L()
+            if not sp.isspmatrix_csc(lower):  # pragma: no cover - CHOLMOD returns CSC
+                lower = sp.csc_matrix(lower)
+            lower.sort_indices()  # CHOLMOD's are sorted: a check only
         self.perm = np.asarray(factor.P(), dtype=np.int64)
         self.iperm = np.empty_like(self.perm)
         self.iperm[self.perm] = np.arange(self.perm.size)

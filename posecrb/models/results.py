@@ -5,26 +5,60 @@ Both follow the result protocol (``posecrb.core.result``): ``to_dict()`` is the 
 """
 from __future__ import annotations
 
-from collections.abc import Mapping
-from dataclasses import dataclass, field, replace
+from collections.abc import Callable, Mapping
+from dataclasses import dataclass, field
 from typing import Any
 
 import numpy as np
 
 from ..core.errors import UsageError
+from ..core.graph import PoseGraph
 from ..core.result import (
     ARRAY,
     NESTED,
     Result,
     array_field,
+    derived_field,
+    inputs_field,
     internal_field,
     optional_field,
-    pose_blocks_codec,
+    plain,
+    shared_status_field,
     status_field,
 )
 from ..core.status import OK, Status
+from ..linalg.accuracy import LogdetAccuracy
 from ..solver.estimate import Estimate
 from .paper.crlb import InverseAccuracy
+from .sed.frames import coordinates_description
+
+
+def pose_blocks_codec() -> tuple[Callable[[Any], Any], Callable[[Any], Any]]:
+    """Per-pose matrices: ``{pose id: array}`` in Python, ``{"id": [[...]]}`` in JSON."""
+
+    def encode(blocks: Mapping[int, np.ndarray] | None) -> Any:
+        return None if blocks is None else {str(k): plain(np.asarray(v)) for k, v in blocks.items()}
+
+    def decode(blocks: Mapping[str, Any] | None) -> Any:
+        return None if blocks is None else {int(k): np.asarray(v, dtype=float) for k, v in blocks.items()}
+
+    return encode, decode
+
+
+def graph_keys(graph: PoseGraph, model: str) -> dict[str, Any]:
+    """The first keys of the ``fim`` and ``crlb`` JSON: the graph and the model."""
+    return {"dataset": graph.name, "model": model, "dim": graph.dim, "poses": graph.n, "edges": graph.m,
+            "components": graph.n_components}
+
+
+def accuracy_keys(acc: LogdetAccuracy | None) -> dict[str, float] | None:
+    """The JSON's ``logdet_accuracy``: the log-det's condition number and its rounding-error bound."""
+    return None if acc is None else {"condition": acc.condition, "error_bound": acc.error_bound}
+
+
+def _description(res: FimResult | CrlbResult) -> str:
+    """The JSON's ``coordinates_description``: what the coordinates of a pose are, from the frame."""
+    return coordinates_description(res.dim, res.frame)
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -92,9 +126,9 @@ class FimResult(_ModelKeys):
     frame : str
         ``"mixed"`` (paper), ``"world"`` or ``"body"`` (sed).
     coordinates_description : str
-        What the coordinates of a pose are.
+        What the coordinates of a pose are (from ``frame``).
     saved : str or None
-        The file written by ``save=``.
+        The file the command line's ``--save`` wrote.
     estimate : Estimate
         Where the poses come from.
     times : dict of str to float
@@ -131,10 +165,11 @@ class FimResult(_ModelKeys):
     fim_variant: str | None = optional_field()
     ordering: dict[str, str] = field(default_factory=dict)
     frame: str
-    coordinates_description: str
+    coordinates_description: str = derived_field(_description)
     saved: str | None = optional_field()
     estimate: Estimate | None = field(default=None, metadata={NESTED: Estimate})
     times: dict[str, float] = field(default_factory=dict)
+    inputs: tuple[str, ...] = inputs_field()
     matrix: Any = array_field(None)
     row_ids: np.ndarray = array_field()
     row_coord: np.ndarray = array_field()
@@ -234,28 +269,39 @@ class CrlbResult(_ModelKeys):
     anchors: list[int]
     nullity: int
     accuracy: InverseAccuracy | None = optional_field(**{NESTED: InverseAccuracy})
-    trace_crlb: float | None
-    trace_crlb_status: Status = status_field()
-    mse_bound: float | None
-    mse_bound_status: Status = status_field()
-    trace_translation: float | None = optional_field()
-    trace_translation_status: Status = status_field()
-    trace_rotation: float | None = optional_field()
-    trace_rotation_status: Status = status_field()
-    trace_crlb_curvature: float | None = optional_field()
-    trace_crlb_curvature_status: Status = status_field()
-    mse_bound_curvature: float | None = optional_field()
-    mse_bound_curvature_status: Status = status_field()
+    trace_crlb: float | None = shared_status_field("inverse_status")
+    mse_bound: float | None = shared_status_field("inverse_status")
+    trace_translation: float | None = shared_status_field("inverse_status", None, omit_none=True)
+    trace_rotation: float | None = shared_status_field("inverse_status", None, omit_none=True)
+    trace_crlb_curvature: float | None = shared_status_field("curvature_numbers_status", None, omit_none=True)
+    mse_bound_curvature: float | None = shared_status_field("curvature_numbers_status", None, omit_none=True)
     curvature_correction_max: float | None = optional_field()
     curvature_status: Status = internal_field(OK)
     coordinates: list[str]
     frame: str
     ordering: dict[str, str] = field(default_factory=dict)
-    coordinates_description: str
+    coordinates_description: str = derived_field(_description)
     per_pose: dict[int, np.ndarray] | None = optional_field(codec=pose_blocks_codec())
     per_pose_curvature: dict[int, np.ndarray] | None = optional_field(codec=pose_blocks_codec())
     estimate: Estimate | None = field(default=None, metadata={NESTED: Estimate})
     times: dict[str, float] = field(default_factory=dict)
+    inputs: tuple[str, ...] = inputs_field()
+
+    @property
+    def inverse_status(self) -> Status:
+        """The status every number of the bound inherits from the inverse's accuracy: its own when
+        the inverse is unusable, ok otherwise (a warning stays on ``accuracy``)."""
+        if self.accuracy is None or self.accuracy.status.available:
+            return OK
+        return self.accuracy.status
+
+    @property
+    def curvature_numbers_status(self) -> Status:
+        """The status of eq. (68)'s curvature-corrected numbers (3D paper model): the inverse's
+        when it is unusable, else the validity of the expansion (``curvature_status``)."""
+        if not (self.dim == 3 and self.model == "paper"):
+            return OK
+        return self.curvature_status if self.inverse_status.available else self.inverse_status
 
     def statuses(self) -> dict[str, Status]:
         """The inverse's accuracy (``"CRLB"``), eq. (68)'s validity in 3D and the estimate's
@@ -270,13 +316,13 @@ class CrlbResult(_ModelKeys):
         return out
 
     @classmethod
-    def from_dict(cls, d: Mapping[str, Any]) -> CrlbResult:
-        """As ``Result.from_dict``; eq. (68)'s status comes back from ``trace_crlb_curvature_status``
-        when the inverse itself is usable (the JSON carries it only there)."""
-        res = super().from_dict(d)
-        if res.dim == 3 and res.model == "paper" and (res.accuracy is None or res.accuracy.status.available):
-            res = replace(res, curvature_status=res.trace_crlb_curvature_status)
-        return res
+    def _restore(cls, kwargs: dict[str, Any], d: Mapping[str, Any]) -> None:
+        """eq. (68)'s status comes back from ``trace_crlb_curvature_status`` when the inverse itself
+        is usable (the JSON carries it only there)."""
+        accuracy = kwargs.get("accuracy")
+        if d.get("dim") == 3 and d.get("model") == "paper" and (accuracy is None or accuracy.status.available) \
+                and d.get("trace_crlb_curvature_status") is not None:
+            kwargs["curvature_status"] = Status.from_json(d["trace_crlb_curvature_status"])
 
     def pose_rows(self) -> list[dict[str, Any]]:
         """One dict per pose with blocks: ``id``, ``var_<coordinate>`` (the block's diagonal),

@@ -17,6 +17,8 @@ matplotlib.use("Agg")
 import matplotlib.pyplot as plt
 import numpy as np
 
+from ..core.arguments import check_output_argument
+from ..core.errors import ArgumentError
 from ..core.files import FIGURE_EXTENSIONS, check_output_file, save_figure
 from ..evaluation.published import paper_row
 
@@ -213,27 +215,36 @@ def plot_timeline(result: TimelineResult, path: str | os.PathLike) -> Path:
     """The information timeline (``posecrb timeline --plot``): against the number of poses, the
     D-optimality log-det (lb-ub band, FIM log-det) raw and per dimension (divided by q (K - 1),
     Carrillo et al.'s D-criterion scale), and the gain of each step's loop closures, the top 10
-    marked with their pose ids. Disconnected prefixes are gaps."""
-    k = result.poses.astype(float)
+    marked with their pose ids. Disconnected prefixes are gaps.
+
+    ``path`` is checked first (``ArgumentError``): a figure's extension, a writable directory, and
+    none of the files the result was computed from (``result.input_paths()``). A result without
+    any value (every prefix of its range disconnected) is an ``ArgumentError`` too: nothing to draw."""
+    check_output_argument("path", path, result.input_paths(), extensions=FIGURE_EXTENSIONS)
+    rows = result.rows
+    if not np.isfinite(rows.lb).any():
+        raise ArgumentError("result", f"TimelineResult of {result.dataset}", "has no values to draw: every prefix "
+                            f"from {result.first} to {result.last} poses is disconnected", sep=": ")
+    k = rows.poses.astype(float)
     q = result.dim + (1 if result.dim == 2 else 3)
     dims = q * np.maximum(k - 1, 1)
     fig, axes = plt.subplots(3, 1, sharex=True, figsize=(8.0, 7.2), gridspec_kw={"height_ratios": [0.8, 1.3, 1]})
     top = result.top_closures()
     for ax, scale, label in ((axes[0], 1.0, "log det"), (axes[1], dims, "log det / (q (K − 1))")):
-        lb, ub = result.lb / scale, result.ub / scale
+        lb, ub = rows.lb / scale, rows.ub / scale
         ok = np.isfinite(lb) & np.isfinite(ub)
         ax.fill_between(k, lb, ub, where=ok, color=_COLOURS["ub"], alpha=0.25, lw=0,
                         label="lb – ub band (eq. 75, graph only)")
         ax.plot(k, lb, "-", color=_COLOURS["lb"], lw=0.8, label="lb")
         ax.plot(k, ub, "-", color=_COLOURS["ub"], lw=0.8, label="ub")
-        if result.fim_logdet is not None:
-            src = (result.estimate or {}).get("source", "")
-            ax.plot(k, result.fim_logdet / scale, "-", color=_COLOURS["fim"], lw=0.9,
+        if rows.fim_logdet is not None:
+            src = result.estimate.source if result.estimate is not None else ""
+            ax.plot(k, rows.fim_logdet / scale, "-", color=_COLOURS["fim"], lw=0.9,
                     label=f"FIM log det (at {src})")
         ax.set_ylabel(label)
         ax.grid(True, alpha=0.3)
-    gain = np.where(np.isfinite(result.gain), result.gain, 0.0)
-    has = result.loop_closures > 0
+    gain = np.where(np.isfinite(rows.gain), rows.gain, 0.0)
+    has = rows.loop_closures > 0
     axes[2].vlines(k[has], 0, gain[has], color="0.35", lw=0.6 if has.sum() < 2000 else 0.3,
                    label="gain of a step's loop closures")
     for rank, c in enumerate(top):

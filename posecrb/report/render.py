@@ -27,7 +27,6 @@ from ..core.result import plain as _plain
 if TYPE_CHECKING:
     from rich.table import Table
 
-FORMATS = ("table", "json", "csv", "markdown")
 
 
 def render_statuses(row: dict[str, Any]) -> dict[str, Any]:

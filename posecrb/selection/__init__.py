@@ -12,7 +12,7 @@ those of docs/design.md#glossary-selection):
 * ``greedy``: the incremental and lazy greedy (log-dets), MAC's GreedyEig (fiedler);
 * ``relaxation``: Frank-Wolfe on the concave relaxation, top-K and Madow rounding, the swap polish;
 * ``certificate``: the ratio certificate (upper bounds, certified ratio);
-* ``select``: the driver ``select_edges``; ``result``: ``SelectionResult`` and the pruned graph.
+* ``select``: the driver ``select_edges``; ``result``: ``SelectResult`` and the pruned graph.
 """
 from __future__ import annotations
 
@@ -20,12 +20,12 @@ from .budget import DisconnectedFixedSet, EdgeSplit, parse_budget, split_edges
 from .certificate import RatioCertificate
 from .objectives import OBJECTIVES, FiedlerObjective, LogDetObjective, fim_objective, make_objective, tree_objective
 from .relaxation import Relaxation, frank_wolfe, madow, polish_fiedler
-from .result import SelectionResult, pruned_graph, write_pruned
+from .result import SelectResult, pruned_graph
 from .select import METHODS, select_edges
 
 __all__ = [
     "METHODS", "OBJECTIVES", "DisconnectedFixedSet", "EdgeSplit", "FiedlerObjective", "LogDetObjective",
-    "RatioCertificate", "Relaxation", "SelectionResult", "fim_objective", "frank_wolfe", "madow",
+    "RatioCertificate", "Relaxation", "SelectResult", "fim_objective", "frank_wolfe", "madow",
     "make_objective", "parse_budget", "polish_fiedler", "pruned_graph", "select_edges", "split_edges",
-    "tree_objective", "write_pruned",
+    "tree_objective",
 ]

@@ -1,7 +1,8 @@
 """What a selection may choose from and how many: the budget K and the split of the edges into
 fixed edges F and candidates C (docs/design.md#glossary).
 
-``--budget`` is ``K`` or ``P%`` of the candidates (rounded down, as MAC does). ``--fixed`` is
+A budget is ``K`` edges or a fraction of the candidates (rounded down, as MAC does); the command
+line's ``--budget`` spells the fraction ``P%`` (``budget_value``). ``--fixed`` is
 ``odometry`` (the edges between consecutive pose ids, joined into a connected set by the heaviest
 candidates where the chain is broken) or a text file of pose-id pairs, read through the input
 layer (``posecrb.core.files.read_lines``).
@@ -10,16 +11,17 @@ from __future__ import annotations
 
 import logging
 import math
+import numbers
 import re
 from dataclasses import dataclass
 
 import numpy as np
 import scipy.sparse as sp
 
-from ..core.errors import ParseError, PosecrbError, UsageError
+from ..core.errors import ArgumentError, ParseError, PosecrbError
 from ..core.files import read_lines
 from ..core.graph import PoseGraph, connected_components
-from ..core.integers import IntegerError, parse_int, shown_text
+from ..core.integers import IntegerError, parse_int
 
 log = logging.getLogger("posecrb")
 
@@ -30,36 +32,62 @@ class DisconnectedFixedSet(PosecrbError):
     """The fixed edges do not connect the graph, so the base objective is -inf."""
 
 
-def parse_budget(spec: str | int, n_candidates: int) -> int:
-    """``K`` (an integer) or ``P%`` (of the candidates, rounded down as MAC does) -> K.
-
-    Raises UsageError for 0, negative, malformed, or more than the candidates."""
-    if isinstance(spec, int) and not isinstance(spec, bool):
-        k, label = spec, shown_text(spec)                  # (str() of a huge int raises)
-    else:
-        text = str(spec).strip()
-        label = shown_text(text)
-        m = re.fullmatch(r"([0-9]+(?:\.[0-9]*)?|\.[0-9]+)\s*%", text)
-        if m:
-            pct = float(m.group(1))
-            if not 0 < pct <= 100:
-                raise UsageError(f"--budget {label}: a percentage must be in (0, 100]")
-            k = math.floor(pct / 100.0 * n_candidates + 1e-9)
-            if k < 1:
-                raise UsageError(f"--budget {label} of {n_candidates} candidate edge(s) rounds down to 0 edges")
-            return k
-        if not re.fullmatch(r"[+-]?[0-9]+", text):
-            raise UsageError(f"--budget {label!r}: expected a number of edges K or a percentage P% of the "
-                             "candidates")
-        try:
-            k = parse_int(text)
-        except IntegerError:         # beyond int64 (never int() of thousands of digits): its sign tells
-            k = -1 if text.startswith("-") else n_candidates + 1
-    if k <= 0:
-        raise UsageError(f"--budget {label}: the number of edges to select must be >= 1")
-    if k > n_candidates:
-        raise UsageError(f"--budget {label} exceeds the {n_candidates} candidate edge(s)")
+def budget_count(budget: int | float, n_candidates: int) -> int:
+    """K from a budget: a number of edges K (an integer), or a fraction of the candidates in (0, 1]
+    (a float, rounded down as MAC does). ``ArgumentError`` naming ``budget`` otherwise: not a
+    number, K < 1, more than the candidates, a fraction outside (0, 1] or rounding down to 0."""
+    if isinstance(budget, (bool, np.bool_)) or not isinstance(budget, numbers.Real):
+        raise ArgumentError("budget", budget, "is not a number of edges K (an integer) or a fraction of the "
+                            "candidates in (0, 1] (a float)")
+    if isinstance(budget, numbers.Integral):
+        k = int(budget)
+        if k <= 0:
+            raise ArgumentError("budget", k, "is not a number of edges >= 1")
+        if k > n_candidates:
+            raise ArgumentError("budget", k, f"exceeds the {n_candidates} candidate edge(s)")
+        return k
+    fraction = float(budget)
+    if not (math.isfinite(fraction) and 0 < fraction <= 1):
+        raise ArgumentError("budget", budget, "is not a fraction of the candidates in (0, 1] (a number of edges "
+                            "is an integer)")
+    k = math.floor(fraction * n_candidates + 1e-9)
+    if k < 1:
+        raise ArgumentError("budget", budget, f"of {n_candidates} candidate edge(s) rounds down to 0 edges")
     return k
+
+
+def budget_value(spec: str | int | float) -> int | float:
+    """The command line's budget (``K`` or ``P%`` of the candidates) as the library takes it: the
+    integer K or the fraction P / 100 (numbers pass as they are). ``ArgumentError`` naming
+    ``budget`` for anything else, or a percentage outside (0, 100]."""
+    if isinstance(spec, (int, float)) and not isinstance(spec, bool):
+        return spec
+    text = str(spec).strip()
+    m = re.fullmatch(r"([0-9]+(?:\.[0-9]*)?|\.[0-9]+)\s*%", text)
+    if m:
+        pct = float(m.group(1))
+        if not 0 < pct <= 100:
+            raise ArgumentError("budget", text, "is not a percentage in (0, 100]")
+        return pct / 100.0
+    if re.fullmatch(r"[+-]?[0-9]+", text) is None:
+        raise ArgumentError("budget", text, "is not K or P%: expected a number of edges K or a percentage P% of "
+                            "the candidates")
+    try:
+        return parse_int(text)
+    except IntegerError:       # beyond int64 (never int() of thousands of digits): too many edges, or < 1
+        return -1 if text.startswith("-") else 2 ** 63
+
+
+def budget_spec(budget: int | float) -> str:
+    """How a budget is shown (the JSON's ``budget_spec``): K, or the fraction as a percentage."""
+    if isinstance(budget, numbers.Integral):
+        return str(int(budget))
+    return f"{100 * float(budget):.12g}%"
+
+
+def parse_budget(spec: str | int | float, n_candidates: int) -> int:
+    """``K`` or ``P%`` of the candidates (``budget_value``) -> K (``budget_count``)."""
+    return budget_count(budget_value(spec), n_candidates)
 
 
 @dataclass(frozen=True)

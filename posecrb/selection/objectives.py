@@ -32,6 +32,7 @@ from typing import Any, Literal
 import numpy as np
 import scipy.sparse as sp
 
+from ..core.choices import OBJECTIVES
 from ..core.errors import InternalError, NumericalError, UsageError
 from ..core.graph import PoseGraph
 from ..core.noise import isotropic_precisions, rotation_weights
@@ -42,7 +43,6 @@ from ..linalg.selinv import SelectedInverse
 from ..models.paper.fim import rotation_jacobians
 from ..solver.estimate import Estimate
 
-OBJECTIVES = ("tree", "fim", "fiedler")
 # From this many rows on, the symbolic analysis uses METIS (less fill on pose graphs, as in selinv).
 _METIS_FROM = 4000
 # Dense eigensolver for lambda_2 up to this many poses.

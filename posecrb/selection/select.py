@@ -4,7 +4,7 @@ Its steps, one small function each: check the options (``_check_options``), set 
 edges and candidates, budget, anchor, estimate, objective, the fixed edges' value:
 ``_prepare``), choose by the method (``_choose``: greedy, relaxation, random or naive), evaluate
 the chosen set with its bounds (``_evaluate``), optionally run the relaxation for a bound
-(``_certify``), and assemble the result (``SelectionResult`` with its ``RatioCertificate``).
+(``_certify``), and assemble the result (``SelectResult`` with its certificate).
 """
 from __future__ import annotations
 
@@ -18,10 +18,11 @@ from typing import Any
 import numpy as np
 from threadpoolctl import threadpool_limits
 
+from ..core.choices import METHODS
 from ..core.errors import NotPositiveDefinite, UsageError
 from ..core.graph import PoseGraph
 from ..solver.estimate import Estimate, get_estimate
-from .budget import EdgeSplit, parse_budget, split_edges
+from .budget import EdgeSplit, budget_spec, parse_budget, split_edges
 from .certificate import RatioCertificate, ratio_certificate, submodular_bound, supergradient_bound
 from .greedy import (
     GAINS,
@@ -42,13 +43,11 @@ from .relaxation import (
     projected_gradient,
     round_relaxation,
 )
-from .result import SelectionResult, pruned_graph, write_pruned
+from .result import SelectResult, pruned_graph, selection_result
 
-__all__ = ["METHODS", "SelectionResult", "pruned_graph", "select_edges", "write_pruned"]
+__all__ = ["METHODS", "SelectResult", "pruned_graph", "select_edges"]
 
 log = logging.getLogger("posecrb")
-
-METHODS = ("greedy", "relax", "random", "naive")
 
 
 @dataclass
@@ -64,7 +63,7 @@ class _Problem:
     base: np.ndarray
     w_rot: np.ndarray                      # the naive method's weights (and top-K's tie-break)
     max_iter: int                          # relaxation iterations
-    estimate: dict | None = None
+    estimate: Estimate | None = None
     base_state: ObjectiveState | None = None
     full_value: float = float("nan")
     times: dict[str, float] = field(default_factory=dict)
@@ -104,7 +103,7 @@ def _check_options(objective: str, method: str, gains: str, tol: float, max_iter
         raise UsageError(f"max_iter must be an integer >= 1, not {max_iter!r}")
 
 
-def _prepare(graph: PoseGraph, budget: str | int, objective: str, fixed: str, anchor: int | None,
+def _prepare(graph: PoseGraph, budget: str | int | float, objective: str, fixed: str, anchor: int | None,
              estimate: str, fiedler_weight: str, split: EdgeSplit | None, reference: Estimate | None,
              max_iter: int | None) -> _Problem:
     """Fixed edges and candidates, K, the anchor, the estimate (fim), the objective, and the values
@@ -116,7 +115,6 @@ def _prepare(graph: PoseGraph, budget: str | int, objective: str, fixed: str, an
         raise UsageError(f"{graph.name}: no candidate edges (every edge is fixed)")
     k = parse_budget(budget, split.candidates.size)
     anchor = graph.anchor_index(None) if anchor is None else int(anchor)
-    est_info: dict[str, Any] | None = None
     est = reference
     if objective == "fim":
         if est is None:
@@ -126,7 +124,6 @@ def _prepare(graph: PoseGraph, budget: str | int, objective: str, fixed: str, an
         if est.certified is False:
             log.warning("%s: the estimate of the full graph is NOT certified; the fim objective is evaluated "
                         "at an uncertified point", graph.name)
-        est_info = est.to_dict()
     obj = make_objective(graph, objective, anchor, est, fiedler_weight)
     base = np.zeros(graph.m)
     base[split.fixed] = 1.0
@@ -134,7 +131,7 @@ def _prepare(graph: PoseGraph, budget: str | int, objective: str, fixed: str, an
     problem = _Problem(graph=graph, split=split, k=k, anchor=anchor, obj=obj, base=base,
                        w_rot=graph.rotation_weights if fiedler_weight == "w" else graph.kappa,
                        max_iter=max_iter if max_iter is not None else (20 if obj.kind == "fiedler" else 100),
-                       estimate=est_info, times=times)
+                       estimate=est if objective == "fim" else None, times=times)
     t0 = time.perf_counter()
     try:
         problem.base_state = obj.evaluate(base)
@@ -273,17 +270,18 @@ def _certificate(p: _Problem, choice: _Choice, relax: Relaxation | None, final: 
     return ratio_certificate(value, relax, relax_bound, sub, every)
 
 
-def select_edges(graph: PoseGraph, budget: str | int, *, objective: str = "tree", method: str = "greedy",
+def select_edges(graph: PoseGraph, budget: str | int | float, *, objective: str = "tree",
+                 method: str = "greedy",
                  fixed: str = "odometry", certify: bool = False, seed: int = 0, anchor: int | None = None,
                  estimate: str = "solve", gains: str = "auto", max_iter: int | None = None,
                  tol: float = 1e-3, fiedler_weight: str = "w", split: EdgeSplit | None = None,
                  reference: Estimate | None = None, engine: str = "auto", strategy: str = "auto",
-                 polish: int | None = None) -> SelectionResult:
+                 polish: int | None = None) -> SelectResult:
     """Choose ``budget`` candidate edges maximising ``objective`` (``posecrb.selection``).
 
-    ``budget``: K or "P%" of the candidates. ``method``: ``greedy`` (exact greedy; MAC's
-    GreedyEig for fiedler), ``relax`` (the relaxation: spectral projected gradient for the
-    log-dets, MAC's Frank-Wolfe for fiedler; rounded by top-K and by MADOW_DRAWS seeded Madow
+    ``budget``: K, a fraction of the candidates in (0, 1], or the text "K" / "P%". ``method``:
+    ``greedy`` (exact greedy; MAC's GreedyEig for fiedler), ``relax`` (the relaxation: spectral
+    projected gradient for the log-dets, MAC's Frank-Wolfe for fiedler; rounded by top-K and by MADOW_DRAWS seeded Madow
     draws, the best kept; the log-dets keep the greedy selection unless a rounding beats it),
     ``random`` (seeded), ``naive`` (the K heaviest by rotation weight, MAC's baseline; ties at
     random). ``certify``: also run the
@@ -318,10 +316,10 @@ def select_edges(graph: PoseGraph, budget: str | int, *, objective: str = "tree"
                              strategy=strategy, polish=polish)
 
 
-def _select_edges(graph: PoseGraph, budget: str | int, *, objective: str, method: str, fixed: str, certify: bool,
-                  seed: int, anchor: int | None, estimate: str, gains: str, max_iter: int | None, tol: float,
-                  fiedler_weight: str, split: EdgeSplit | None, reference: Estimate | None, engine: str,
-                  strategy: str, polish: int | None) -> SelectionResult:
+def _select_edges(graph: PoseGraph, budget: str | int | float, *, objective: str, method: str, fixed: str,
+                  certify: bool, seed: int, anchor: int | None, estimate: str, gains: str, max_iter: int | None,
+                  tol: float, fiedler_weight: str, split: EdgeSplit | None, reference: Estimate | None, engine: str,
+                  strategy: str, polish: int | None) -> SelectResult:
     t_total = time.perf_counter()
     _check_options(objective, method, gains, tol, max_iter)
     p = _prepare(graph, budget, objective, fixed, anchor, estimate, fiedler_weight, split, reference, max_iter)
@@ -347,11 +345,9 @@ def _select_edges(graph: PoseGraph, budget: str | int, *, objective: str, method
     cert = _certificate(p, choice, relax, final, value, sub)
     times["total"] = time.perf_counter() - t_total
     assert p.base_state is not None
-    id_pairs = np.stack([graph.ids[graph.src], graph.ids[graph.dst]], axis=1)
-    return SelectionResult(
-        dataset=graph.name, path=graph.path, dim=graph.dim, poses=graph.n, edges=graph.m,
-        anchor_id=int(graph.ids[p.anchor]), objective=objective, method=method, budget=p.k,
-        budget_spec=str(budget), split=p.split, selected=choice.chosen, selected_ids=id_pairs[choice.chosen],
-        value=float(value), base_value=float(p.base_state.value), full_value=float(p.full_value), certificate=cert,
-        rounding=choice.rounding, order=choice.order, seed=int(seed), stats=choice.stats, estimate=p.estimate,
-        times=times, _id_pairs=id_pairs)
+    return selection_result(
+        graph, anchor=p.anchor, objective=objective, method=method, budget=p.k,
+        budget_spec=str(budget) if isinstance(budget, str) else budget_spec(budget),
+        split=p.split, chosen=choice.chosen, value=value, base_value=p.base_state.value, full_value=p.full_value,
+        certificate=cert, rounding=choice.rounding, order=choice.order, seed=seed, stats=choice.stats,
+        estimate=p.estimate, times=times)

@@ -32,6 +32,7 @@ from typing import Any
 import numpy as np
 import numpy.typing as npt
 
+from ..core.choices import SYNTH_KINDS
 from ..core.errors import InternalError, UsageError
 from ..core.graph import PoseGraph, rotation_dimension
 from ..core.noise import isotropic_information
@@ -40,7 +41,7 @@ from ..lie.se import relative_poses
 from ..lie.so import so2_exp, so3_exp
 from .sampling import isotropic_noise
 
-KINDS = ("grid2d", "grid3d", "sphere", "torus", "octagon", "demo")
+KINDS = SYNTH_KINDS
 
 DEFAULT_TAU = 100.0      # translation precision (delta = 0.1)
 DEFAULT_KAPPA = 1000.0   # Langevin concentration (angle std ~ 1/sqrt(2 kappa) = 0.022 rad)

@@ -9,6 +9,7 @@ import numpy.typing as npt
 from scipy.special import gamma as gamma_fn
 from scipy.special import gammainc, gammaincinv
 
+from ..core.choices import NOISE_SCALES
 from ..core.errors import InternalError, UsageError
 from ..core.graph import PoseGraph
 from ..core.noise import isotropic_information
@@ -144,7 +145,7 @@ def sample_isotropic_gaussian(tau: npt.ArrayLike, size: int, dim: int, rng: np.r
     return rng.standard_normal((size, dim)) / np.sqrt(tau)[:, None]
 
 
-NOISE_SCALES = ("both", "rotation")
+
 
 
 def scaled_precisions(graph: PoseGraph, kc: float = 1.0, scale: str = "both", tau: npt.ArrayLike | None = None,

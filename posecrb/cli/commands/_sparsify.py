@@ -6,6 +6,7 @@ import time
 
 import click
 
+from ...core.choices import EXECUTORS, FIXED_RULES
 from ...core.errors import UsageError
 from ...core.provenance import dataset_entry, run_record
 from ...core.status import Status, log_status
@@ -55,7 +56,7 @@ MAX_TASKS = 10000
               help="[objective-]method list (default greedy,relax,fiedler-relax,random,naive).")
 @click.option("--objective", default="tree", show_default=True, metavar="tree|fim|fiedler",
               help="Objective of the methods named without one.")
-@click.option("--fixed", default="odometry", show_default=True, type=InputFile(("odometry",)),
+@click.option("--fixed", default="odometry", show_default=True, type=InputFile(FIXED_RULES),
               metavar="odometry|FILE", help="Fixed edges: the odometry chain, or a file of pose-id pairs 'i j'.")
 @click.option("--certify", is_flag=True, help="Relaxation bound for greedy, random and naive too.")
 @click.option("--max-iter", type=PlainInt(1, 100000), default=None, help="Relaxation iterations.")
@@ -63,7 +64,7 @@ MAX_TASKS = 10000
               help="Seed of random selections and Madow rounding.")
 @click.option("--jobs", type=PlainInt(1, 1024), default=1, show_default=True,
               help="Worker processes (local pool, or LocalCluster size for --executor dask).")
-@click.option("--executor", type=click.Choice(["local", "dask"]), default="local", show_default=True,
+@click.option("--executor", type=click.Choice(EXECUTORS), default="local", show_default=True,
               help="local: serial (--jobs 1) or a process pool; dask: dask.distributed.")
 @click.option("--scheduler", metavar="ADDRESS", default=None, help="Dask scheduler address.")
 @click.option("--plot", "plot_path", type=OutputFile(FIGURE_EXTENSIONS), default=None,

@@ -5,7 +5,7 @@ import logging
 
 import click
 
-from ...api.functions import bounds
+from ...api.bounds import bounds
 from ...core.errors import PosecrbError, status_of
 from ...core.status import log_statuses
 from ...report.render import print_rows

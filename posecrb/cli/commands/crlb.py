@@ -5,7 +5,7 @@ import logging
 
 import click
 
-from ...api.functions import crlb
+from ...api.models import crlb
 from ...core.status import log_statuses
 from ...report.render import key_value_rows, print_rows
 from ..options import (
@@ -16,6 +16,7 @@ from ..options import (
     model_option,
     model_settings_options,
     ordering_option,
+    parse_pose_ids,
 )
 from ..paths import Command, DatasetArg
 
@@ -57,7 +58,8 @@ def command(file, model, quotient, anchors, poses, estimate_source, rotation_wei
     `coordinates`; `frame` and `coordinates_description` say what they mean (JSON: full matrices).
     --ordering: the factorization's fill-reducing ordering (cost only; JSON key ordering).
     """
-    res = crlb(file, model=model, quotient=quotient, anchor=list(anchors), poses=poses, estimate=estimate_source,
+    res = crlb(file, model=model, quotient=quotient, anchor=list(anchors),
+               poses=None if poses is None else parse_pose_ids(poses), estimate=estimate_source,
                rotation_weight=rotation_weight, fim_variant=fim_variant, frame=frame, ordering=ordering,
                data_dir=data_dir)
     log_statuses(log, res.dataset, res.statuses())

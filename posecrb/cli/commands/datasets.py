@@ -5,6 +5,7 @@ import logging
 
 import click
 
+from ...core.choices import SYNTH_KINDS
 from ...core.errors import PosecrbError
 from ...core.noise import precisions_from_sigma
 from ...core.resources import check_memory
@@ -178,7 +179,7 @@ def synth_memory(kind: str, poses: int) -> float:
 
 
 @command.command("synth")
-@click.argument("kind", type=click.Choice(["grid2d", "grid3d", "sphere", "torus", "octagon", "demo"]))
+@click.argument("kind", type=click.Choice(SYNTH_KINDS))
 @click.option("--poses", type=PlainInt(2), default=None,
               help="Number of poses (grid2d 100, grid3d 125, sphere 2500, torus 5000; octagon is always 8).")
 @click.option("--noise", "sigma", type=FiniteFloat(min=1e-6, max=1e6), default=None,

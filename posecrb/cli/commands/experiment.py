@@ -15,6 +15,7 @@ from typing import Any
 
 import click
 
+from ...core.choices import EXECUTORS, NOISE_SCALES
 from ...core.errors import UsageError
 from ...core.provenance import dataset_entry, run_record
 from ...core.resources import check_memory
@@ -58,7 +59,7 @@ def _run_options(default_trials: str, name: str, extra: tuple[str, ...] = ()
                          help="Root seed; every trial has its own SeedSequence child."),
             click.option("--jobs", type=PlainInt(1, 1024), default=1, show_default=True,
                          help="Worker processes (local pool, or LocalCluster size for --executor dask)."),
-            click.option("--executor", type=click.Choice(["local", "dask"]), default="local", show_default=True,
+            click.option("--executor", type=click.Choice(EXECUTORS), default="local", show_default=True,
                          help="local: serial (--jobs 1) or a process pool; dask: dask.distributed "
                               "(pip install 'posecrb[dask]').") ,
             click.option("--scheduler", metavar="ADDRESS", default=None,
@@ -121,7 +122,7 @@ CRLB_HEADERS = {"mse_stderr": "± s.e.", "mse_bound": "CRLB/n_p", "mse_bound_cur
 @click.option("--kc", "kc_spec", default=None,
               help="Noise levels k_c: one value (20), a list (1,5,20) or a range (1:20, 1:20:0.5). "
                    "Default 1:20 (--quick: 1,20).")
-@click.option("--scale", type=click.Choice(["both", "rotation"]), default="both", show_default=True,
+@click.option("--scale", type=click.Choice(NOISE_SCALES), default="both", show_default=True,
               help="both: k_c multiplies kappa and tau (the whole information); rotation: only kappa, "
                    "eq. (80) as printed.")
 @click.option("--kappa", type=FiniteFloat(min=1e-12, max=1e12), default=None,

@@ -2,10 +2,11 @@
 from __future__ import annotations
 
 import logging
+from dataclasses import replace
 
 import click
 
-from ...api.functions import fim
+from ...api.models import fim
 from ...core.status import log_statuses
 from ...report.render import key_value_rows, print_rows
 from ..options import (
@@ -52,7 +53,9 @@ def command(file, model, estimate_source, anchor, rotation_weight, fim_variant, 
     log-det factorization's fill-reducing ordering, --ordering: cost only).
     """
     res = fim(file, model=model, estimate=estimate_source, anchor=anchor, rotation_weight=rotation_weight,
-              fim_variant=fim_variant, frame=frame, ordering=ordering, save=save, data_dir=data_dir)
+              fim_variant=fim_variant, frame=frame, ordering=ordering, data_dir=data_dir)
+    if save is not None:    # checked before the work (posecrb.cli.paths)
+        res = replace(res, saved=res.save(save))
     log_statuses(log, res.dataset, res.statuses())
     row = res.to_dict()
     if fmt != "json":

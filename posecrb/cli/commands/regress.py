@@ -12,7 +12,7 @@ from ...core.errors import DatasetNotFound, PosecrbError, UsageError
 from ...core.files import check_output_file
 from ...evaluation.regress import Diff, checkout_expected_path, compare, compute_metrics, load_expected, save_expected
 from ...report.render import print_rows
-from ..options import data_dir_option, format_option
+from ..options import data_dir_option, format_option, repeatable_datasets
 from ..paths import Command, DatasetArg, OutputFile
 
 log = logging.getLogger("posecrb")
@@ -54,7 +54,7 @@ def command(names, update, expected_path, allow_missing, all_rows, data_dir, fmt
                          "--update to create it)")
     data = load_expected(expected_path)
     stored = data["datasets"]
-    requested = list(names) or None
+    requested = repeatable_datasets(names, data_dir) or None
     todo = requested or sorted(stored)
     if not todo:
         raise PosecrbError("nothing to compare: the expected file has no dataset; name datasets with "

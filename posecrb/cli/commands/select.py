@@ -2,14 +2,25 @@
 from __future__ import annotations
 
 import logging
+from collections.abc import Callable
+from dataclasses import replace
 
 import click
 
-from ...api.functions import select
-from ...core.errors import UsageError
+from ...api.select import select
+from ...core.choices import ESTIMATE_SOURCES, FIXED_RULES, METHODS, OBJECTIVES, Gains
+from ...core.errors import ArgumentError, UsageError
 from ...core.status import log_statuses
 from ...report.render import print_rows
-from ..options import SEED_RANGE, FiniteFloat, PlainInt, anchor_option, data_dir_option, format_option
+from ..options import (
+    SEED_RANGE,
+    FiniteFloat,
+    PlainInt,
+    anchor_option,
+    data_dir_option,
+    format_option,
+    load_dataset,
+)
 from ..paths import GRAPH_EXTENSIONS, Command, DatasetArg, InputFile, OutputFile
 
 log = logging.getLogger("posecrb")
@@ -53,15 +64,17 @@ def _summary(d: dict) -> list[dict]:
 @click.argument("file", type=DatasetArg())
 @click.option("--budget", required=True, metavar="K|P%",
               help="Number of candidate edges to keep, or a percentage of the candidates (rounded down).")
-@click.option("--objective", default="tree", show_default=True, metavar="tree|fim|fiedler",
+@click.option("--objective", type=click.Choice(OBJECTIVES), default="tree", show_default=True,
+              metavar="|".join(OBJECTIVES),
               help="tree: d logdet L_tau + d_r logdet L_w (eq. 75, weighted tree-connectivity); fim: logdet of "
                    "the anchored frame-consistent FIM at --estimate; fiedler: algebraic connectivity of the "
                    "rotation-weighted Laplacian (MAC's objective).")
-@click.option("--method", default="greedy", show_default=True, metavar="greedy|relax|random|naive",
+@click.option("--method", type=click.Choice(METHODS), default="greedy", show_default=True,
+              metavar="|".join(METHODS),
               help="greedy (exact greedy; MAC's GreedyEig for fiedler), relax (the concave relaxation's bound, "
                    "top-K and Madow rounding; tree and fim keep the greedy set unless a rounding beats it), "
                    "random (seeded), naive (heaviest rotation weights).")
-@click.option("--fixed", default="odometry", show_default=True, type=InputFile(("odometry",)),
+@click.option("--fixed", default="odometry", show_default=True, type=InputFile(FIXED_RULES),
               metavar="odometry|FILE",
               help="Edges always kept: the odometry chain (consecutive ids, plus edges needed to connect it), "
                    "or a file of pose-id pairs 'i j'. Every other edge is a candidate.")
@@ -79,7 +92,7 @@ def _summary(d: dict) -> list[dict]:
               help="Seed the lazy greedy's queue with random-projection estimates of the gains (implies --lazy; "
                    "the lazy greedy's default above 50000 candidates).")
 @click.option("--exact", is_flag=True, help="Never use random projections.")
-@click.option("--estimate", default="solve", show_default=True, type=InputFile(("solve", "vertices")),
+@click.option("--estimate", default="solve", show_default=True, type=InputFile(ESTIMATE_SOURCES),
               metavar="solve|vertices|FILE",
               help="fim objective: the estimate at which the FIM is evaluated (default the certified optimum "
                    "of the full graph).")
@@ -101,17 +114,50 @@ def command(file, budget, objective, method, fixed, certify, max_iter, tol, lazy
 
     if jl and exact:
         raise UsageError("--jl and --exact exclude each other")
-    res = select(file, budget=budget, objective=objective, method=method, fixed=fixed, certify=certify,
-                 max_iter=max_iter, tol=tol, lazy=lazy, jl=jl, exact=exact, estimate=estimate, seed=seed, out=out_path,
-                 anchor=anchor, data_dir=data_dir)
+    from ...selection.budget import budget_value  # noqa: PLC0415 -- lazy: start-up time
+
+    amount = _budget(budget, budget_value)
+    graph, _ = load_dataset(file, data_dir)
+    try:
+        res = select(graph, budget=amount, objective=objective, method=method, fixed=fixed, certify=certify,
+                     max_iter=max_iter, tol=tol, gains=gains_of(lazy, jl, exact), estimate=estimate, seed=seed,
+                     anchor=anchor)
+    except ArgumentError as exc:
+        if exc.parameter == "budget":    # the budget as the user wrote it (20%, not 0.2)
+            raise ArgumentError("budget", budget, exc.reason, sep=exc.sep) from None
+        raise
+    res = replace(res, budget_spec=budget)
+    if out_path is not None:    # checked before the work (posecrb.cli.paths)
+        from ...io import write_g2o  # noqa: PLC0415 -- lazy: start-up time
+
+        write_g2o(res.pruned_graph(graph), out_path)
+        res = replace(res, saved=out_path)
     log_statuses(log, res.dataset, res.statuses())
     if res.saved:
-        log.info("wrote %s (%d edges)", res.saved, res.fixed["edges"] + res.budget)
+        log.info("wrote %s (%d edges)", res.saved, res.fixed.edges + res.budget)
     d = res.to_dict()
     if fmt == "json":
         print_rows([d], fmt)
     elif fmt == "table":
         print_rows(_summary(d), fmt, ["quantity", "value"], headers=HEADERS,
                    title=f"{d['dataset']}: {d['budget']} of {d['candidates']} candidate edges")
-    else:
-        print_rows([res.to_row()], fmt)
+    else:    # one row: without the per-edge lists
+        print_rows([{k: v for k, v in d.items() if k not in ("selected", "order")}], fmt)
+
+
+def _budget(text: str, budget_value: Callable[[str], int | float]) -> int | float:
+    """``--budget K|P%`` as the library takes it (K, or the fraction P / 100)."""
+    try:
+        return budget_value(text)
+    except ArgumentError as exc:
+        raise ArgumentError("budget", text, exc.reason, sep=exc.sep) from None
+
+
+def gains_of(lazy: bool, jl: bool, exact: bool) -> Gains:
+    """The library's ``gains=`` of the flags ``--lazy``, ``--jl`` and ``--exact`` (``--jl`` implies
+    the lazy greedy; ``--exact`` alone is the default, which never uses random projections)."""
+    if jl:
+        return "jl"
+    if lazy:
+        return "lazy-exact" if exact else "lazy"
+    return "auto"

@@ -2,14 +2,16 @@
 from __future__ import annotations
 
 import logging
+from dataclasses import replace
 
 import click
 
-from ...api.functions import solve
+from ...api.solve import solve, solve_times
+from ...core.choices import INITS
 from ...core.errors import SolverError
 from ...core.status import log_status
 from ...report.render import print_rows
-from ..options import POSE_ID, FiniteFloat, PlainInt, data_dir_option, format_option
+from ..options import POSE_ID, FiniteFloat, PlainInt, data_dir_option, format_option, load_dataset
 from ..paths import GRAPH_EXTENSIONS, Command, DatasetArg, OutputFile
 
 log = logging.getLogger("posecrb")
@@ -31,7 +33,7 @@ HEADERS = {"hessian_vector_products": "HVPs", "times.total": "time s", "duality_
               help="First rank of the Riemannian staircase [default: d+1].")
 @click.option("--rmax", type=PlainInt(2, 100), default=10, show_default=True,
               help="Last rank of the Riemannian staircase.")
-@click.option("--init", "init", type=click.Choice(["chordal", "vertices"]), default="chordal", show_default=True,
+@click.option("--init", "init", type=click.Choice(INITS), default="chordal", show_default=True,
               help="Initial rotations: chordal relaxation, or the file's own vertices.")
 @click.option("--anchor", type=POSE_ID, default=None,
               help="Pose id (as in the file) put at the identity in the output; default: the smallest id.")
@@ -54,8 +56,16 @@ def command(file, out, fmt, r0, rmax, init, anchor, certificate_tol, sesync_comp
     With --sesync-compat the rotation term is SE-Sync's kappa(2d - 2 tr(R_j^T R_i R~)) with
     R~ from the unnormalised quaternions (posecrb.io.load(..., quaternions="raw")).
     """
-    res = solve(file, r0=r0, rmax=rmax, init=init, anchor=anchor, certificate_tol=certificate_tol,
-                sesync_compat=sesync_compat, out=out, data_dir=data_dir)
+    graph, parse_seconds = load_dataset(file, data_dir, quaternions="raw" if sesync_compat else "normalize")
+    res = solve(graph, r0=r0, rmax=rmax, init=init, anchor=anchor, certificate_tol=certificate_tol,
+                sesync_compat=sesync_compat)
+    res = replace(res, times=solve_times(res.times, parse_seconds))
+    if out is not None:    # checked before the work (posecrb.cli.paths)
+        from ...io import load, write_g2o  # noqa: PLC0415 -- lazy: start-up time
+
+        # edges as the normalised reading: a raw, non-orthogonal R~ has no quaternion of its own
+        write_g2o(load(graph.path) if sesync_compat and graph.path else graph, out, res.rot, res.trans)
+        res = replace(res, saved=out)
     row = res.to_dict()
     human = fmt in ("table", "markdown")
     if human:   # the table formatter keeps 5 digits; the objective deserves all of SE-Sync's

@@ -8,6 +8,7 @@ from collections.abc import Sequence
 
 import click
 
+from ...core.choices import EXECUTORS, TABLE_FORMATS
 from ...core.errors import PosecrbError
 from ...core.files import make_output_dir, scratch_dir, write_text
 from ...core.provenance import write_run_record
@@ -29,13 +30,13 @@ from ...report.latex import to_latex
 from ...report.render import to_csv, to_json, to_markdown, to_rich_table
 from ...sim.generators import builtin_demo
 from ..options import (
-    TABLE_FORMATS,
     PlainInt,
     data_dir_option,
     format_option,
     make_rotation_weight_option,
     ordering_option,
     repeat_option,
+    repeatable_datasets,
 )
 from ..paths import FIGURE_EXTENSIONS, Command, DatasetArg, OutputDir, OutputFile
 from ..progress import progress
@@ -105,7 +106,7 @@ def _render(rows: list[dict], tables: Sequence[int], fmt: str, compare: bool, se
               help="Also draw one figure (PNG, SVG or PDF, by the extension): FIM log-det and ub relative to lb per "
                    "dataset, and every time against the paper's printed one.")
 @ordering_option
-@click.option("--executor", type=click.Choice(["local", "dask"]), default="local", show_default=True,
+@click.option("--executor", type=click.Choice(EXECUTORS), default="local", show_default=True,
               help="local: in this process (--jobs 1) or a process pool; dask: one dataset per task on "
                    "dask.distributed (pip install 'posecrb[dask]'), each task single-threaded (BLAS/OpenMP "
                    "1 thread), so its timings are single-threaded ones (rows say timing).")
@@ -129,7 +130,7 @@ def command(all_, tables, names, repeat, jobs, fmt, out_dir, compare_paper, rota
     if all_ and names:
         raise click.UsageError("--all and --datasets are exclusive")
     # --out and --plot were checked before the work, against the inputs (posecrb.cli.paths)
-    requested = list(names) or None
+    requested = repeatable_datasets(names, data_dir) or None
     explicit = bool(tables)
     tables = sorted(set(tables)) or [1, 2, 3, 4]
     if as_published:

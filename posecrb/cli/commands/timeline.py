@@ -40,8 +40,8 @@ def _show_summary(res: TimelineResult) -> None:
 
     metrics, top = res.summary_rows()
     est = res.estimate
-    title = (f"{res.dataset}: {res.dim}D, {res.n_poses} poses, {res.n_edges} edges; steps {res.first}..{res.last} "
-             "poses; " + (f"FIM at {est['source']}" if est else "graph only") + "; first decrease: number of poses "
+    title = (f"{res.dataset}: {res.dim}D, {res.poses} poses, {res.edges} edges; steps {res.first}..{res.last} "
+             "poses; " + (f"FIM at {est.source}" if est else "graph only") + "; first decrease: number of poses "
              "(newest id)")
     console = Console(soft_wrap=False, width=250)
     console.print(title, markup=False, highlight=False)
@@ -85,9 +85,16 @@ def command(file, estimate, every, start, stop, rotation_weight, fim_variant, pl
     markdown give every row.
     """
     res = timeline(file, estimate=estimate, every=every, start=start, stop=stop, rotation_weight=rotation_weight,
-                   fim_variant=fim_variant, plot=plot_path, data_dir=data_dir)
+                   fim_variant=fim_variant, data_dir=data_dir)
+    if plot_path is not None:    # checked before the work (posecrb.cli.paths)
+        if res.lb_status.available:
+            from ...report.plots import plot_timeline  # noqa: PLC0415 -- matplotlib, only for a figure
+
+            plot_timeline(res, plot_path)
+        else:
+            log.warning("no figure written to %s: %s", plot_path, res.lb_status.reason)
     log_statuses(log, res.dataset, res.statuses())
-    uncertified = res.estimate is not None and res.estimate.get("certified") is False
+    uncertified = res.estimate is not None and res.estimate.certified is False
     if fmt == "json":
         # to_dict() is plain JSON already (no NaN, no numpy scalars): no conversion pass; one line
         # per row and per loop closure
@@ -95,7 +102,7 @@ def command(file, estimate, every, start, stop, rotation_weight, fim_variant, pl
     elif fmt == "table":
         _show_summary(res)
     else:
-        print_rows(res.rows(), fmt, columns=[c for c in ROW_COLUMNS if c != "fim_logdet" or res.estimate]
+        print_rows(res.row_dicts(), fmt, columns=[c for c in ROW_COLUMNS if c != "fim_logdet" or res.estimate]
                    if fmt == "markdown" else None)
     if uncertified:
         raise PosecrbError(f"the solver did not certify the estimate of {res.dataset} (fim_logdet is at an "

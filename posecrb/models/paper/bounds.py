@@ -20,7 +20,8 @@ weights tau) and L_w (rotation weights w, docs/design.md#noise-model):
 """
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+import math
+from dataclasses import dataclass
 
 import numpy as np
 import scipy.sparse as sp
@@ -28,7 +29,8 @@ import scipy.sparse as sp
 from ...core.errors import NotPositiveDefinite
 from ...core.graph import PoseGraph
 from ...core.noise import isotropic_precisions, rotation_weights
-from ...core.status import OK, Status, put
+from ...core.result import Result, internal_field, status_field
+from ...core.status import OK, Status
 from ...core.timing import Repeat, measure
 from ...linalg.cholesky import Factor, SymbolicCholesky
 from ...linalg.lanczos import largest_eigenpair
@@ -213,43 +215,66 @@ def block_diagonal(blocks: np.ndarray) -> sp.csc_matrix:
     return sp.csc_matrix((blocks.ravel(), (rows, cols)), shape=(k * b, k * b))
 
 
-@dataclass(frozen=True)
-class GraphBounds:
-    dim: int
-    anchor: int                   # internal index
-    anchor_id: int                # id as in the file
+@dataclass(frozen=True, kw_only=True)
+class GraphBounds(Result):
+    """The graph-only bounds of the paper model at one anchor (the part of a ``BoundsResult``
+    that follows from the graph alone; ``compute_bounds``).
+
+    ``to_dict()`` is its keys of the ``bounds`` JSON object, from ``anchor`` to ``total_degree``;
+    a number that is not ok carries ``<key>_status``. The log-dets of the two Laplacians, the
+    times, their run counts and the orderings used are kept here too, outside the JSON (the
+    ``BoundsResult`` shows the times and the orderings with the rest of its own).
+
+    Attributes
+    ----------
+    anchor : int
+        The anchored pose id (``anchor_index``: its internal index).
+    rotation_weight : str
+        ``"eq59"`` or ``"table2"``.
+    lb, ub, ub_lambda : float or None
+        eq. (75) left, middle (the paper's Table I/II upper bound) and right with lambda_inf
+        (eq. 77); ``ub`` None when unavailable (``ub_status``).
+    lambda_inf : float
+        eq. (77)'s lambda_inf.
+    lambda_min_rot, lambda_min_rot_lower : float or None
+        lambda_min(L_w) (an upper estimate) and a certified lower bound of it.
+    gap_bound : float or None
+        Lemma 4: ``0 <= logdet F - lb <= gap_bound``.
+    t_opt_graph, t_opt_approx : float
+        T-optimality, eq. (73) and eq. (72).
+    total_degree : int
+        Sum of the degrees of the free poses.
+
+    Examples
+    --------
+    >>> import posecrb
+    >>> b = posecrb.bounds("intel", estimate=None).bounds
+    >>> round(b.lb, 3), b.anchor, b.status.ok
+    (30155.231, 0, True)
+    """
+
+    anchor: int
     rotation_weight: str
-    logdet_l_tau: float
-    logdet_l_w: float
     lb: float
     ub: float | None              # ub_psi, the paper's Table I/II upper bound (None: see ub_status)
+    ub_status: Status = status_field("ub")
     ub_lambda: float
     lambda_inf: float
     lambda_min_rot: float | None  # lambda_min(L_w) (estimate, an upper bound); None if unavailable
+    lambda_min_rot_status: Status = status_field("lambda_min(L_w)")
+    lambda_min_rot_lower: float | None = None   # certified lower bound used by gap_bound
     gap_bound: float | None       # Lemma 4, with a certified lower bound of lambda_min(L_w)
+    gap_bound_status: Status = status_field("Lemma 4 gap bound")
     t_opt_graph: float            # eq. (73)
     t_opt_approx: float           # eq. (72)
     total_degree: int
-    times: dict[str, float] = field(default_factory=dict)
-    lambda_min_rot_lower: float | None = None   # certified lower bound used by gap_bound
-    lambda_min_rot_status: Status = OK
-    gap_bound_status: Status = OK
-    ub_status: Status = OK
-    ordering: dict[str, str] = field(default_factory=dict)   # {"lb": ..., "ub": ...}: the orderings used
-    runs: dict[str, int] = field(default_factory=dict)       # per key of times: how many runs its median is of
-
-    def to_row(self) -> dict:
-        """The bounds' part of a ``bounds`` row (keys and order of the command's JSON); a number
-        that is not ok carries ``<key>_status`` (``posecrb.core.status.put``). Times are not in it."""
-        row: dict = {"anchor": self.anchor_id, "rotation_weight": self.rotation_weight, "lb": self.lb}
-        put(row, "ub", self.ub, self.ub_status)
-        row.update({"ub_lambda": self.ub_lambda, "lambda_inf": self.lambda_inf})
-        put(row, "lambda_min_rot", self.lambda_min_rot, self.lambda_min_rot_status)
-        row["lambda_min_rot_lower"] = self.lambda_min_rot_lower
-        put(row, "gap_bound", self.gap_bound, self.gap_bound_status)
-        row.update({"t_opt_graph": self.t_opt_graph, "t_opt_approx": self.t_opt_approx,
-                    "total_degree": self.total_degree})
-        return row
+    dim: int = internal_field(0)
+    anchor_index: int = internal_field(0)
+    logdet_l_tau: float = internal_field(math.nan)
+    logdet_l_w: float = internal_field(math.nan)
+    times: dict[str, float] = internal_field(factory=dict)
+    runs: dict[str, int] = internal_field(factory=dict)        # per key of times: how many runs its median is of
+    ordering: dict[str, str] = internal_field(factory=dict)    # {"lb": ..., "ub": ...}: the orderings used
 
 
 def compute_bounds(graph: PoseGraph, anchor: int | None = None, rotation_weight: str = "eq59",
@@ -337,7 +362,7 @@ def compute_bounds(graph: PoseGraph, anchor: int | None = None, rotation_weight:
     t_graph, t_approx = t_optimality(graph, anchor, rotation_weight)
     total_degree = int(graph.degree.sum() - graph.degree[anchor])
     return GraphBounds(
-        dim=d, anchor=anchor, anchor_id=int(graph.ids[anchor]), rotation_weight=rotation_weight,
+        dim=d, anchor_index=anchor, anchor=int(graph.ids[anchor]), rotation_weight=rotation_weight,
         logdet_l_tau=float(ld_tau), logdet_l_w=float(ld_w),
         lb=d * float(ld_tau) + dr * float(ld_w), ub=None if ld_psi is None else d * float(ld_tau) + float(ld_psi),
         ub_lambda=d * float(ld_tau) + dr * float(ld_w_lam), lambda_inf=lam_inf,

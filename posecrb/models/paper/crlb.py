@@ -43,7 +43,9 @@ from typing import Any
 import numpy as np
 import scipy.sparse as sp
 
+from ...core.errors import ArgumentError
 from ...core.graph import PoseGraph
+from ...core.jsontypes import conform, is_status_json
 from ...core.result import Result, plain
 from ...core.status import OK, Status
 from ...linalg.accuracy import onenorm_inverse
@@ -105,9 +107,21 @@ class InverseAccuracy(Result):
 
     @classmethod
     def from_dict(cls, d: Mapping[str, Any]) -> InverseAccuracy:
-        """The inverse of ``to_dict``."""
-        return cls(d["residual"], d["condition_estimate"], d["condition_unscaled"], d["error_bound"], d["columns"],
-                   Status.from_json(d))
+        """The inverse of ``to_dict``, each value checked (``ArgumentError`` otherwise)."""
+        if not isinstance(d, Mapping):
+            raise ArgumentError("d", type(d).__name__, "is not a mapping (an InverseAccuracy dict)", sep=": ")
+        numbers = {k: d.get(k) for k in ("residual", "condition_estimate", "condition_unscaled", "error_bound")}
+        status = {k: v for k, v in d.items() if k not in (*numbers, "columns")}
+        ok_status = status == {"status": "ok", "reason": None}
+        if not (set(d) >= {*numbers, "columns"} and (ok_status or is_status_json(status))
+                and isinstance(d["columns"], int) and not isinstance(d["columns"], bool)
+                and all(conform(v, float)[0] for v in numbers.values())):
+            raise ArgumentError("d", f"{{... {len(d)} keys}}", "is not an InverseAccuracy (residual, "
+                                "condition_estimate, condition_unscaled, error_bound: numbers; columns: an integer; "
+                                "a status)", sep=": ")
+        value = {k: float(conform(v, float)[1]) for k, v in numbers.items()}
+        return cls(value["residual"], value["condition_estimate"], value["condition_unscaled"], value["error_bound"],
+                   d["columns"], OK if ok_status else Status.from_json(status))
 
     def statuses(self) -> dict[str, Status]:
         return {"CRLB": self.status}

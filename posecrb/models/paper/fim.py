@@ -58,6 +58,7 @@ from dataclasses import dataclass, field, replace
 import numpy as np
 import scipy.sparse as sp
 
+from ...core.choices import FIM_VARIANTS
 from ...core.errors import UsageError
 from ...core.graph import PoseDimensions, PoseGraph
 from ...core.noise import rotation_weights
@@ -67,7 +68,6 @@ from ...linalg.ordering import OrderingChoice, ordered_symbolic
 
 _E2 = np.array([[0.0, -1.0], [1.0, 0.0]])
 LAYOUTS = ("blocks", "poses")
-FIM_VARIANTS = ("eq64", "consistent")
 
 
 @dataclass(frozen=True, eq=False, kw_only=True)

@@ -40,12 +40,11 @@ from typing import Any
 import numpy as np
 import scipy.sparse as sp
 
+from ...core.choices import FRAMES
 from ...core.errors import InternalError, UsageError
 from ...core.graph import PoseGraph
 from ...lie.se import se_adjoint, se_inverse
 from .crlb import SedCrlb, sed_crlb
-
-FRAMES = ("world", "body")
 
 
 def check_frame(frame: str) -> str:
