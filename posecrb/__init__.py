@@ -10,6 +10,8 @@ The library (``__all__``) in one page:
 * each returns a frozen dataclass with ``to_dict()`` (the command's ``--format json`` object),
   ``from_dict()``, ``to_frame()`` (pandas), ``save``/``load`` (npz) and a ``status``; results with natural
   parts hold them as typed results (``BoundsResult.bounds``, ``SelectResult.certificate``, ...);
+* ``verify(graph, estimate)`` judges an estimate another program computed: is it the global optimum,
+  how far from it, in map units and in units of the CRLB;
 * no function writes a file: ``result.save(path)``, ``posecrb.io.write_g2o(graph, path, ...)`` and
   ``posecrb.report.plot_timeline(result, path)`` do, and refuse the files they were given;
 * errors derive from ``PosecrbError``; a wrong argument is an ``ArgumentError`` naming it.
@@ -49,6 +51,7 @@ if TYPE_CHECKING:
     from .api.select import select
     from .api.solve import solve
     from .api.timeline import timeline
+    from .api.verify import verify
     from .core.graph import PoseGraph
     from .core.status import Status
     from .incremental.parts import LoopClosure, Monotonicity
@@ -60,6 +63,7 @@ if TYPE_CHECKING:
     from .selection.result import CertificateBounds, FixedEdges, SelectionCertificate, SelectResult
     from .solver.estimate import Estimate
     from .solver.solve import SolveResult
+    from .verification.result import VerifyResult
 
 __version__ = "0.2.0"
 
@@ -68,6 +72,7 @@ __version__ = "0.2.0"
 _LAZY = {
     "load": "api.graphs", "parse": "api.graphs", "solve": "api.solve", "bounds": "api.bounds",
     "fim": "api.models", "crlb": "api.models", "select": "api.select", "timeline": "api.timeline",
+    "verify": "api.verify", "VerifyResult": "verification.result",
     "PoseGraph": "core.graph", "Status": "core.status", "Estimate": "solver.estimate",
     "SolveResult": "solver.solve", "BoundsResult": "models.paper.result",
     "GraphBounds": "models.paper.bounds", "FimAtEstimate": "models.paper.result", "FimResult": "models.results",
@@ -78,11 +83,11 @@ _LAZY = {
 }
 
 __all__ = [
-    "load", "parse", "solve", "bounds", "fim", "crlb", "select", "timeline",
+    "load", "parse", "solve", "bounds", "fim", "crlb", "select", "timeline", "verify",
     "PoseGraph", "Estimate", "SolveResult", "BoundsResult", "GraphBounds", "FimAtEstimate", "FimResult", "CrlbResult",
     "InverseAccuracy",
     "SelectResult", "FixedEdges", "SelectionCertificate", "CertificateBounds", "TimelineResult",
-    "LoopClosure", "Monotonicity", "Status",
+    "LoopClosure", "Monotonicity", "VerifyResult", "Status",
     "PosecrbError", "UsageError", "ArgumentError", "ParseError", "DatasetNotFound", "DisconnectedGraph",
     "NumericalError", "NotPositiveDefinite", "SolverError",
     "__version__",

@@ -71,6 +71,8 @@ COMMANDS: dict[str, tuple[str, str]] = {
     "timeline": ("timeline", "D- and T-optimality of every prefix of FILE as the graph grows: lb, ub, t_opt_graph "
                              "and the FIM log-det per step, computed incrementally, and the gain of every loop "
                              "closure."),
+    "verify": ("verify", "Is an estimate another program computed the global optimum? Certificate, basin and "
+                         "distances to the certified optimum."),
 }
 
 

@@ -43,6 +43,13 @@ Executor = Literal["local", "dask"]
 SynthKind = Literal["grid2d", "grid3d", "sphere", "torus", "octagon", "demo"]
 #: What a Monte Carlo noise level k_c multiplies: both precisions, or only kappa (eq. 80 as printed).
 NoiseScale = Literal["both", "rotation"]
+#: The format of an estimate file: read from the content, or g2o/TORO VERTEX lines, Ceres' pose-graph
+#: lines, TUM's timestamped lines or KITTI's 3x4 matrices (posecrb.io.estimates).
+EstimateFormat = Literal["auto", "g2o", "toro", "ceres", "tum", "kitti"]
+#: Which pose a TUM or KITTI row is: row k the k-th smallest id, or (TUM) the timestamp as the id.
+RowOrder = Literal["order", "timestamps"]
+#: What ``posecrb verify`` concludes about an estimate, strongest first.
+Verdict = Literal["certified-optimal", "global-basin", "local-minimum", "uncertified"]
 #: Output formats of the commands (``tables`` adds LaTeX).
 Format = Literal["table", "json", "csv", "markdown"]
 TableFormat = Literal["table", "markdown", "csv", "json", "latex"]
@@ -63,6 +70,9 @@ FIXED_RULES: tuple[str, ...] = get_args(FixedRule)
 EXECUTORS: tuple[str, ...] = get_args(Executor)
 SYNTH_KINDS: tuple[str, ...] = get_args(SynthKind)
 NOISE_SCALES: tuple[str, ...] = get_args(NoiseScale)
+ESTIMATE_FORMATS: tuple[str, ...] = get_args(EstimateFormat)
+ROW_ORDERS: tuple[str, ...] = get_args(RowOrder)
+VERDICTS: tuple[str, ...] = get_args(Verdict)
 FORMATS: tuple[str, ...] = get_args(Format)
 TABLE_FORMATS: tuple[str, ...] = get_args(TableFormat)
 
@@ -73,6 +83,7 @@ GAIN_MODES: dict[str, tuple[str, str]] = {
 }
 
 __all__ = [
+    "ESTIMATE_FORMATS", "ROW_ORDERS", "VERDICTS", "EstimateFormat", "RowOrder", "Verdict",
     "ESTIMATE_SOURCES", "ESTIMATE_SOURCES_OR_NONE", "EXECUTORS", "FIM_VARIANTS", "FIXED_RULES", "FORMATS", "FRAMES",
     "GAINS", "GAIN_MODES", "INITS", "METHODS", "MODELS", "NOISE_SCALES", "OBJECTIVES", "ORDERINGS",
     "QUATERNION_MODES", "ROTATION_WEIGHTS", "SYNTH_KINDS", "TABLE_FORMATS", "EstimateSource", "EstimateSourceOrNone",

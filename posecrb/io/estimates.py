@@ -30,12 +30,14 @@ import logging
 import os
 import re
 from dataclasses import dataclass, replace
-from typing import TYPE_CHECKING, Literal, get_args
+from typing import TYPE_CHECKING
 
 import numpy as np
 
+from ..core.choices import ESTIMATE_FORMATS, ROW_ORDERS, EstimateFormat, RowOrder
 from ..core.errors import ParseError
 from ..core.files import read_input
+from ..lie.so import NotRotations, check_rotations
 from .records import SKIPPED_TAGS
 from .rotations import euler_to_rot, quat_to_rot
 
@@ -44,10 +46,6 @@ if TYPE_CHECKING:
 
 log = logging.getLogger("posecrb")
 
-EstimateFormat = Literal["auto", "g2o", "toro", "ceres", "tum", "kitti"]
-ESTIMATE_FORMATS: tuple[str, ...] = get_args(EstimateFormat)
-RowOrder = Literal["order", "timestamps"]
-ROW_ORDERS: tuple[str, ...] = get_args(RowOrder)
 
 # VERTEX records: tag -> (format, dimension, numeric fields after the id)
 VERTEX_RECORDS = {"VERTEX_SE2": ("g2o", 2, 3), "VERTEX_SE3:QUAT": ("g2o", 3, 7),
@@ -445,21 +443,19 @@ def _quaternion_rotations(path: str, lines: np.ndarray, q: np.ndarray, quantum: 
 
 
 def _matrix_rotations(path: str, lines: np.ndarray, m: np.ndarray, quantum: np.ndarray) -> np.ndarray:
-    """The nearest rotations (polar factor with det +1) of (k, 3, 3) matrices that are rotations
-    within their digits' rounding; a reflection or a larger defect is an error."""
-    d = m.shape[-1]
-    defect = np.abs(m @ np.swapaxes(m, 1, 2) - np.eye(d)).max(axis=(1, 2))
-    det = np.linalg.det(m)
-    tol = ROUNDING_QUANTA * quantum + FLOAT_ROTATION_TOL
-    bad = (defect > tol) | (det <= 0)
-    if bad.any():
-        j = int(np.flatnonzero(bad)[0])
-        why = "a reflection (det < 0)" if det[j] <= 0 else \
-            f"|R R^T - I| = {defect[j]:.3g}, beyond the {tol[j]:.2g} its digits allow"
-        raise ParseError(path, int(lines[j]), f"the 3x3 block is not a rotation: {why}")
-    u, _, vt = np.linalg.svd(m)
-    _warn_projected(path, defect, "rotation matrix")
-    return u @ vt
+    """The rotations of (k, 3, 3) matrices by the one rotation check (``posecrb.lie.so.check_rotations``):
+    within double precision's rounding taken as they are, within the rounding of their digits
+    (``ROUNDING_QUANTA`` quanta of the file's coarsest row) projected onto the rotations with a warning,
+    beyond that, or a reflection, an error naming the line."""
+    limit = ROUNDING_QUANTA * float(quantum.max(initial=0.0)) + FLOAT_ROTATION_TOL
+    try:
+        rot, _ = check_rotations(m, tol=FLOAT_ROTATION_TOL, limit=limit, name=f"{path}: the 3x3 blocks")
+    except NotRotations as exc:
+        line = int(lines[exc.rows[0]]) if exc.rows.size else None
+        # the check names rows by their index; the error names the first one's line instead
+        reason = re.sub(r"^rows? [0-9, .]+\(of [0-9]+\) ", "", str(exc).split(": ", 2)[-1])
+        raise ParseError(path, line, f"the 3x3 block {reason}") from None
+    return rot
 
 
 def _warn_projected(path: str, deviation: np.ndarray, what: str) -> None:
@@ -542,5 +538,4 @@ def _shape_name(f: EstimateFile) -> str:
 
 
 
-__all__ = ["ESTIMATE_FORMATS", "ROW_ORDERS", "EstimateFile", "EstimateFormat", "EstimatePoses", "RowOrder",
-           "read_estimate_file"]
+__all__ = ["EstimateFile", "EstimatePoses", "read_estimate_file"]

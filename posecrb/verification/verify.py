@@ -28,7 +28,7 @@ from .judge import Judgement, Precision, judge
 from .result import VerifyResult
 from .trajectory import ALIGNMENT, trajectory_error
 
-# The keys (with a status) that need the certified optimum.
+# The keys that need the certified optimum (they share its status).
 _NEEDS_OPTIMUM = ("optimum_objective", "suboptimality", "relative_suboptimality", "refined_objective", "ate_trans",
                   "ate_rot_deg", "rpe_trans", "rpe_rot_deg", "mahalanobis", "g2o_cost_optimum")
 # Where the refinement ends at the optimum's value within this fraction of it (beyond solve's own
@@ -61,6 +61,8 @@ def verify_estimate(graph: PoseGraph, estimate: Poses, *, anchor: int = 0, run_s
     keys: dict[str, Any] = {
         "dataset": graph.name, "path": graph.path, "sha256": graph.sha256, "dim": graph.dim, "poses": graph.n,
         "edges": graph.m, "anchor": int(graph.ids[anchor]), "estimate": estimate.describe,
+        "inputs": tuple(p for p in (graph.path, estimate.describe.get("path"),
+                                    None if truth is None else truth.describe.get("path")) if p),
         "objective": at_estimate.objective, "gradient_norm": at_estimate.gradient_norm,
         "lambda_min": at_estimate.certificate.lambda_min,
         "certificate": _certificate_dict(at_estimate, certificate_tol),
@@ -92,7 +94,11 @@ def verify_estimate(graph: PoseGraph, estimate: Poses, *, anchor: int = 0, run_s
         times["truth"] = time.perf_counter() - t1
     times["total"] = time.perf_counter() - t0
     sub = at_estimate.objective - f_opt
-    return VerifyResult(
+    optimum_status = OK if optimum.certified else Status.warning(
+        f"solve does not certify its estimate ({optimum.reason}): the optimum is the best estimate found")
+    if not optimum.duality_gap_status.ok:
+        optimum_status = optimum.duality_gap_status
+    return VerifyResult(optimum_status=optimum_status,
         **keys, verdict=verdict, verdict_reason=reason, optimum_objective=f_opt, suboptimality=sub,
         relative_suboptimality=sub / abs(f_opt) if f_opt else None, lower_bound=lower, lower_bound_source=source,
         refined_objective=f_ref,
@@ -118,11 +124,10 @@ def _without_solve(keys: dict[str, Any], j: Judgement, times: dict[str, float], 
         reason = (f"{_not_certified_reason(j)}; without a solve (--no-solve) the optimum and the estimate's "
                   "basin are not known")
     times["total"] = time.perf_counter() - t0
-    none = dict.fromkeys(_NEEDS_OPTIMUM + ("refinement",))
-    statuses = {f"{k}_status": skipped for k in _NEEDS_OPTIMUM}
-    return VerifyResult(**keys, **none, **statuses, verdict=verdict, verdict_reason=reason,
-                        lower_bound=j.lower_bound, lower_bound_source="certificate at the estimate"
-                        if j.lower_bound is not None else None, times=times)
+    return VerifyResult(**keys, **dict.fromkeys(_NEEDS_OPTIMUM + ("refinement",)), optimum_status=skipped,
+                        verdict=verdict, verdict_reason=reason, lower_bound=j.lower_bound,
+                        lower_bound_source="certificate at the estimate" if j.lower_bound is not None else None,
+                        times=times)
 
 
 def _certified_reason(j: Judgement) -> str:
@@ -188,8 +193,10 @@ def _distances(graph: PoseGraph, estimate: Poses, optimum: SolveResult, anchor: 
         ids, values = pose_mahalanobis(crlb.per_pose or {}, graph, delta, int(graph.ids[anchor]))
         k = int(np.argmax(values)) if values.size else None
         mahal.update(max_pose=None if k is None else float(values[k]), max_pose_id=None if k is None else int(ids[k]))
+    if not status.ok:
+        mahal["max_pose_status"] = status.as_json()
     return {"ate_trans": err.ate_trans, "ate_rot_deg": err.ate_rot_deg, "rpe_trans": err.rpe_trans,
-            "rpe_rot_deg": err.rpe_rot_deg, "mahalanobis": mahal, "mahalanobis_status": status}
+            "rpe_rot_deg": err.rpe_rot_deg, "mahalanobis": mahal}
 
 
 def _truth(graph: PoseGraph, estimate: Poses, optimum: SolveResult, truth: Poses, anchor: int) -> dict[str, Any]:
