@@ -15,6 +15,7 @@ from typing import Any
 
 import numpy as np
 
+from ..core.choices import Verdict
 from ..core.graph import PoseGraph
 from ..core.status import OK, Status
 from ..models.paper.crlb import crlb_from_fim
@@ -117,6 +118,7 @@ def _certificate_dict(j: Judgement, tol: float) -> dict[str, Any]:
 def _without_solve(keys: dict[str, Any], j: Judgement, times: dict[str, float], t0: float) -> VerifyResult:
     skipped = Status.unavailable("not computed: --no-solve (the certified optimum was not computed)",
                                  hint="without --no-solve, verify also solves the graph and refines the estimate")
+    verdict: Verdict
     if j.certified:
         verdict, reason = "certified-optimal", _certified_reason(j)
     else:
@@ -124,7 +126,8 @@ def _without_solve(keys: dict[str, Any], j: Judgement, times: dict[str, float], 
         reason = (f"{_not_certified_reason(j)}; without a solve (--no-solve) the optimum and the estimate's "
                   "basin are not known")
     times["total"] = time.perf_counter() - t0
-    return VerifyResult(**keys, **dict.fromkeys(_NEEDS_OPTIMUM + ("refinement",)), optimum_status=skipped,
+    absent: dict[str, Any] = dict.fromkeys(_NEEDS_OPTIMUM + ("refinement",))
+    return VerifyResult(**keys, **absent, optimum_status=skipped,
                         verdict=verdict, verdict_reason=reason, lower_bound=j.lower_bound,
                         lower_bound_source="certificate at the estimate" if j.lower_bound is not None else None,
                         times=times)
@@ -151,7 +154,7 @@ def _not_certified_reason(j: Judgement) -> str:
     return " and ".join(parts)
 
 
-def _verdict(j: Judgement, exact: bool, optimum: SolveResult, f_ref: float, tol: float) -> tuple[str, str]:
+def _verdict(j: Judgement, exact: bool, optimum: SolveResult, f_ref: float, tol: float) -> tuple[Verdict, str]:
     if j.certified:
         return "certified-optimal", _certified_reason(j)
     f_opt = optimum.objective
