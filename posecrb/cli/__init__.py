@@ -26,7 +26,7 @@ from typing import TextIO
 
 import click
 
-from .. import __version__
+from .._version import __version__
 from ..core.errors import ArgumentError, PosecrbError, UsageError
 from ..core.files import Terminated, handle_sigterm, remove_temporaries
 

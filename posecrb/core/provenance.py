@@ -16,7 +16,7 @@ from importlib.metadata import PackageNotFoundError, version
 from pathlib import Path
 from typing import Any
 
-from .. import __version__
+from .._version import __version__
 from .files import write_text
 
 _DISTRIBUTIONS = ("numpy", "scipy", "pandas", "scikit-sparse", "numba", "click", "rich", "matplotlib",

@@ -27,7 +27,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import IO
 
-from .. import __version__
+from .._version import __version__
 from ..core.errors import PosecrbError
 from ..core.files import atomic_write, make_output_dir
 from .manifest import DatasetEntry, Manifest, load_manifest, verify_file
