@@ -25,9 +25,10 @@ import numpy as np
 from _common import data_dir, median_time
 from grids import grid_file
 
-from posecrb.core.files import decode_utf8, read_input
+from posecrb.core.inputs import read_input
 from posecrb.datasets import search as datasets
 from posecrb.io import FORMATS, load
+from posecrb.io.lines import decode_utf8
 from posecrb.io.reader import parse
 from posecrb.io.text import split_text
 

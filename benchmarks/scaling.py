@@ -166,7 +166,7 @@ def plot(records: list[dict], path: str) -> None:
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    from posecrb.core.files import save_figure
+    from posecrb.report.figures import save_figure
     from posecrb.report.plots import check_figure_path
 
     check_figure_path(path)
@@ -328,7 +328,7 @@ def main(argv: list[str] | None = None) -> int:
         print()
         print(markdown(records, note))
     if args.json:
-        from posecrb.core.files import write_text
+        from posecrb.core.outputs import write_text
 
         write_text(args.json, json.dumps({"records": records, "dgemm": rate, "load_end": os.getloadavg()},
                                          indent=1))

@@ -16,8 +16,8 @@ from dataclasses import replace
 from typing import TYPE_CHECKING, Any, TypeAlias
 
 from ..core.errors import ArgumentError
-from ..core.files import GRAPH_EXTENSIONS
 from ..core.graph import PoseGraph
+from ..core.outputs import GRAPH_EXTENSIONS
 from ..core.result import check_output_argument
 from . import arguments as arg
 

@@ -82,9 +82,9 @@ def timeline(source: Source, *, estimate: EstimateSpec = "solve", every: int = 1
     >>> m["raw"].monotone, m["per_dimension"].monotone  # the per-dimension D-criterion does not
     (True, False)
     """
-    from ..core.files import FIGURE_EXTENSIONS  # noqa: PLC0415 -- lazy: start-up time
     from ..incremental import timeline as compute_timeline  # noqa: PLC0415 -- lazy: start-up time
     from ..models.paper.fim import FIM_VARIANTS  # noqa: PLC0415 -- lazy: start-up time
+    from ..report.figures import FIGURE_EXTENSIONS  # noqa: PLC0415 -- lazy: start-up time
 
     every = arg.integer("every", every, 1)
     start = None if start is None else arg.integer("start", start, 2)

@@ -28,7 +28,8 @@ import click
 
 from .._version import __version__
 from ..core.errors import ArgumentError, PosecrbError, UsageError
-from ..core.files import Terminated, handle_sigterm, remove_temporaries
+from ..core.outputs import remove_temporaries
+from .signals import Terminated, handle_sigterm
 
 log = logging.getLogger("posecrb")
 

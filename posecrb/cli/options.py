@@ -170,7 +170,7 @@ def plot_target(plot_path: str | None, out_dir: str | None, name: str) -> str | 
         return plot_path
     if not out_dir:
         return None
-    from ..core.files import make_output_dir  # noqa: PLC0415 -- only when writing
+    from ..core.outputs import make_output_dir  # noqa: PLC0415 -- only when writing
 
     return str(make_output_dir(out_dir) / f"{name}.png")
 

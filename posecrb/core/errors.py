@@ -71,7 +71,7 @@ class ParseError(PosecrbError):
 class OutputError(PosecrbError):
     """A result file cannot be written (disk full, permission denied, read-only file system):
     the path and the system's reason (exit 1). Nothing was written: the previous file, if any,
-    is intact (``posecrb.core.files.atomic_write``)."""
+    is intact (``posecrb.core.outputs.atomic_write``)."""
 
     def __init__(self, path: str, reason: str):
         self.path, self.reason = str(path), reason

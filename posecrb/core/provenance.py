@@ -17,7 +17,7 @@ from pathlib import Path
 from typing import Any
 
 from .._version import __version__
-from .files import write_text
+from .outputs import write_text
 
 _DISTRIBUTIONS = ("numpy", "scipy", "pandas", "scikit-sparse", "numba", "click", "rich", "matplotlib",
                   "dask", "distributed")

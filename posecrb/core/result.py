@@ -41,7 +41,8 @@ from typing import Any, TypeVar
 import numpy as np
 
 from .errors import ArgumentError, ParseError, UsageError
-from .files import atomic_write, check_output_file, read_regular_file
+from .inputs import read_regular_file
+from .outputs import atomic_write, check_output_file
 from .status import OK, Status, worst
 
 R = TypeVar("R", bound="Result")
@@ -242,7 +243,7 @@ class Result:
 def check_output_argument(parameter: str, path: str | os.PathLike[str],
                           inputs: tuple[str | os.PathLike[str] | None, ...] = (), *,
                           extensions: tuple[str, ...] | None = None) -> str:
-    """``posecrb.core.files.check_output_file`` for a library argument: the same checks (the
+    """``posecrb.core.outputs.check_output_file`` for a library argument: the same checks (the
     extension among ``extensions`` included), before any work, with the error naming
     ``parameter`` (an ``ArgumentError``: ``save='x.npz': ...``; the command line shows
     ``--save x.npz: ...``). Returns the path as a string."""

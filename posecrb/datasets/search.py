@@ -30,7 +30,7 @@ from pathlib import Path
 from typing import TYPE_CHECKING
 
 from ..core.errors import DatasetNotFound, ParseError, PosecrbError, UsageError
-from ..core.files import path_kind
+from ..core.inputs import path_kind
 
 if TYPE_CHECKING:
     from .manifest import DatasetEntry, Manifest

@@ -13,8 +13,8 @@ import os
 import numpy as np
 
 from ..core.errors import ParseError, UsageError
-from ..core.files import atomic_write
 from ..core.graph import PoseGraph
+from ..core.outputs import atomic_write
 from ..lie.so import so2_exp, so2_log
 from .records import Format, RecordKind
 from .rotations import quat_to_rot, rot_to_quat
@@ -93,7 +93,7 @@ def format_rows(arr: np.ndarray) -> list[str]:
 def write_lines(path: str | os.PathLike, vtag: str, etag: str, graph: PoseGraph, vcols: np.ndarray | None,
                 ecols: np.ndarray) -> None:
     """One line per vertex (when ``vcols``) then per edge, ids as read (int64, never through
-    float64), written atomically (``posecrb.core.files.atomic_write``)."""
+    float64), written atomically (``posecrb.core.outputs.atomic_write``)."""
     lines: list[str] = []
     if vcols is not None:
         lines += [f"{vtag} {i} {row}" for i, row in zip(graph.ids, format_rows(vcols))]
@@ -109,7 +109,7 @@ def write_g2o(graph: PoseGraph, path: str | os.PathLike, rot: np.ndarray | None 
 
     Information matrices are written in g2o order whatever the input format was. Ids are
     written from the int64 ids as read (never through float64). The file is replaced
-    atomically (``posecrb.core.files.atomic_write``): a failure or a signal leaves the previous
+    atomically (``posecrb.core.outputs.atomic_write``): a failure or a signal leaves the previous
     file, if any, and no temporary.
     """
     rot = graph.vertex_rot if rot is None else rot

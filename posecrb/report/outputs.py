@@ -1,6 +1,6 @@
 """An experiment's ``--out`` directory: its rows as CSV and JSON, extra tables, and ``run.json``.
 
-Every file is written atomically (``posecrb.core.files``); the run record follows the one schema
+Every file is written atomically (``posecrb.core.outputs``); the run record follows the one schema
 of ``posecrb.core.provenance.run_record`` (docs/design.md#run-record).
 """
 from __future__ import annotations
@@ -11,7 +11,7 @@ from collections.abc import Mapping, Sequence
 from pathlib import Path
 from typing import Any
 
-from ..core.files import make_output_dir, write_text
+from ..core.outputs import make_output_dir, write_text
 from ..core.provenance import write_run_record
 from .render import to_csv, to_json
 

@@ -4,7 +4,7 @@ fixed edges F and candidates C (docs/design.md#glossary).
 ``--budget`` is ``K`` or ``P%`` of the candidates (rounded down, as MAC does). ``--fixed`` is
 ``odometry`` (the edges between consecutive pose ids, joined into a connected set by the heaviest
 candidates where the chain is broken) or a text file of pose-id pairs, read through the input
-layer (``posecrb.core.files.read_lines``).
+layer (``posecrb.io.lines.read_lines``).
 """
 from __future__ import annotations
 
@@ -17,8 +17,8 @@ import numpy as np
 import scipy.sparse as sp
 
 from ..core.errors import ParseError, PosecrbError, UsageError
-from ..core.files import read_lines
 from ..core.graph import PoseGraph, connected_components
+from ..io.lines import read_lines
 
 log = logging.getLogger("posecrb")
 

@@ -13,7 +13,6 @@ from ...experiments.sparsify import (
     DEFAULT_BUDGETS,
     DEFAULT_METHODS,
     QUICK_BUDGETS,
-    plot_sparsify,
     sparsify_experiment,
 )
 from ...report.outputs import write_experiment_outputs
@@ -111,6 +110,8 @@ def sparsify_cmd(file, budgets, methods, objective, fixed, certify, max_iter, se
                      f"FIM logdet {ref['fim_logdet']:.6g}, tr CRLB {crlb_ref} ({elapsed:.1f} s)")
     target = plot_target(plot_path, out_dir, "sparsify")
     if target:
+        from ...report.plots import plot_sparsify  # noqa: PLC0415 -- matplotlib, only for --plot
+
         plot_sparsify(res, target)
     if out_dir:
         settings = {"file": res.path, "sha256": res.sha256, "dataset": res.dataset, "dim": res.dim,

@@ -9,7 +9,7 @@ from collections.abc import Sequence
 import click
 
 from ...core.errors import PosecrbError
-from ...core.files import make_output_dir, scratch_dir, write_text
+from ...core.outputs import make_output_dir, scratch_dir, write_text
 from ...core.provenance import write_run_record
 from ...evaluation.tables import (
     HEADERS,
