@@ -11,7 +11,9 @@ this module and ``posecrb.io.lines`` splits text inputs into lines and fields.
   working memory per byte of input), and the read itself stops at that bound (a file that grows
   meanwhile cannot get around it).
 * gzip is recognised by its magic bytes, whatever the name, and decompressed with the same bound on
-  the decompressed size (a gzip bomb is refused, not expanded).
+  the decompressed size (a gzip bomb is refused, not expanded). The compressed input is fed to zlib
+  in slices of ``_INPUT_SLICE`` bytes, so that each call's unconsumed input, which zlib hands back as
+  a copy, is at most one slice: the work is linear in the input, never quadratic.
 * An empty path or one with a NUL character is refused before the system sees it.
 * Every failure is a ``ParseError`` naming the file (exit 1).
 """
@@ -35,7 +37,9 @@ INPUT_EXPANSION = 16
 # Without a memory figure from the system, inputs are capped at this many bytes (decompressed).
 DEFAULT_INPUT_LIMIT = 16 * 1024 ** 3
 GZIP_MAGIC = b"\x1f\x8b"
+# Decompressed bytes returned by one zlib call, and compressed bytes given to it (see the docstring).
 _CHUNK = 1 << 20
+_INPUT_SLICE = 1 << 16
 
 
 def path_kind(st: os.stat_result) -> str:
@@ -131,29 +135,34 @@ def read_regular_file(path: str | os.PathLike, *, max_bytes: int | None = None) 
 
 def gunzip(data: bytes, name: str, limit: int | None = None) -> bytes:
     """The decompressed content of gzip ``data`` (every member); ParseError when the stream is
-    corrupt or truncated, or decompresses to more than ``limit`` bytes (default ``input_limit()``)."""
+    corrupt or truncated, or decompresses to more than ``limit`` bytes (default ``input_limit()``).
+
+    The input goes to zlib in slices of ``_INPUT_SLICE`` bytes (module docstring)."""
     limit = input_limit() if limit is None else limit
+    view = memoryview(data)
     out: list[bytes] = []
     total = 0
-    rest = data
+    pos = 0
     try:
-        while rest:
+        while pos < len(view):
             d = zlib.decompressobj(16 + zlib.MAX_WBITS)   # one gzip member
-            src = rest
-            while True:
-                chunk = d.decompress(src, _CHUNK)
-                total += len(chunk)
-                if total > limit:
-                    raise too_large(name, f"more than {limit} (decompressed)", limit)
-                out.append(chunk)
-                src = d.unconsumed_tail
-                if d.eof or not (src or chunk):
-                    break
-            if not d.eof:
-                raise ParseError(name, None, "truncated gzip data (the stream ends before its end marker)")
-            rest = d.unused_data
-            if rest and not rest.startswith(GZIP_MAGIC):
-                if rest.strip(b"\0"):
+            while not d.eof:
+                if pos >= len(view):
+                    raise ParseError(name, None, "truncated gzip data (the stream ends before its end marker)")
+                src: bytes | memoryview = view[pos: pos + _INPUT_SLICE]
+                pos += len(src)
+                while True:
+                    chunk = d.decompress(src, _CHUNK)
+                    total += len(chunk)
+                    if total > limit:
+                        raise too_large(name, f"more than {limit} (decompressed)", limit)
+                    out.append(chunk)
+                    src = d.unconsumed_tail               # at most one slice
+                    if d.eof or not (src or chunk):
+                        break
+            pos -= len(d.unused_data)                     # the next member starts in this slice
+            if pos < len(view) and view[pos: pos + 2] != GZIP_MAGIC:
+                if bytes(view[pos:]).strip(b"\0"):
                     raise ParseError(name, None, "trailing data after the gzip stream")
                 break
     except zlib.error as exc:
