@@ -9,16 +9,24 @@ that cannot be fetched are not told to fetch; a symbolic link loop is called one
 """
 from __future__ import annotations
 
+import errno
 import gzip
+import io
+import os
+import subprocess
+import sys
 import zlib
 from pathlib import Path
 
 import numpy as np
 import pytest
 
-from posecrb.core import inputs
-from posecrb.core.errors import ParseError
+from posecrb.core import inputs, outputs
+from posecrb.core.errors import OutputError, ParseError
 from posecrb.core.inputs import gunzip
+from posecrb.core.outputs import atomic_write, escape_surrogates, write_text
+
+from .hostile.corpus import graph2, text
 
 REPO = Path(__file__).resolve().parents[1]
 
@@ -62,3 +70,47 @@ def test_gunzip_members_across_slice_boundaries_match_pythons_gzip(cut):
     second = b"second member " * 1000
     members = gzip.compress(first, compresslevel=0) + gzip.compress(second)
     assert gunzip(members + b"\0" * 300, "x.gz") == gzip.decompress(members) == first + second
+
+
+# ---------------------------------------------------------------- writers keep the first error
+class _FullDisk(io.FileIO):
+    def write(self, b):
+        raise OSError(errno.ENOSPC, os.strerror(errno.ENOSPC))
+
+
+@pytest.mark.parametrize("mode, size", [("w", 10), ("wb", 10), ("wb", 1 << 20)])
+def test_a_full_disk_is_one_output_error_naming_the_path(tmp_path, monkeypatch, mode, size):
+    """The OutputError raised when the flush failed was replaced by the same OSError raised again when
+    the file was closed (`internal error: OSError: [Errno 28]`). Small writes fail at the flush, large
+    ones in the body's own write; both are the first error, and nothing is left."""
+    monkeypatch.setattr(outputs, "RAW_FILE", _FullDisk)
+    target = tmp_path / "r.out"
+    with pytest.raises(OutputError, match=f"cannot write {target}: No space left on device") as exc:
+        with atomic_write(target, mode) as fh:
+            fh.write("x" * size if mode == "w" else b"x" * size)
+    assert isinstance(exc.value.__context__, (OSError, type(None)))
+    assert list(tmp_path.iterdir()) == []
+
+
+# ---------------------------------------------------------------- undecodable file names
+def test_undecodable_bytes_are_written_escaped():
+    name = os.fsdecode(b"caf\xe9.g2o")
+    assert escape_surrogates(name) == "caf\\xe9.g2o" and escape_surrogates("café") == "café"
+
+
+def test_text_outputs_escape_undecodable_bytes(tmp_path):
+    name = os.fsdecode(b"caf\xe9.g2o")
+    write_text(tmp_path / "t.md", f"| {name} | é |\n")
+    assert (tmp_path / "t.md").read_text(encoding="utf-8") == "| caf\\xe9.g2o | é |\n"
+
+
+@pytest.mark.parametrize("fmt", ["csv", "markdown", "json"])
+def test_stdout_shows_a_non_utf8_file_name_under_a_strict_utf8_terminal(tmp_path, fmt):
+    """`bounds caf\\xe9.g2o --format csv` died with UnicodeEncodeError where stdout is strict UTF-8."""
+    g = tmp_path / os.fsdecode(b"caf\xe9.g2o")
+    g.write_text(text(graph2()))
+    env = {**os.environ, "PYTHONPATH": str(REPO), "PYTHONIOENCODING": "utf-8:strict", "LANG": "C.UTF-8"}
+    proc = subprocess.run([sys.executable, "-m", "posecrb", "bounds", os.fsencode(g), "--format", fmt],
+                          capture_output=True, env=env, timeout=120)
+    assert proc.returncode == 0, proc.stderr
+    assert b"caf\\xe9" in proc.stdout or b"caf\\\\xe9" in proc.stdout or b"caf\\udce9" in proc.stdout

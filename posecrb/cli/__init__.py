@@ -5,13 +5,16 @@ Exceptions become exit codes in exactly one place (``main``):
 130 interrupted (SIGINT), 143 terminated (SIGTERM; temporaries are removed first).
 Python warnings (numpy's RuntimeWarning included) never reach the user as raw text:
 ``main`` routes each through the posecrb logger as one line on stderr (filters such as
-``-W error::RuntimeWarning`` still apply, which is how the tests prove none occurs).
+``-W error::RuntimeWarning`` still apply, which is how the tests prove none occurs). stdout and
+stderr show a byte of a file name that is not valid UTF-8 as ``\\xNN`` (the output layer's
+``posecrb-escape`` handler) in every locale, instead of failing.
 Subcommands live in ``posecrb.cli.commands.<name>``, each module exposing a click command as
 ``command``; they are listed in ``COMMANDS`` and imported only when invoked, so ``posecrb --help``
 loads neither numpy/scipy nor numba.
 """
 from __future__ import annotations
 
+import contextlib
 import importlib
 import importlib.abc
 import importlib.machinery
@@ -21,14 +24,14 @@ import os
 import sys
 import types
 import warnings
-from collections.abc import Sequence
+from collections.abc import Iterator, Sequence
 from typing import TextIO
 
 import click
 
 from .._version import __version__
 from ..core.errors import ArgumentError, PosecrbError, UsageError
-from ..core.outputs import remove_temporaries
+from ..core.outputs import ESCAPE, remove_temporaries
 from .signals import Terminated, handle_sigterm
 
 log = logging.getLogger("posecrb")
@@ -39,6 +42,25 @@ class _StderrHandler(logging.Handler):
         level = ("error" if record.levelno >= logging.ERROR else
                  "warning" if record.levelno >= logging.WARNING else "info")
         click.echo(f"posecrb: {level}: {record.getMessage()}", err=True)
+
+
+@contextlib.contextmanager
+def _escaped_streams() -> Iterator[None]:
+    """While a command runs, stdout and stderr escape undecodable file-name bytes (module docstring);
+    undone afterwards."""
+    restore = []
+    for stream in (sys.stdout, sys.stderr):
+        errors, reconfigure = getattr(stream, "errors", None), getattr(stream, "reconfigure", None)
+        if errors is not None and reconfigure is not None:
+            with contextlib.suppress(ValueError, OSError):
+                reconfigure(errors=ESCAPE)
+                restore.append((reconfigure, errors))
+    try:
+        yield
+    finally:
+        for reconfigure, errors in restore:
+            with contextlib.suppress(ValueError, OSError):
+                reconfigure(errors=errors)
 
 
 def _configure_logging(verbose: int, quiet: bool) -> None:
@@ -196,7 +218,7 @@ def _defer_unused_imports() -> None:
 def main(argv: list[str] | None = None) -> int:
     """Entry point: run the CLI and map every exception to an exit code."""
     _defer_unused_imports()
-    with warnings.catch_warnings(), handle_sigterm():
+    with warnings.catch_warnings(), handle_sigterm(), _escaped_streams():
         warnings.showwarning = _route_warning      # restored by catch_warnings on exit
         try:
             return _main(argv)

@@ -17,19 +17,27 @@ outputs (a folder swapped in whole) on top of this module.
   ``KeyboardInterrupt`` and the CLI's exception for SIGTERM included -- the temporary is removed
   and the previous file, if any, is untouched.
 * A write the system refuses (disk full, permission denied, read-only file system) is an
-  ``OutputError`` with the path and the reason (exit 1), never a traceback.
+  ``OutputError`` with the path and the reason (exit 1), never a traceback. The *first* error is the
+  one reported: a buffered write that failed at its flush fails again when the file is closed, and
+  that second failure is discarded, not raised in place of the first.
+* Text is UTF-8. A file name that is not valid UTF-8 reaches Python as lone surrogates
+  (``os.fsdecode``); written into text (a table, a JSON file, the terminal) each undecodable byte is
+  shown as ``\\xNN`` (the ``posecrb-escape`` error handler, ``escape_surrogates``).
 * ``make_output_dir`` creates an output directory (one level: its parent must exist).
 """
 from __future__ import annotations
 
+import codecs
 import contextlib
 import errno
+import io
 import os
+import re
 import stat
 import tempfile
 from collections.abc import Callable, Iterator, Sequence
 from pathlib import Path
-from typing import IO, Any
+from typing import IO
 
 from .errors import OutputError, UsageError
 from .inputs import path_kind
@@ -44,6 +52,38 @@ GRAPH_EXTENSIONS = (".g2o",)           # graphs written by posecrb (the g2o writ
 _STORAGE_ERRNOS = frozenset(getattr(errno, name) for name in (
     "ENOSPC", "EDQUOT", "EFBIG", "EROFS", "EACCES", "EPERM", "EIO", "ENOENT", "ENOTDIR", "EISDIR",
     "ENAMETOOLONG", "ELOOP", "EEXIST", "EXDEV", "EBUSY", "ETXTBSY") if hasattr(errno, name))
+
+# The raw file under every write's buffer. Tests put a class here whose ``write`` fails the way a
+# full disk does, so that the buffering above it behaves as with a real device.
+RAW_FILE: Callable[..., io.FileIO] = io.FileIO
+
+# ---------------------------------------------------------------------------- undecodable names
+ESCAPE = "posecrb-escape"
+_SURROGATE = re.compile("[\ud800-\udfff]")
+
+
+def _escaped(char: str) -> str:
+    code = ord(char)
+    return f"\\x{code - 0xDC00:02x}" if 0xDC80 <= code <= 0xDCFF else f"\\u{code:04x}"
+
+
+def escape_surrogates(text: str) -> str:
+    """``text`` with each lone surrogate (an undecodable byte of a file name, ``os.fsdecode``) as
+    ``\\xNN``; other text unchanged. For libraries that need valid text (matplotlib's titles)."""
+    return _SURROGATE.sub(lambda m: _escaped(m.group()), text) if not text.isascii() else text
+
+
+def _escape_error(exc: UnicodeError) -> tuple[str, int]:
+    """Codec error handler ``posecrb-escape``: surrogates as ``\\xNN`` (``_escaped``), any other
+    character the encoding lacks as ``\\uNNNN`` (text shown on a terminal of another encoding)."""
+    if not isinstance(exc, UnicodeEncodeError):
+        raise exc
+    return "".join(_escaped(c) if _SURROGATE.match(c) else f"\\u{ord(c):04x}" if ord(c) <= 0xFFFF
+                   else f"\\U{ord(c):08x}" for c in exc.object[exc.start: exc.end]), exc.end
+
+
+codecs.register_error(ESCAPE, _escape_error)
+
 
 # ---------------------------------------------------------------------------- checks
 def same_file(a: str | os.PathLike, b: str | os.PathLike) -> bool:
@@ -244,20 +284,35 @@ def _target(path: str | os.PathLike) -> str:
     return target
 
 
+def _storage_error(path: str | os.PathLike, exc: OSError) -> OutputError:
+    return OutputError(os.fspath(path), exc.strerror or str(exc))
+
+
+def _discard(fh: IO, raw: io.FileIO) -> None:
+    """Close a handle whose write already failed, keeping that first error: closing flushes the
+    buffer again, which fails again, and that second error is not the news."""
+    with contextlib.suppress(OSError, ValueError):
+        fh.close()
+    if not raw.closed:
+        with contextlib.suppress(OSError):
+            raw.close()
+
+
 @contextlib.contextmanager
 def atomic_write(path: str | os.PathLike, mode: str = "w", *, encoding: str | None = "utf-8",
                  newline: str | None = None, suffix: str = ".tmp",
                  before_replace: Callable[[Path], None] | None = None) -> Iterator[IO]:
     """Open a temporary next to ``path`` for writing; on a normal exit it replaces ``path``.
 
-    ``mode`` is ``"w"`` (text) or ``"wb"``.
+    ``mode`` is ``"w"`` (text; undecodable file-name bytes escaped, module docstring) or ``"wb"``.
     The temporary is ``.<name>.<random><suffix>`` in the same directory (so the rename never crosses
     a file system), created by ``mkstemp`` (``O_EXCL``: never an existing file of the user's, never
     through a symbolic link), flushed and fsynced before ``os.replace``. ``before_replace(temporary)``
     runs after the fsync and may raise to cancel the write (``fetch`` verifies the checksum there).
     On any exception, KeyboardInterrupt and SIGTERM's included, the temporary is removed and ``path``
     is untouched. The system refusing the write (full disk, permissions, read-only file system,
-    missing directory) is an ``OutputError`` naming ``path``.
+    missing directory) is an ``OutputError`` naming ``path``: the first such error, never the
+    repetition of it when the file is closed.
     """
     if mode not in ("w", "wb"):
         raise UsageError(f"atomic_write mode must be 'w' or 'wb', not {mode!r}")
@@ -269,29 +324,38 @@ def atomic_write(path: str | os.PathLike, mode: str = "w", *, encoding: str | No
     try:
         fd, tmp = tempfile.mkstemp(prefix=prefix, suffix=suffix, dir=directory)
     except OSError as exc:
-        raise OutputError(os.fspath(path), exc.strerror or str(exc)) from None
+        raise _storage_error(path, exc) from None
     _LIVE.add(tmp)
     try:
-        kwargs: dict[str, Any] = {} if mode == "wb" else {"encoding": encoding, "newline": newline}
-        with os.fdopen(fd, mode, **kwargs) as fh:
+        raw = RAW_FILE(fd, "wb", closefd=True)
+        buffered = io.BufferedWriter(raw)
+        fh: IO = buffered if mode == "wb" else io.TextIOWrapper(buffered, encoding=encoding, errors=ESCAPE,
+                                                                 newline=newline)
+        closed = False
+        try:
             try:
                 yield fh
             except OSError as exc:
                 if exc.errno in _STORAGE_ERRNOS and exc.filename is None:
-                    raise OutputError(os.fspath(path), exc.strerror or str(exc)) from None
+                    raise _storage_error(path, exc) from None
                 raise
             try:
                 fh.flush()
                 os.fsync(fh.fileno())
+                fh.close()
+                closed = True
             except OSError as exc:
-                raise OutputError(os.fspath(path), exc.strerror or str(exc)) from None
+                raise _storage_error(path, exc) from None
+        finally:
+            if not closed:
+                _discard(fh, raw)
         if before_replace is not None:
             before_replace(Path(tmp))
         try:
             os.chmod(tmp, _file_mode(target))
             os.replace(tmp, target)
         except OSError as exc:
-            raise OutputError(os.fspath(path), exc.strerror or str(exc)) from None
+            raise _storage_error(path, exc) from None
         fsync_dir(directory)
     except BaseException:
         with contextlib.suppress(OSError):
@@ -302,7 +366,7 @@ def atomic_write(path: str | os.PathLike, mode: str = "w", *, encoding: str | No
 
 
 def write_text(path: str | os.PathLike, text: str) -> Path:
-    """Atomically write ``text`` (UTF-8) to ``path``."""
+    """Atomically write ``text`` (UTF-8, undecodable file-name bytes escaped) to ``path``."""
     with atomic_write(path, "w") as fh:
         fh.write(text)
     return Path(path)
@@ -323,6 +387,7 @@ def remove_temporaries() -> None:
         _LIVE.discard(tmp)
 
 
-__all__ = ["GRAPH_EXTENSIONS", "atomic_write", "check_extension", "check_output_dir", "check_output_file",
-           "checked_output_name", "default_mode", "fsync_dir", "make_output_dir", "name_max", "remove_temporaries",
-           "same_file", "scratch_dir", "write_bytes", "write_text"]
+__all__ = ["ESCAPE", "GRAPH_EXTENSIONS", "RAW_FILE", "atomic_write", "check_extension", "check_output_dir",
+           "check_output_file", "checked_output_name", "default_mode", "escape_surrogates", "fsync_dir",
+           "make_output_dir", "name_max", "remove_temporaries", "same_file", "scratch_dir", "write_bytes",
+           "write_text"]

@@ -11,10 +11,31 @@ import os
 from pathlib import Path
 from typing import Any
 
-from ..core.outputs import atomic_write, check_extension
+from ..core.outputs import atomic_write, check_extension, escape_surrogates
 
 # The format follows the extension; matplotlib writes each without a display.
 FIGURE_EXTENSIONS = (".png", ".svg", ".pdf")
+
+
+def _escape_texts(fig: Any) -> None:
+    """Every text of ``fig`` as valid text: a title, label or tick label built from a file name that
+    is not valid UTF-8 (lone surrogates, ``os.fsdecode``) shows each undecodable byte as ``\\xNN``
+    instead of failing in the font renderer. Tick labels are made by the axes' formatters only when
+    the figure is drawn, so each formatter's output is escaped as it is made."""
+    from matplotlib.axis import Axis  # noqa: PLC0415 -- matplotlib only for figures
+    from matplotlib.text import Text  # noqa: PLC0415 -- matplotlib only for figures
+
+    for artist in fig.findobj(Text):
+        text = artist.get_text()
+        if not text.isascii():
+            escaped = escape_surrogates(text)
+            if escaped != text:
+                artist.set_text(escaped)
+    for axis in fig.findobj(Axis):
+        for formatter in {id(f): f for f in (axis.get_major_formatter(), axis.get_minor_formatter())}.values():
+            ticks, offset = formatter.format_ticks, formatter.get_offset
+            formatter.format_ticks = lambda values, ticks=ticks: [escape_surrogates(t) for t in ticks(values)]
+            formatter.get_offset = lambda offset=offset: escape_surrogates(offset())
 
 
 def save_figure(fig: Any, path: str | os.PathLike, dpi: int = 100) -> Path:
@@ -26,6 +47,7 @@ def save_figure(fig: Any, path: str | os.PathLike, dpi: int = 100) -> Path:
     p = Path(path)
     try:
         check_extension(p, FIGURE_EXTENSIONS)
+        _escape_texts(fig)
         fig.tight_layout()
         with atomic_write(p, "wb") as fh, plt.rc_context({"svg.fonttype": "none"}):
             fig.savefig(fh, dpi=dpi, format=p.suffix[1:].lower())
