@@ -15,16 +15,21 @@ import io
 import os
 import subprocess
 import sys
+import tracemalloc
+import zipfile
 import zlib
 from pathlib import Path
 
 import numpy as np
 import pytest
 
-from posecrb.core import inputs, outputs
-from posecrb.core.errors import OutputError, ParseError
+import posecrb
+from posecrb.core import archives, inputs, outputs
+from posecrb.core.archives import read_npz
+from posecrb.core.errors import ArgumentError, OutputError, ParseError
 from posecrb.core.inputs import gunzip
 from posecrb.core.outputs import atomic_write, escape_surrogates, write_text
+from posecrb.core.result import Result
 
 from .hostile.corpus import graph2, text
 
@@ -70,6 +75,122 @@ def test_gunzip_members_across_slice_boundaries_match_pythons_gzip(cut):
     second = b"second member " * 1000
     members = gzip.compress(first, compresslevel=0) + gzip.compress(second)
     assert gunzip(members + b"\0" * 300, "x.gz") == gzip.decompress(members) == first + second
+
+
+# ---------------------------------------------------------------- .npz archives
+def _npz(tmp_path: Path, name: str = "r.npz", **arrays) -> Path:
+    path = tmp_path / name
+    np.savez(path, **arrays)
+    return path
+
+
+def test_npz_member_bomb_is_refused_before_it_is_inflated(tmp_path, monkeypatch):
+    """A small archive whose member inflates to 64 MiB loaded at that size (3.2 MB -> 3.36 GB RSS)."""
+    bomb = tmp_path / "bomb.npz"
+    with zipfile.ZipFile(bomb, "w", zipfile.ZIP_DEFLATED) as zf:
+        buf = io.BytesIO()
+        np.lib.format.write_array(buf, np.zeros(8 << 20))          # 64 MiB of zeros
+        zf.writestr("rot.npy", buf.getvalue())
+    assert bomb.stat().st_size < 1 << 20
+    monkeypatch.setattr(archives, "available_memory", lambda: archives.ARCHIVE_EXPANSION * (4 << 20))
+    tracemalloc.start()
+    try:
+        for load in (read_npz, posecrb.SolveResult.load):
+            with pytest.raises(ParseError, match="need about 4 times as much memory"):
+                load(bomb)
+        peak = tracemalloc.get_traced_memory()[1]
+    finally:
+        tracemalloc.stop()
+    assert peak < 8 << 20
+
+
+def test_npz_member_inflating_beyond_its_declared_size_is_refused(tmp_path):
+    path = _npz(tmp_path, a=np.arange(1000.0))
+    raw = bytearray(path.read_bytes())
+    with zipfile.ZipFile(path) as zf:
+        info = zf.getinfo("a.npy")
+    small = (200).to_bytes(4, "little")
+    raw[info.header_offset + 22: info.header_offset + 26] = small          # local header: uncompressed size
+    central = raw.rindex(b"PK\x01\x02")
+    raw[central + 24: central + 28] = small                                 # central directory: the same
+    path.write_bytes(bytes(raw))
+    with pytest.raises(ParseError, match="a.npy"):
+        read_npz(path)
+
+
+def test_npz_with_python_objects_is_refused(tmp_path):
+    path = _npz(tmp_path, a=np.array([{"x": 1}], dtype=object))
+    with pytest.raises(ParseError, match="Python objects"):
+        read_npz(path)
+
+
+def test_npz_header_that_disagrees_with_its_data_is_refused(tmp_path):
+    path = tmp_path / "h.npz"
+    header = io.BytesIO()
+    np.lib.format.write_array_header_1_0(header, {"descr": "<f8", "fortran_order": False, "shape": (10 ** 12,)})
+    with zipfile.ZipFile(path, "w") as zf:
+        zf.writestr("a.npy", np.lib.format.magic(1, 0) + header.getvalue()[8:] + b"\0" * 64)
+    with pytest.raises(ParseError, match="declares 8000000000000 bytes"):
+        read_npz(path)
+
+
+def test_npz_arrays_come_back_as_saved(tmp_path):
+    arrays = {"a": np.arange(12.0).reshape(3, 4), "f": np.asfortranarray(np.eye(3)), "s": np.array("text"),
+              "i": np.array([1, 2], dtype=np.int32), "e": np.empty((0, 3))}
+    got = read_npz(_npz(tmp_path, **arrays))
+    assert got.keys() == arrays.keys()
+    for k, v in arrays.items():
+        assert got[k].dtype == v.dtype and got[k].shape == v.shape
+        np.testing.assert_array_equal(got[k], v)
+
+
+def _results(tmp_path_factory) -> list[Result]:
+    """One instance of every public result type that saves and loads (``Result``), from a small graph:
+    the functions' results and the results nested in them."""
+    g = tmp_path_factory.mktemp("results") / "g.g2o"
+    g.write_text(text(graph2()))
+    made = [posecrb.solve(g), posecrb.bounds(g), posecrb.fim(g), posecrb.crlb(g), posecrb.select(g, budget=1)]
+    nested = [v for r in made for v in vars(r).values() if isinstance(v, Result)]
+    kinds = {getattr(posecrb, n) for n in posecrb.__all__
+             if isinstance(getattr(posecrb, n), type) and issubclass(getattr(posecrb, n), Result)}
+    by_kind = {type(r): r for r in made + nested}
+    assert set(by_kind) >= kinds, kinds - set(by_kind)
+    return [by_kind[k] for k in sorted(kinds, key=lambda k: k.__name__)]
+
+
+@pytest.fixture(scope="module")
+def results(tmp_path_factory) -> list[Result]:
+    return _results(tmp_path_factory)
+
+
+def test_load_of_what_is_not_a_result_file_is_a_parse_error(tmp_path, results):
+    """Result.load of a .npy, a truncated zip, an empty file or a g2o file raised TypeError, BadZipFile,
+    EOFError or pickle's ValueError."""
+    np.save(tmp_path / "a.npy", np.arange(3))
+    (tmp_path / "empty.npz").write_bytes(b"")
+    (tmp_path / "g.g2o").write_text(text(graph2()))
+    for res in results:
+        saved = Path(res.save(tmp_path / f"{type(res).__name__}.npz"))
+        assert type(res).load(saved).to_dict() == res.to_dict()
+        trunc = tmp_path / "trunc.npz"
+        trunc.write_bytes(saved.read_bytes()[: saved.stat().st_size // 2])
+        for path, words in ((tmp_path / "a.npy", "not a .npz archive"), (tmp_path / "empty.npz", "an empty file"),
+                            (trunc, "not a .npz archive"), (tmp_path / "g.g2o", "not a .npz archive"),
+                            (tmp_path, "is a directory"), (str(tmp_path / "x\0.npz"), "NUL")):
+            with pytest.raises(ParseError, match=words):
+                type(res).load(path)
+
+
+def test_save_refuses_none_the_empty_path_and_devices(tmp_path, monkeypatch, results):
+    """save(None) raised TypeError; save('') wrote a hidden '.npz'; save('/dev/null') wrote /dev/null.npz."""
+    monkeypatch.chdir(tmp_path)
+    for res in results:
+        for bad, words in ((None, "is not a file name"), ("", "is not a file name"),
+                           ("/dev/null", "is a character device"), (tmp_path, "is a directory"),
+                           (str(tmp_path / "x\0"), "NUL")):
+            with pytest.raises(ArgumentError, match=words):
+                res.save(bad)
+    assert list(tmp_path.iterdir()) == [] and not os.path.exists("/dev/null.npz")
 
 
 # ---------------------------------------------------------------- writers keep the first error

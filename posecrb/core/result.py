@@ -31,7 +31,6 @@ A field of type ``Status`` named ``<key>_status`` follows ``<key>`` and is rende
 from __future__ import annotations
 
 import dataclasses
-import io
 import json
 import math
 import os
@@ -40,8 +39,8 @@ from typing import Any, TypeVar
 
 import numpy as np
 
+from .archives import read_npz
 from .errors import ArgumentError, ParseError, UsageError
-from .inputs import read_regular_file
 from .outputs import atomic_write, check_output_file
 from .status import OK, Status, worst
 
@@ -216,6 +215,7 @@ class Result:
 
         The file holds ``to_dict()`` as JSON (key ``result``), the class name (``result_type``)
         and the big arrays; ``load`` reads it back. Returns the path written."""
+        check_output_argument("path", path)      # as given: not None, empty, a device or a directory
         target = npz_path(os.fspath(path))
         check_output_argument("path", target)
         payload = {"result": np.array(json.dumps(self.to_dict(), allow_nan=False)),
@@ -228,11 +228,7 @@ class Result:
     def load(cls: type[R], path: str | os.PathLike[str]) -> R:
         """The result ``save`` wrote to ``path`` (read through the input layer)."""
         name = os.fspath(path)
-        try:
-            with np.load(io.BytesIO(read_regular_file(name)), allow_pickle=False) as npz:
-                data = {k: npz[k] for k in npz.files}
-        except (ValueError, OSError) as exc:
-            raise ParseError(name, None, f"not a posecrb result file ({exc})") from None
+        data = read_npz(name)       # the input layer: capped inflation, no pickles, ParseError
         kind = str(data.pop("result_type", ""))
         if kind != cls.__name__ or "result" not in data:
             raise ParseError(name, None, f"holds a {kind or 'non-posecrb'} result, not a {cls.__name__}")
