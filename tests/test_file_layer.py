@@ -24,9 +24,11 @@ import numpy as np
 import pytest
 
 import posecrb
+from posecrb import io as graph_io
+from posecrb.cli import main
 from posecrb.core import archives, inputs, outputs
 from posecrb.core.archives import read_npz
-from posecrb.core.errors import ArgumentError, OutputError, ParseError
+from posecrb.core.errors import ArgumentError, OutputError, ParseError, PosecrbError
 from posecrb.core.inputs import gunzip
 from posecrb.core.outputs import atomic_write, escape_surrogates, write_text
 from posecrb.core.result import Result
@@ -193,6 +195,26 @@ def test_save_refuses_none_the_empty_path_and_devices(tmp_path, monkeypatch, res
     assert list(tmp_path.iterdir()) == [] and not os.path.exists("/dev/null.npz")
 
 
+# ---------------------------------------------------------------- NUL characters in paths
+def test_a_nul_character_in_any_path_is_a_clean_error(tmp_path):
+    """posecrb.load('a\\0b') raised ValueError: embedded null byte; so did every function that resolves
+    a dataset, and data_dir."""
+    g = tmp_path / "g.g2o"
+    g.write_text(text(graph2()))
+    nul = str(tmp_path / "a\0b.g2o")
+    calls = [lambda: posecrb.load(nul), lambda: posecrb.bounds(nul), lambda: posecrb.fim(nul),
+             lambda: posecrb.crlb(nul), lambda: posecrb.solve(nul), lambda: posecrb.select(nul, budget=1),
+             lambda: posecrb.timeline(nul), lambda: posecrb.bounds("tinyGrid3D", data_dir=str(tmp_path / "\0")),
+             lambda: posecrb.solve(g, out=nul), lambda: posecrb.select(g, budget=1, out=nul),
+             lambda: posecrb.fim(g, estimate=nul), lambda: posecrb.timeline(g, plot=str(tmp_path / "a\0.png")),
+             lambda: graph_io.load(nul), lambda: graph_io.save(posecrb.load(g), nul),
+             lambda: graph_io.write_g2o(posecrb.load(g), nul)]
+    for k, call in enumerate(calls):
+        with pytest.raises(PosecrbError):
+            call()
+        assert sorted(p.name for p in tmp_path.iterdir()) == ["g.g2o"], k
+
+
 # ---------------------------------------------------------------- writers keep the first error
 class _FullDisk(io.FileIO):
     def write(self, b):
@@ -235,3 +257,48 @@ def test_stdout_shows_a_non_utf8_file_name_under_a_strict_utf8_terminal(tmp_path
                           capture_output=True, env=env, timeout=120)
     assert proc.returncode == 0, proc.stderr
     assert b"caf\\xe9" in proc.stdout or b"caf\\\\xe9" in proc.stdout or b"caf\\udce9" in proc.stdout
+
+
+# ---------------------------------------------------------------- messages
+def test_a_comma_list_is_not_told_to_fetch_it(tmp_path, capsys, monkeypatch):
+    """`bounds intel,MIT` suggested `posecrb datasets fetch intel,MIT`, which cannot work."""
+    monkeypatch.setenv("POSECRB_DATA", str(tmp_path))
+    capsys.readouterr()
+    assert main(["bounds", "intel,MIT"]) == 1
+    err = capsys.readouterr().err
+    assert "datasets fetch" not in err and "give one dataset per argument" in err and "(intel MIT)" in err
+    assert main(["bounds", "no-such-thing"]) == 1
+    err = capsys.readouterr().err
+    assert "datasets fetch" not in err and "posecrb datasets list" in err
+    assert main(["bounds", "intel"]) == 1                     # in the manifest, not on the path: fetch it
+    assert "run `posecrb datasets fetch intel`" in capsys.readouterr().err
+
+
+def test_a_symbolic_link_loop_is_called_one(tmp_path, capsys, monkeypatch):
+    """A symlink loop in POSECRB_DATA was called "dangling"."""
+    a, b = tmp_path / "a", tmp_path / "b"
+    a.symlink_to(b)
+    b.symlink_to(a)
+    monkeypatch.setenv("POSECRB_DATA", str(a))
+    capsys.readouterr()
+    assert main(["bounds", "intel"]) == 2
+    assert f"$POSECRB_DATA entry {a} is a symbolic link loop" in capsys.readouterr().err
+    monkeypatch.delenv("POSECRB_DATA")
+    with pytest.raises(ParseError, match="symbolic link loop"):
+        inputs.read_input(a)
+    with pytest.raises(PosecrbError, match="symbolic link loop"):
+        outputs.check_output_dir(a)
+
+
+def test_matplotlibs_warnings_reach_stderr_as_posecrb_lines(tmp_path):
+    """Under a read-only $HOME matplotlib's cache warning reached stderr raw."""
+    g = tmp_path / "g.g2o"
+    g.write_text(text(graph2()))
+    env = {k: v for k, v in os.environ.items() if k not in ("MPLCONFIGDIR", "XDG_CONFIG_HOME", "XDG_CACHE_HOME")}
+    env.update(HOME="/dev/null", PYTHONPATH=str(REPO))
+    proc = subprocess.run([sys.executable, "-m", "posecrb", "timeline", str(g), "--plot", str(tmp_path / "t.png"),
+                           "--format", "json"], capture_output=True, text=True, env=env, timeout=300)
+    assert proc.returncode == 0, proc.stderr
+    lines = proc.stderr.splitlines()
+    assert any("matplotlib" in ln for ln in lines), proc.stderr    # the condition is reproduced
+    assert all(ln.startswith("posecrb: ") for ln in lines), proc.stderr

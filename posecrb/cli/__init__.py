@@ -5,7 +5,8 @@ Exceptions become exit codes in exactly one place (``main``):
 130 interrupted (SIGINT), 143 terminated (SIGTERM; temporaries are removed first).
 Python warnings (numpy's RuntimeWarning included) never reach the user as raw text:
 ``main`` routes each through the posecrb logger as one line on stderr (filters such as
-``-W error::RuntimeWarning`` still apply, which is how the tests prove none occurs). stdout and
+``-W error::RuntimeWarning`` still apply, which is how the tests prove none occurs); so are the
+warnings other libraries log (matplotlib's about a read-only home directory, say). stdout and
 stderr show a byte of a file name that is not valid UTF-8 as ``\\xNN`` (the output layer's
 ``posecrb-escape`` handler) in every locale, instead of failing.
 Subcommands live in ``posecrb.cli.commands.<name>``, each module exposing a click command as
@@ -44,10 +45,25 @@ class _StderrHandler(logging.Handler):
         click.echo(f"posecrb: {level}: {record.getMessage()}", err=True)
 
 
+class _LibraryLogHandler(logging.Handler):
+    """Warnings other libraries log (to the root logger's handlers), as one posecrb line each."""
+
+    def __init__(self) -> None:
+        super().__init__(logging.WARNING)
+
+    def emit(self, record: logging.LogRecord) -> None:
+        if record.name == "posecrb" or record.name.startswith("posecrb."):
+            return                                  # posecrb's own records have their handler
+        log.warning("%s: %s", record.name.split(".")[0], " ".join(record.getMessage().split()))
+
+
 @contextlib.contextmanager
-def _escaped_streams() -> Iterator[None]:
-    """While a command runs, stdout and stderr escape undecodable file-name bytes (module docstring);
-    undone afterwards."""
+def _routed_output() -> Iterator[None]:
+    """While a command runs: other libraries' log warnings through posecrb's logger, and stdout and
+    stderr escaping undecodable file-name bytes (module docstring); both undone afterwards."""
+    handler = _LibraryLogHandler()
+    root = logging.getLogger()
+    root.addHandler(handler)
     restore = []
     for stream in (sys.stdout, sys.stderr):
         errors, reconfigure = getattr(stream, "errors", None), getattr(stream, "reconfigure", None)
@@ -58,6 +74,7 @@ def _escaped_streams() -> Iterator[None]:
     try:
         yield
     finally:
+        root.removeHandler(handler)
         for reconfigure, errors in restore:
             with contextlib.suppress(ValueError, OSError):
                 reconfigure(errors=errors)
@@ -218,7 +235,7 @@ def _defer_unused_imports() -> None:
 def main(argv: list[str] | None = None) -> int:
     """Entry point: run the CLI and map every exception to an exit code."""
     _defer_unused_imports()
-    with warnings.catch_warnings(), handle_sigterm(), _escaped_streams():
+    with warnings.catch_warnings(), handle_sigterm(), _routed_output():
         warnings.showwarning = _route_warning      # restored by catch_warnings on exit
         try:
             return _main(argv)

@@ -80,7 +80,8 @@ class OutputError(PosecrbError):
 
 class DatasetNotFound(PosecrbError):
     """A bare dataset name found nowhere on the search path; the message lists the directories
-    searched and how to fetch the dataset.
+    searched and what else to do: fetch the dataset when the manifest knows the name (``advice``
+    replaces that hint for a name that cannot be fetched).
 
     Attributes
     ----------
@@ -99,13 +100,12 @@ class DatasetNotFound(PosecrbError):
     no-such-dataset
     """
 
-    def __init__(self, name: str, searched: list[str]):
+    def __init__(self, name: str, searched: list[str], advice: str | None = None):
         self.name, self.searched = name, searched
         hint = "; searched: " + ", ".join(searched) if searched else ""
-        super().__init__(
-            f"dataset {name!r} not found{hint}. "
-            f"Pass a path, set --data-dir or $POSECRB_DATA, or run `posecrb datasets fetch {shlex.quote(name)}`."
-        )
+        advice = advice or f"run `posecrb datasets fetch {shlex.quote(name)}`"
+        super().__init__(f"dataset {name!r} not found{hint}. "
+                         f"Pass a path, set --data-dir or $POSECRB_DATA, or {advice}.")
 
 
 class UsageError(PosecrbError, ValueError):

@@ -19,6 +19,7 @@ this module and ``posecrb.io.lines`` splits text inputs into lines and fields.
 """
 from __future__ import annotations
 
+import errno
 import hashlib
 import os
 import stat
@@ -51,6 +52,16 @@ def path_kind(st: os.stat_result) -> str:
         if test(mode):
             return name
     return "not a regular file"
+
+
+def unresolvable(exc: OSError) -> str:
+    """What a path whose ``stat`` failed with ``exc`` is, for a path that exists as a name
+    (``os.path.lexists``): a symbolic link loop is not a dangling link."""
+    if exc.errno == errno.ELOOP:
+        return "a symbolic link loop"
+    if exc.errno in (errno.ENOENT, errno.ENOTDIR):
+        return "a dangling symbolic link"
+    return f"unreadable ({exc.strerror or exc})"
 
 
 def checked_name(path: str | os.PathLike) -> str:
@@ -86,9 +97,12 @@ def _open_regular(name: str) -> tuple[IO[bytes], os.stat_result]:
     try:
         st = os.stat(name)
     except FileNotFoundError:
+        if os.path.lexists(name):
+            raise ParseError(name, None, "is a dangling symbolic link") from None
         raise ParseError(name, None, "no such file") from None
     except OSError as exc:
-        raise ParseError(name, None, f"cannot read file: {exc.strerror or exc}") from None
+        what = unresolvable(exc) if os.path.lexists(name) else f"unreadable ({exc.strerror or exc})"
+        raise ParseError(name, None, f"cannot read file: is {what}") from None
     if not stat.S_ISREG(st.st_mode):
         raise ParseError(name, None, f"is {path_kind(st)}, not a regular file")
     try:
@@ -193,4 +207,4 @@ def read_input(path: str | os.PathLike, *, max_bytes: int | None = None) -> Inpu
 
 
 __all__ = ["DEFAULT_INPUT_LIMIT", "GZIP_MAGIC", "INPUT_EXPANSION", "InputData", "check_input_file", "checked_name",
-           "gunzip", "input_limit", "path_kind", "read_input", "read_regular_file", "too_large"]
+           "gunzip", "input_limit", "path_kind", "read_input", "read_regular_file", "too_large", "unresolvable"]

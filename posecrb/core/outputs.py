@@ -40,7 +40,7 @@ from pathlib import Path
 from typing import IO
 
 from .errors import OutputError, UsageError
-from .inputs import path_kind
+from .inputs import path_kind, unresolvable
 
 # Temporaries of writes in progress; ``remove_temporaries`` deletes them (last resort of the
 # CLI when a signal arrives while a temporary is being created or renamed).
@@ -157,8 +157,8 @@ def _existing_kind(p: Path) -> str | None:
         return None
     try:
         st = os.stat(p)
-    except OSError:
-        return None
+    except OSError as exc:
+        return None if exc.errno == errno.ENOENT else unresolvable(exc)
     return None if stat.S_ISREG(st.st_mode) else path_kind(st)
 
 
@@ -207,8 +207,8 @@ def check_output_dir(path: str | os.PathLike, inputs: Sequence[str | os.PathLike
     if os.path.lexists(p):
         try:
             st = os.stat(p)
-        except OSError:
-            raise UsageError(f"{_shown(option, shown)}: is a dangling symbolic link, not a directory") from None
+        except OSError as exc:
+            raise UsageError(f"{_shown(option, shown)}: is {unresolvable(exc)}, not a directory") from None
         if not stat.S_ISDIR(st.st_mode):
             raise UsageError(f"{_shown(option, shown)}: is {path_kind(st)}, not a directory")
         _probe_writable(p, option, shown)
