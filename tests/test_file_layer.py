@@ -11,8 +11,12 @@ from __future__ import annotations
 
 import errno
 import gzip
+import hashlib
 import io
+import json
+import logging
 import os
+import signal
 import subprocess
 import sys
 import tracemalloc
@@ -26,9 +30,10 @@ import pytest
 import posecrb
 from posecrb import io as graph_io
 from posecrb.cli import main
-from posecrb.core import archives, inputs, outputs
+from posecrb.core import archives, folders, inputs, outputs
 from posecrb.core.archives import read_npz
 from posecrb.core.errors import ArgumentError, OutputError, ParseError, PosecrbError
+from posecrb.core.folders import MANIFEST, deferred_signals, output_folder
 from posecrb.core.inputs import gunzip
 from posecrb.core.outputs import atomic_write, escape_surrogates, write_text
 from posecrb.core.result import Result
@@ -257,6 +262,104 @@ def test_stdout_shows_a_non_utf8_file_name_under_a_strict_utf8_terminal(tmp_path
                           capture_output=True, env=env, timeout=120)
     assert proc.returncode == 0, proc.stderr
     assert b"caf\\xe9" in proc.stdout or b"caf\\\\xe9" in proc.stdout or b"caf\\udce9" in proc.stdout
+
+
+# ---------------------------------------------------------------- folders
+def _tree(d: Path) -> dict[str, bytes]:
+    return {p.name: p.read_bytes() for p in sorted(d.iterdir()) if p.is_file()}
+
+
+def test_a_new_folder_appears_whole_with_its_manifest(tmp_path):
+    with output_folder(tmp_path / "out") as stage:
+        write_text(stage / "a.csv", "1\n")
+        write_text(stage / "run.json", "{}\n")
+        assert not (tmp_path / "out").exists()
+    files = _tree(tmp_path / "out")
+    manifest = json.loads(files.pop(MANIFEST))
+    assert files == {"a.csv": b"1\n", "run.json": b"{}\n"}
+    assert manifest["files"] == {n: hashlib.sha256(b).hexdigest() for n, b in files.items()}
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["out"]
+
+
+def _previous(tmp_path: Path) -> Path:
+    out = tmp_path / "out"
+    with output_folder(out) as stage:
+        for name in ("table1.md", "table2.md", "run.json"):
+            write_text(stage / name, f"old {name}\n")
+    (out / "notes.txt").write_text("mine\n")
+    return out
+
+
+def test_a_new_run_replaces_all_of_the_old_runs_files_and_nothing_else(tmp_path):
+    """tables --out over an earlier run left table2.* of that run next to the new table1.*."""
+    out = _previous(tmp_path)
+    (out / "table2.md").write_text("edited by hand\n")        # no longer what posecrb wrote: the user's now
+    with output_folder(out) as stage:
+        write_text(stage / "table1.md", "new\n")
+        write_text(stage / "run.json", "new\n")
+    files = _tree(out)
+    files.pop(MANIFEST)
+    assert files == {"table1.md": b"new\n", "run.json": b"new\n", "table2.md": b"edited by hand\n",
+                     "notes.txt": b"mine\n"}
+
+
+@pytest.mark.parametrize("when", ["in the block", "at the third rename"])
+def test_a_failure_leaves_the_old_run_whole(tmp_path, monkeypatch, when):
+    out = _previous(tmp_path)
+    before = _tree(out)
+    rename = os.rename
+    calls = []
+
+    def failing(src, dst):
+        calls.append(dst)
+        if len(calls) == 3:
+            raise OSError(errno.ENOSPC, os.strerror(errno.ENOSPC), os.fspath(dst))
+        rename(src, dst)
+
+    with pytest.raises((OutputError, RuntimeError)) as exc:
+        with output_folder(out) as stage:
+            write_text(stage / "table1.md", "new\n")
+            write_text(stage / "run.json", "new\n")
+            if when == "in the block":
+                raise RuntimeError("the work failed")
+            monkeypatch.setattr(folders.os, "rename", failing)
+    monkeypatch.setattr(folders.os, "rename", rename)
+    if when != "in the block":
+        assert str(exc.value).startswith(f"cannot write {out}")
+    assert _tree(out) == before
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["out"]          # no staging directory left
+
+
+def test_a_hostile_manifest_cannot_reach_outside_the_folder(tmp_path):
+    out = _previous(tmp_path)
+    victim = tmp_path / "victim.txt"
+    victim.write_text("keep\n")
+    digest = hashlib.sha256(b"keep\n").hexdigest()
+    (out / MANIFEST).write_text(json.dumps({"files": {"../victim.txt": digest, str(victim): digest, "": digest}}))
+    with output_folder(out) as stage:
+        write_text(stage / "x.csv", "new\n")
+    assert victim.read_text() == "keep\n"
+
+
+def test_an_unreadable_manifest_leaves_the_unknown_files_and_says_so(tmp_path, caplog):
+    out = _previous(tmp_path)
+    (out / MANIFEST).write_text("{not json")
+    with caplog.at_level(logging.WARNING, logger="posecrb"), output_folder(out) as stage:
+        write_text(stage / "table1.md", "new\n")
+    assert "unreadable" in caplog.text
+    assert (out / "table2.md").read_text() == "old table2.md\n" and (out / "table1.md").read_text() == "new\n"
+
+
+def test_signals_during_a_swap_are_held_until_it_is_done():
+    got = []
+    previous = signal.signal(signal.SIGTERM, lambda s, f: got.append(("handled", s)))
+    try:
+        with deferred_signals():
+            os.kill(os.getpid(), signal.SIGTERM)
+            got.append("still inside")
+        assert got == ["still inside", ("handled", signal.SIGTERM)]
+    finally:
+        signal.signal(signal.SIGTERM, previous)
 
 
 # ---------------------------------------------------------------- messages
