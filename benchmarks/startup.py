@@ -151,7 +151,8 @@ def main(argv: list[str] | None = None) -> int:
         "python -c 'import numpy'": [py, "-c", "import numpy"],
         f"python -c 'import {floor}'": [py, "-c", f"import {floor}"],
         f"python -c 'import {floor}' deferred": [
-            py, "-c", f"from posecrb.cli import _defer_unused_imports; _defer_unused_imports(); import {floor}"],
+            py, "-c",
+            f"from posecrb.cli.lazy_numpy import defer_unused_imports; defer_unused_imports(); import {floor}"],
         "posecrb --help": [*cmd, "--help"],
         "posecrb --version": [*cmd, "--version"],
     }

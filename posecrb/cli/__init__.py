@@ -17,15 +17,11 @@ from __future__ import annotations
 
 import contextlib
 import importlib
-import importlib.abc
-import importlib.machinery
-import importlib.util
 import logging
 import os
 import sys
-import types
 import warnings
-from collections.abc import Iterator, Sequence
+from collections.abc import Iterator
 from typing import TextIO
 
 import click
@@ -33,6 +29,7 @@ import click
 from .._version import __version__
 from ..core.errors import ArgumentError, PosecrbError, UsageError
 from ..core.outputs import ESCAPE, remove_temporaries
+from .lazy_numpy import defer_unused_imports
 from .signals import Terminated, handle_sigterm
 
 log = logging.getLogger("posecrb")
@@ -197,44 +194,9 @@ def _route_warning(message: Warning | str, category: type[Warning], filename: st
         log.warning("%s from %s: %s", category.__name__, origin, text)
 
 
-class _DeferredImport(importlib.abc.MetaPathFinder):
-    """Import finder that loads the named modules lazily (on first attribute access).
-
-    scipy >= 1.15 builds its array-API namespace by cloning ``numpy``'s public names, which imports
-    every submodule listed in ``numpy.__all__``; ``numpy.f2py`` (a Fortran wrapper generator),
-    ``numpy.testing`` (unittest, importlib.metadata, charset_normalizer), ``numpy.ma`` and
-    ``numpy.polynomial`` are among them and cost ~70 ms of every command's start-up although a
-    solve uses none of them (``numpy.unique`` without counts consults ``numpy.ma``; the readers
-    avoid it, other paths simply load it then). Deferred, they are real
-    modules that execute on first use. Installed by ``main`` only: importing posecrb as a library
-    changes nothing in the caller's interpreter.
-    """
-
-    def __init__(self, names: frozenset[str]) -> None:
-        self.names = names
-
-    def find_spec(self, fullname: str, path: Sequence[str] | None,
-                  target: types.ModuleType | None = None) -> importlib.machinery.ModuleSpec | None:
-        if fullname not in self.names:
-            return None
-        spec = importlib.machinery.PathFinder.find_spec(fullname, path)
-        if spec is None or spec.loader is None or not hasattr(spec.loader, "exec_module"):
-            return spec
-        spec.loader = importlib.util.LazyLoader(spec.loader)
-        return spec
-
-
-_UNUSED_AT_START = frozenset({"numpy.f2py", "numpy.testing", "numpy.polynomial", "numpy.ma"})
-
-
-def _defer_unused_imports() -> None:
-    if not any(isinstance(finder, _DeferredImport) for finder in sys.meta_path):
-        sys.meta_path.insert(0, _DeferredImport(_UNUSED_AT_START))
-
-
 def main(argv: list[str] | None = None) -> int:
     """Entry point: run the CLI and map every exception to an exit code."""
-    _defer_unused_imports()
+    defer_unused_imports()
     with warnings.catch_warnings(), handle_sigterm(), _routed_output():
         warnings.showwarning = _route_warning      # restored by catch_warnings on exit
         try:
