@@ -173,6 +173,8 @@ def results(tmp_path_factory) -> list[Result]:
 def test_load_of_what_is_not_a_result_file_is_a_parse_error(tmp_path, results):
     """Result.load of a .npy, a truncated zip, an empty file or a g2o file raised TypeError, BadZipFile,
     EOFError or pickle's ValueError."""
+    with pytest.raises(ArgumentError, match="is not a file name"):
+        results[0].load(None)
     np.save(tmp_path / "a.npy", np.arange(3))
     (tmp_path / "empty.npz").write_bytes(b"")
     (tmp_path / "g.g2o").write_text(text(graph2()))
@@ -327,7 +329,21 @@ def test_a_failure_leaves_the_old_run_whole(tmp_path, monkeypatch, when):
     if when != "in the block":
         assert str(exc.value).startswith(f"cannot write {out}")
     assert _tree(out) == before
-    assert sorted(p.name for p in tmp_path.iterdir()) == ["out"]          # no staging directory left
+    assert sorted(p.name for p in out.iterdir()) == sorted(before)        # no staging directory left
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["out"]
+
+
+def test_a_folder_given_as_a_symbolic_link_stays_one(tmp_path):
+    """The folder is written where the link points (staged inside it, on its file system); the link
+    is not replaced by a directory."""
+    real = _previous(tmp_path)
+    link = tmp_path / "link"
+    link.symlink_to(real)
+    with output_folder(link) as stage:
+        write_text(stage / "table1.md", "new\n")
+    assert link.is_symlink() and os.readlink(link) == str(real)
+    assert (real / "table1.md").read_text() == "new\n" and not (real / "table2.md").exists()
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["link", "out"]
 
 
 def test_a_hostile_manifest_cannot_reach_outside_the_folder(tmp_path):

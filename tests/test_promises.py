@@ -437,8 +437,8 @@ def test_shell_hints_are_quoted(tmp_path, capsys, monkeypatch):
     monkeypatch.delenv("POSECRB_DATA", raising=False)
     monkeypatch.setenv("XDG_CACHE_HOME", str(tmp_path / "xdg"))
     monkeypatch.chdir(tmp_path)
-    rc, _, err = run(["info", "my data; rm -rf ~"], capsys)
-    assert rc == 1 and "`posecrb datasets fetch 'my data; rm -rf ~'`" in err
+    rc, _, err = run(["info", "intel,my data; rm -rf ~"], capsys)
+    assert rc == 1 and "give one dataset per argument" in err and "(intel 'my data; rm -rf ~')" in err
 
 
 def test_tables_datasets_is_repeatable_and_never_splits_a_path(tmp_path, capsys, monkeypatch):

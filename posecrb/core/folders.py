@@ -4,10 +4,13 @@ The promise: after a failure or a signal, posecrb's own files in the folder are 
 or all of the new one, never a mix; files in the folder that posecrb did not write are never
 touched. ``output_folder(path)`` keeps it:
 
-1. The run writes its files into a private staging directory next to the folder
-   (``.<name>.posecrb-<random>``, same file system, so every later step is a rename). Each file
-   goes through ``posecrb.core.outputs.atomic_write`` as any other output; a failure is reported
-   with the folder's path of the file, not the staging one.
+1. The run writes its files into a private staging directory on the folder's file system, so
+   that every later step is a rename: inside the folder when it exists
+   (``.posecrb-staging-<random>``: the folder is the one directory known to be writable, even
+   when it is a symbolic link to another file system), next to it otherwise
+   (``.<name>.posecrb-<random>``). Each file goes through ``posecrb.core.outputs.atomic_write``
+   as any other output; a failure is reported with the folder's path of the file, not the
+   staging one.
 2. On success the staging directory receives the manifest ``MANIFEST``: the name and sha256 of
    every file of the run.
 3. Commit. A folder that does not exist yet is the staging directory renamed into place (one
@@ -102,12 +105,15 @@ class _Staging:
 
     def __init__(self, path: str | os.PathLike):
         self.shown = checked_output_name(path, None)
-        self.final = Path(os.path.abspath(self.shown))
-        parent, base = self.final.parent, self.final.name
-        room = name_max(parent) - len(".posecrb-") - 10
-        prefix = "." + os.fsdecode(os.fsencode(base)[:max(room, 1)]).rstrip("\ufffd") + ".posecrb-"
+        self.final = Path(os.path.realpath(os.path.abspath(self.shown)))    # a symbolic link's target
+        if self.final.is_dir():
+            where, prefix = self.final, ".posecrb-staging-"
+        else:
+            where, base = self.final.parent, self.final.name
+            room = name_max(where) - len(".posecrb-") - 10
+            prefix = "." + os.fsdecode(os.fsencode(base)[:max(room, 1)]).rstrip("\ufffd") + ".posecrb-"
         try:
-            self.staging = Path(tempfile.mkdtemp(prefix=prefix, dir=parent))
+            self.staging = Path(tempfile.mkdtemp(prefix=prefix, dir=where))
         except OSError as exc:
             raise OutputError(self.shown, exc.strerror or str(exc)) from None
 

@@ -27,7 +27,7 @@ import zlib
 from dataclasses import dataclass
 from typing import IO, cast
 
-from .errors import ParseError
+from .errors import ArgumentError, ParseError
 from .resources import available_memory, format_bytes
 
 # Reading a pose graph needs about 12 bytes of working memory per byte of file (the text, its
@@ -66,7 +66,9 @@ def unresolvable(exc: OSError) -> str:
 
 def checked_name(path: str | os.PathLike) -> str:
     """``path`` as a string once it can name a file: ParseError for an empty path or a NUL character
-    (which the system would refuse with a raw ``ValueError``)."""
+    (which the system would refuse with a raw ``ValueError``), ArgumentError for what is no path."""
+    if not isinstance(path, (str, bytes, os.PathLike)):
+        raise ArgumentError("path", path, "is not a file name (a str or os.PathLike)")
     name = os.fspath(path)
     if not isinstance(name, str):
         name = os.fsdecode(name)

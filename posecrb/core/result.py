@@ -227,8 +227,8 @@ class Result:
     @classmethod
     def load(cls: type[R], path: str | os.PathLike[str]) -> R:
         """The result ``save`` wrote to ``path`` (read through the input layer)."""
+        data = read_npz(path)       # the input layer: capped inflation, no pickles, ParseError
         name = os.fspath(path)
-        data = read_npz(name)       # the input layer: capped inflation, no pickles, ParseError
         kind = str(data.pop("result_type", ""))
         if kind != cls.__name__ or "result" not in data:
             raise ParseError(name, None, f"holds a {kind or 'non-posecrb'} result, not a {cls.__name__}")
