@@ -346,6 +346,29 @@ def test_a_folder_given_as_a_symbolic_link_stays_one(tmp_path):
     assert sorted(p.name for p in tmp_path.iterdir()) == ["link", "out"]
 
 
+def test_when_the_rollback_fails_too_the_previous_files_are_kept_and_named(tmp_path, monkeypatch):
+    out = _previous(tmp_path)
+    rename = os.rename
+    calls = []
+
+    def failing(src, dst):
+        calls.append(dst)
+        if len(calls) >= 4:                 # the swap's fourth rename, and every rename of the rollback
+            raise OSError(errno.EIO, os.strerror(errno.EIO), os.fspath(src))
+        rename(src, dst)
+
+    with pytest.raises(OutputError, match="holds files of both runs, and the previous files not put back are in") \
+            as exc:
+        with output_folder(out) as stage:
+            write_text(stage / "table1.md", "new\n")
+            monkeypatch.setattr(folders.os, "rename", failing)
+    monkeypatch.setattr(folders.os, "rename", rename)
+    kept = Path(str(exc.value).rsplit(" are in ", 1)[1])
+    assert kept.is_dir() and {p.name for p in kept.iterdir()} <= {"table1.md", "table2.md", "run.json", MANIFEST}
+    assert {p.name for p in kept.iterdir()} | {p.name for p in out.iterdir() if p.is_file()} >= \
+        {"table1.md", "table2.md", "run.json", "notes.txt"}
+
+
 def test_a_hostile_manifest_cannot_reach_outside_the_folder(tmp_path):
     out = _previous(tmp_path)
     victim = tmp_path / "victim.txt"

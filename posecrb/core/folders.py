@@ -112,6 +112,7 @@ class _Staging:
             where, base = self.final.parent, self.final.name
             room = name_max(where) - len(".posecrb-") - 10
             prefix = "." + os.fsdecode(os.fsencode(base)[:max(room, 1)]).rstrip("\ufffd") + ".posecrb-"
+        self.kept = False
         try:
             self.staging = Path(tempfile.mkdtemp(prefix=prefix, dir=where))
         except OSError as exc:
@@ -125,7 +126,10 @@ class _Staging:
         return path
 
     def abandon(self) -> None:
-        shutil.rmtree(self.staging, ignore_errors=True)
+        """Remove the staging directory, unless it holds previous files a failed swap could not
+        put back (``_swap``): those are the user's only copy."""
+        if not self.kept:
+            shutil.rmtree(self.staging, ignore_errors=True)
 
     def _previous(self, new: list[str]) -> list[str]:
         """posecrb's files of the previous run in the folder (module docstring, step 3)."""
@@ -188,9 +192,11 @@ class _Staging:
                 for name in reversed(out):
                     os.rename(aside / name, self.final / name)
             except OSError as undo:
+                self.kept = True
                 raise OutputError(self.shown_path(failed), f"{exc.strerror or exc}; restoring the previous files "
                                                            f"failed too ({undo.strerror or undo}): the folder "
-                                                           "holds files of both runs") from None
+                                                           "holds files of both runs, and the previous files not "
+                                                           f"put back are in {aside}") from None
             raise OutputError(self.shown_path(failed), exc.strerror or str(exc)) from None
         fsync_dir(self.final)
 
