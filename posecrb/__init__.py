@@ -32,6 +32,7 @@ from __future__ import annotations
 import importlib
 from typing import TYPE_CHECKING, Any
 
+from ._version import __version__
 from .core.errors import (
     ArgumentError,
     DatasetNotFound,
@@ -64,8 +65,6 @@ if TYPE_CHECKING:
     from .solver.estimate import Estimate
     from .solver.solve import SolveResult
     from .verification.result import VerifyResult
-
-__version__ = "0.2.0"
 
 # name -> module that defines it, imported on first access (numpy, scipy and the models load
 # only when a function or a result class is used: the command line's start-up needs none).

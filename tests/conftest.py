@@ -2,11 +2,16 @@
 from __future__ import annotations
 
 import os
+import shutil
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import pytest
 
 from .helpers import make_random_graph
+
+if TYPE_CHECKING:
+    from posecrb.core.result import Result
 
 
 @pytest.fixture(scope="session")
@@ -30,3 +35,28 @@ def isolated_cache(tmp_path, monkeypatch) -> Path:
 @pytest.fixture
 def random_graph():
     return make_random_graph
+
+
+@pytest.fixture(scope="session")
+def public_results(tmp_path_factory) -> dict[str, Result]:
+    """One instance of every public result type, from the library's own calls on small graphs (2D and
+    3D), parts included."""
+    import posecrb
+
+    d = tmp_path_factory.mktemp("protocol")
+    for name in ("g2d.g2o", "g3d.g2o"):
+        shutil.copy(Path(__file__).resolve().parent / "data" / "cli_json" / name, d)
+    g2, g3 = posecrb.load(d / "g2d.g2o"), posecrb.load(d / "g3d.g2o")
+    sol = posecrb.solve(g2)
+    bounds = posecrb.bounds(g3)
+    select = posecrb.select(g2, budget=0.5, certify=True, objective="fim", estimate=sol)
+    crlb3 = posecrb.crlb(g3, poses="all")
+    line = posecrb.timeline(g3, estimate="vertices", every=2)
+    out: dict[str, Result] = {
+        "SolveResult": sol, "BoundsResult": bounds, "GraphBounds": bounds.bounds, "FimAtEstimate": bounds.fim,
+        "FimResult": posecrb.fim(g3, model="sed", frame="body"), "CrlbResult": crlb3, "InverseAccuracy": crlb3.accuracy,
+        "SelectResult": select, "FixedEdges": select.fixed, "SelectionCertificate": select.certificate,
+        "CertificateBounds": select.certificate.bounds, "Estimate": posecrb.Estimate(sol.rot, sol.trans),
+        "TimelineResult": line, "LoopClosure": line.closures[0], "Monotonicity": line.monotonicity["lb"]["raw"],
+    }
+    return out

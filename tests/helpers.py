@@ -19,7 +19,8 @@ from posecrb.core.graph import PoseGraph
 from posecrb.core.noise import rotation_weights
 from posecrb.lie import se as L
 from posecrb.lie.so import so2_exp, so3_exp
-from posecrb.sim.generators import random_graph, uniform_rotations
+from posecrb.sim.generators import uniform_rotations
+from posecrb.sim.random_graphs import random_graph
 
 
 def _small_rotations(m: int, dim: int, sigma: float, rng: np.random.Generator) -> np.ndarray:

@@ -182,7 +182,7 @@ def test_tree_lower_bound_of_lambda_min():
 
 def _wide_weights_graph(dim: int, n: int = 300, seed: int = 10):
     """Random graph with isotropic information spanning 1e-6..1e12 (n > 200: the Lanczos path)."""
-    from posecrb.sim.generators import random_graph
+    from posecrb.sim.random_graphs import random_graph
 
     return random_graph(np.random.default_rng(seed), n, 2 * n, dim, info="isotropic",
                         tau_range=(1e-6, 1e12), kappa_range=(1e-6, 1e12))

@@ -1,4 +1,4 @@
-"""The input layer (posecrb/core/files.py) and every reader behind it.
+"""The input layer (posecrb/core/inputs.py, posecrb/io/lines.py) and every reader behind it.
 
 Guards: only regular files, a size bound from the available memory, gzip recognised by its magic
 bytes and bounded when decompressed, the readers' line rules for every text input. Then
@@ -23,13 +23,14 @@ from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
 from posecrb.cli import main
-from posecrb.core import files
+from posecrb.core import inputs
 from posecrb.core.errors import DisconnectedGraph, ParseError, PosecrbError
-from posecrb.core.files import Line, gunzip, read_input, read_lines, split_fields, split_lines
 from posecrb.core.graph import PoseGraph
+from posecrb.core.inputs import gunzip, read_input
 from posecrb.datasets.manifest import ManifestError, parse_manifest
 from posecrb.evaluation.regress import parse_expected
 from posecrb.io import load, parse_bytes
+from posecrb.io.lines import Line, decode_utf8, read_lines, split_fields, split_lines
 
 from .hostile.corpus import INFO2, ODD_SEPARATORS, graph2, graph3, text
 
@@ -90,10 +91,10 @@ def test_size_guard_is_derived_from_the_available_memory(tmp_path, monkeypatch):
     f = tmp_path / "g.g2o"
     f.write_text(text(graph2()) + "# " + "x" * (2 << 20) + "\n")     # above the 1 MiB floor of the bound
     size = f.stat().st_size
-    monkeypatch.setattr(files, "available_memory", lambda: files.INPUT_EXPANSION * (size - 1))
+    monkeypatch.setattr(inputs, "available_memory", lambda: inputs.INPUT_EXPANSION * (size - 1))
     with pytest.raises(ParseError, match=f"{size} bytes need about 16 times as much memory to read"):
         load(f)
-    monkeypatch.setattr(files, "available_memory", lambda: files.INPUT_EXPANSION * (1 << 30))
+    monkeypatch.setattr(inputs, "available_memory", lambda: inputs.INPUT_EXPANSION * (1 << 30))
     assert load(f).m == 6
 
 
@@ -103,7 +104,7 @@ def test_devices_and_fifos_are_named_not_read(tmp_path):
     os.mkfifo(fifo)
     for path, what in ((fifo, "a FIFO (named pipe)"), ("/dev/zero", "a character device"),
                        (tmp_path, "a directory")):
-        for reader in (read_input, read_lines, files.check_input_file):
+        for reader in (read_input, read_lines, inputs.check_input_file):
             with pytest.raises(ParseError, match=re.escape(f"is {what}, not a regular file")):
                 reader(path)
 
@@ -216,7 +217,7 @@ def test_fuzz_fast_and_reference_tokenisers_agree(data):
             return exc
 
     got = outcome(lambda: parse_bytes(data, path="x.g2o"))
-    ref = outcome(lambda: parse(split_text(files.decode_utf8(data, "x.g2o")), FORMATS, "x.g2o", None))
+    ref = outcome(lambda: parse(split_text(decode_utf8(data, "x.g2o")), FORMATS, "x.g2o", None))
     if isinstance(ref, ParseError):
         assert isinstance(got, ParseError) and str(got) == str(ref)
         return

@@ -351,7 +351,7 @@ def test_write_g2o_leaves_a_users_tmp_file_alone(tmp_path, random_graph):
 
 @pytest.mark.parametrize("exc_type", [RuntimeError, KeyboardInterrupt])
 def test_failed_write_keeps_the_previous_file_and_no_temporary(tmp_path, exc_type):
-    from posecrb.core.files import atomic_write
+    from posecrb.core.outputs import atomic_write
 
     f = tmp_path / "result.txt"
     f.write_text("previous\n")
@@ -392,7 +392,7 @@ def test_result_npz_write_failure_keeps_the_previous_file(tmp_path, monkeypatch)
 
 
 def test_atomic_write_permissions(tmp_path):
-    from posecrb.core.files import write_text
+    from posecrb.core.outputs import write_text
 
     new = write_text(tmp_path / "new.txt", "x")
     umask = os.umask(0)
@@ -417,7 +417,7 @@ def test_sigterm_during_a_write_removes_the_temporary(tmp_path):
         "import os, signal, sys, time\n"
         "from posecrb.cli import main\n"
         "import posecrb.cli.commands.info as info\n"
-        "from posecrb.core.files import atomic_write\n"
+        "from posecrb.core.outputs import atomic_write\n"
         "def slow(graph):\n"
         f"    with atomic_write({str(target)!r}) as fh:\n"
         "        fh.write('partial')\n"
@@ -440,7 +440,7 @@ def test_sigterm_during_a_write_removes_the_temporary(tmp_path):
 
 def test_ctrl_c_during_a_write_exits_130_and_removes_the_temporary(tmp_path, monkeypatch, capsys):
     import posecrb.cli.commands.info as info
-    from posecrb.core.files import atomic_write
+    from posecrb.core.outputs import atomic_write
 
     target = tmp_path / "out" / "result.txt"
     target.parent.mkdir()

@@ -15,8 +15,8 @@ from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
 from posecrb.core.errors import ParseError
-from posecrb.core.files import decode_utf8
 from posecrb.io import FORMATS, parse_bytes
+from posecrb.io.lines import decode_utf8
 from posecrb.io.reader import parse
 from posecrb.io.text import Fallback, scan_bytes, split_text
 

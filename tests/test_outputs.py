@@ -4,16 +4,22 @@ The options are found by walking the click tree (``posecrb.cli.cli``), never lis
 new command or option is covered as soon as it exists. For each output option, each hostile
 target -- the command's own input, a symbolic link to it, the empty string, a missing directory,
 a read-only directory -- must exit 2 naming the option, with nothing written anywhere and the
-input intact. A second test fails if any module other than the layer (posecrb/core/files.py)
-opens a file for writing; a third checks that a write the system refuses (full disk, permission,
-read-only file system) is exit 1 with the path and the reason, never an internal error.
+input intact. A second test fails if any module other than the output layer (posecrb/core/outputs.py
+and posecrb/core/folders.py) opens a file for writing; a third checks that a write the system
+refuses (full disk, permission, read-only file system) is exit 1 with the path and the reason,
+never an internal error. The last ones run every command with an output under faults: a file
+name that is not UTF-8, a full disk at the first and at the last write, a signal mid-write.
 """
 from __future__ import annotations
 
 import ast
 import errno
+import hashlib
+import io
+import json
 import os
 import re
+import signal
 from pathlib import Path
 
 import click
@@ -24,6 +30,7 @@ from posecrb.cli import cli, main
 from posecrb.cli.paths import INPUT_TYPES, OUTPUT_TYPES, Command, DatasetArg, InputFile, OutputDir, OutputFile
 
 from .hostile.corpus import INFO2
+from .test_fetch import server  # noqa: F401 -- the local HTTP server of the fetch tests, a fixture here too
 
 GRAPH = "\n".join([f"EDGE_SE2 0 1 1 0 0 {INFO2}", f"EDGE_SE2 1 2 1 0 1.57 {INFO2}",
                    f"EDGE_SE2 2 3 1 0 1.57 {INFO2}", f"EDGE_SE2 3 0 1 0 1.57 {INFO2}",
@@ -185,7 +192,7 @@ def test_every_output_option_refuses_every_hostile_target(tmp_path, capsys, monk
 
 
 # ---------------------------------------------------------------- only the layer writes
-LAYER = Path(posecrb.__file__).resolve().parent / "core" / "files.py"
+LAYER = [Path(posecrb.__file__).resolve().parent / "core" / name for name in ("outputs.py", "folders.py")]
 # Calls that create, replace or write files or directories.
 WRITING_CALLS = {"mkstemp", "mkdtemp", "NamedTemporaryFile", "TemporaryFile", "SpooledTemporaryFile",
                  "TemporaryDirectory", "replace", "rename", "renames", "makedirs", "mkdir", "link", "symlink",
@@ -194,7 +201,7 @@ WRITING_CALLS = {"mkstemp", "mkdtemp", "NamedTemporaryFile", "TemporaryFile", "S
                  "to_parquet", "to_pickle", "to_excel", "dump", "truncate", "chmod", "unlink", "remove", "rmdir",
                  "rmtree", "save_npz", "mkfifo", "mknod"}
 # Functions of the layer itself, and writes into in-memory buffers, are fine.
-LAYER_NAMES = {"files", "write_text", "write_bytes", "save_figure"}
+LAYER_NAMES = {"outputs", "write_text", "write_bytes", "save_figure"}
 
 
 def _buffers(tree: ast.AST) -> set[str]:
@@ -247,7 +254,7 @@ def _violations(path: Path) -> list[str]:
             if isinstance(f, ast.Name) and name in LAYER_NAMES:
                 continue                         # the layer's functions, imported by name
             if owner in LAYER_NAMES:
-                continue                         # files.write_text(...)
+                continue                         # outputs.write_text(...)
             target = node.args[0] if node.args else None
             if isinstance(target, ast.Name) and target.id in buffers:
                 continue                         # savefig(fh) into atomic_write's handle, savetxt(buf)
@@ -263,8 +270,8 @@ def _violations(path: Path) -> list[str]:
 
 
 def test_no_module_but_the_layer_writes_files():
-    root = LAYER.parents[1]
-    bad = [v for path in sorted(root.rglob("*.py")) if path != LAYER for v in _violations(path)]
+    root = LAYER[0].parents[1]
+    bad = [v for path in sorted(root.rglob("*.py")) if path not in LAYER for v in _violations(path)]
     assert bad == []
 
 
@@ -284,7 +291,7 @@ def test_the_scan_sees_writes(tmp_path):
                                          (errno.EROFS, "replace")])
 def test_a_refused_write_is_exit_1_with_the_path_and_the_reason(tmp_path, capsys, monkeypatch, code, where):
     """A full disk said `internal error ... (a bug in posecrb)`: now the path and the system's reason."""
-    import posecrb.core.files as files
+    import posecrb.core.outputs as outputs
 
     graph = tmp_path / "g.g2o"
     graph.write_text(GRAPH)
@@ -294,8 +301,8 @@ def test_a_refused_write_is_exit_1_with_the_path_and_the_reason(tmp_path, capsys
     def refuse(*a, **k):
         raise OSError(code, os.strerror(code))
 
-    target = {"fsync": (files.os, "fsync"), "mkstemp": (files.tempfile, "mkstemp"),
-              "replace": (files.os, "replace")}[where]
+    target = {"fsync": (outputs.os, "fsync"), "mkstemp": (outputs.tempfile, "mkstemp"),
+              "replace": (outputs.os, "replace")}[where]
     monkeypatch.setattr(*target, refuse)
     capsys.readouterr()
     rc = main(["solve", str(graph), "--out", str(out)])
@@ -320,3 +327,183 @@ def test_input_types_guard_before_the_work(tmp_path, capsys):
         assert "not a regular file" in capsys.readouterr().err
     assert isinstance(next(p for p in cli.get_command(click.Context(cli), "select").params
                            if p.name == "fixed").type, InputFile)
+
+
+# ---------------------------------------------------------------- every output under faults
+# Each command with an output option runs on a graph whose file name is not valid UTF-8 (it must
+# succeed, its text outputs valid UTF-8), then with a full disk from the first write on and from the
+# last write on (exit 1 naming the path, nothing left behind); folder outputs also take a signal at
+# chosen writes and in the middle of their swap (posecrb's files all old or all new, others untouched).
+# Writes are counted and failed at the raw file under the output layer's buffers, as a device would.
+
+
+class _Disk(io.FileIO):
+    """``posecrb.core.outputs.RAW_FILE`` for one run: counts raw writes; from write ``full_at`` on each
+    fails with ENOSPC; after write ``signal_at`` the process gets SIGTERM."""
+
+    writes = 0
+    full_at: int | None = None
+    signal_at: int | None = None
+
+    def write(self, b):
+        cls = type(self)
+        cls.writes += 1
+        if cls.full_at is not None and cls.writes >= cls.full_at:
+            raise OSError(errno.ENOSPC, os.strerror(errno.ENOSPC))
+        n = super().write(b)
+        if cls.writes == cls.signal_at:
+            os.kill(os.getpid(), signal.SIGTERM)
+        return n
+
+
+def _disk(monkeypatch, **faults) -> type[_Disk]:
+    import posecrb.core.outputs as outputs
+
+    disk = type("Disk", (_Disk,), dict(faults))
+    monkeypatch.setattr(outputs, "RAW_FILE", disk)
+    return disk
+
+
+@pytest.fixture(scope="module")
+def sweep_graph(tmp_path_factory) -> Path:
+    """A 16-pose noisy grid with 9 loop closures (sparsify's budgets need candidates)."""
+    path = tmp_path_factory.mktemp("sweep") / "grid.g2o"
+    assert main(["-q", "datasets", "synth", "grid2d", "--poses", "16", "--noise", "0.05", "--seed", "3",
+                 "--out", str(path), "--format", "json"]) == 0
+    return path
+
+
+NON_UTF8 = os.fsdecode(b"caf\xe9.g2o")          # 'caf\udce9.g2o': the byte 0xe9 is not UTF-8
+SWEPT = [(path, cmd, p) for path, cmd, p in OUTPUTS if path != ("datasets", "fetch")]   # fetch: its own test
+FOLDERS = [(path, cmd, p) for path, cmd, p in SWEPT if isinstance(p.type, OutputDir)]
+
+
+def _setup(root: Path, path, cmd, option, graph: Path) -> tuple[Path, Path, list[str]]:
+    """(work directory, output target, argv) of one run on a copy of ``graph`` named NON_UTF8."""
+    work = root / "work"
+    work.mkdir(parents=True)
+    g = work / NON_UTF8
+    g.write_bytes(graph.read_bytes())
+    fine = work / "fine"
+    fine.mkdir()
+    target = work / (f"out{_ext(option.type)}" if isinstance(option.type, OutputFile) else "outdir")
+    return work, target, ["-q", *_argv(path, cmd, option, str(target), g, fine)]
+
+
+def _run(args, capsys, monkeypatch, work: Path) -> tuple[int, str]:
+    monkeypatch.chdir(work)
+    capsys.readouterr()
+    rc = main(args)
+    err = capsys.readouterr().err
+    assert "Traceback" not in err and "internal error" not in err, err
+    return rc, err
+
+
+def _written(target: Path) -> list[Path]:
+    return sorted(p for p in target.iterdir()) if target.is_dir() else [target]
+
+
+@pytest.mark.timeout(600)
+@pytest.mark.parametrize("path, cmd, option", SWEPT, ids=[f"{' '.join(p)} {_long(o)}" for p, _, o in SWEPT])
+def test_every_output_survives_a_non_utf8_name_and_a_full_disk(tmp_path, capsys, monkeypatch, sweep_graph,
+                                                               path, cmd, option):
+    monkeypatch.delenv("POSECRB_DATA", raising=False)
+    monkeypatch.setenv("XDG_CACHE_HOME", str(tmp_path / "xdg"))
+    work, target, args = _setup(tmp_path / "ok", path, cmd, option, sweep_graph)
+    disk = _disk(monkeypatch)
+    rc, err = _run(args, capsys, monkeypatch, work)
+    assert rc == 0, (args, err)
+    for f in _written(target):
+        if f.suffix in (".json", ".csv", ".md", ".tex", ".g2o"):
+            f.read_bytes().decode("utf-8")                     # valid UTF-8, the odd byte escaped
+    writes = disk.writes
+    assert writes >= 1
+    for full_at in sorted({1, writes}):
+        work, target, args = _setup(tmp_path / f"full{full_at}", path, cmd, option, sweep_graph)
+        before = _snapshot(work)
+        _disk(monkeypatch, full_at=full_at)
+        rc, err = _run(args, capsys, monkeypatch, work)
+        assert rc == 1, (full_at, args, err)
+        shown = f"cannot write {target}" + (os.sep if isinstance(option.type, OutputDir) else "")
+        assert shown in err and "No space left on device" in err, (full_at, err)
+        assert _snapshot(work) == before, full_at                # nothing left: no file, no temporary
+
+
+def _old_run(target: Path, names: tuple[str, ...]) -> dict[str, bytes | None]:
+    """``target`` as a previous run left it: every name the option declares, with the manifest that
+    says posecrb wrote them, and a file of the user's."""
+    from posecrb.core.folders import MANIFEST
+
+    target.mkdir()
+    digests = {}
+    for n in names:
+        data = f"old {n}\n".encode()
+        (target / n).write_bytes(data)
+        digests[n] = hashlib.sha256(data).hexdigest()
+    (target / MANIFEST).write_text(json.dumps({"schema": 1, "files": digests}))
+    (target / "notes.txt").write_text("the user's\n")
+    return _snapshot(target)
+
+
+@pytest.mark.timeout(600)
+@pytest.mark.parametrize("path, cmd, option", FOLDERS, ids=[f"{' '.join(p)} {_long(o)}" for p, _, o in FOLDERS])
+def test_a_folder_output_is_all_old_or_all_new_after_a_signal(tmp_path, capsys, monkeypatch, sweep_graph,
+                                                              path, cmd, option):
+    """SIGTERM at the first, a middle and the last write leaves the previous run's folder as it was;
+    SIGTERM in the middle of the swap is held until the swap is done (all new). Either way the
+    user's file in the folder is untouched and no staging directory is left."""
+    import posecrb.core.folders as folders
+
+    monkeypatch.delenv("POSECRB_DATA", raising=False)
+    monkeypatch.setenv("XDG_CACHE_HOME", str(tmp_path / "xdg"))
+    work, target, args = _setup(tmp_path / "fresh", path, cmd, option, sweep_graph)
+    disk = _disk(monkeypatch)
+    assert _run(args, capsys, monkeypatch, work)[0] == 0
+    new_names = {p.name for p in target.iterdir()}
+    writes = disk.writes
+    for k in sorted({1, (writes + 1) // 2, writes}):
+        work, target, args = _setup(tmp_path / f"sig{k}", path, cmd, option, sweep_graph)
+        old = _old_run(target, option.type.names)
+        _disk(monkeypatch, signal_at=k)
+        rc, err = _run(args, capsys, monkeypatch, work)
+        assert rc == 128 + signal.SIGTERM and "terminated" in err, (k, err)
+        assert _snapshot(target) == old, k
+        assert sorted(p.name for p in work.iterdir()) == sorted(["fine", NON_UTF8, "outdir"]), k
+
+    work, target, args = _setup(tmp_path / "swap", path, cmd, option, sweep_graph)
+    old = _old_run(target, option.type.names)
+    rename = os.rename
+    calls = []
+
+    def rename_then_signal(src, dst):
+        rename(src, dst)
+        calls.append(dst)
+        if len(calls) == 2:                   # one old file moved aside, one new file moved in, ...
+            os.kill(os.getpid(), signal.SIGTERM)
+
+    _disk(monkeypatch)
+    monkeypatch.setattr(folders.os, "rename", rename_then_signal)
+    rc, err = _run(args, capsys, monkeypatch, work)
+    monkeypatch.setattr(folders.os, "rename", rename)
+    assert rc == 128 + signal.SIGTERM and len(calls) > 2, err
+    now = _snapshot(target)
+    assert set(now) == new_names | {"notes.txt"}
+    assert now["notes.txt"] == old["notes.txt"]
+    assert not [n for n, data in now.items() if data is not None and data.startswith(b"old ")]
+    assert sorted(p.name for p in work.iterdir()) == sorted(["fine", NON_UTF8, "outdir"])
+
+
+def test_fetch_dest_on_a_full_disk_is_exit_1_and_leaves_nothing(tmp_path, capsys, monkeypatch, request):
+    url, _, _ = request.getfixturevalue("server")
+    dest = tmp_path / "dest"
+    dest.mkdir()
+    args = ["-q", "datasets", "fetch", "tinyGrid3D", "--url", f"{url}/tinyGrid3D.g2o", "--dest", str(dest)]
+    disk = _disk(monkeypatch)
+    assert _run(args, capsys, monkeypatch, tmp_path)[0] == 0
+    writes = disk.writes
+    (dest / "tinyGrid3D.g2o").unlink()
+    for full_at in sorted({1, writes}):
+        _disk(monkeypatch, full_at=full_at)
+        rc, err = _run(args, capsys, monkeypatch, tmp_path)
+        assert rc == 1 and f"cannot write {dest / 'tinyGrid3D.g2o'}: No space left on device" in err, err
+        assert list(dest.iterdir()) == []

@@ -124,7 +124,7 @@ def test_full_disk_during_select_out_is_exit_1_with_the_path(tmp_path, capsys, m
     """A full disk said `internal error ... (a bug in posecrb)`."""
     import errno
 
-    import posecrb.core.files as files
+    import posecrb.core.outputs as outputs
 
     g = grid(tmp_path)
     out = tmp_path / "pruned.g2o"
@@ -132,7 +132,7 @@ def test_full_disk_during_select_out_is_exit_1_with_the_path(tmp_path, capsys, m
     def full(*a, **k):
         raise OSError(errno.ENOSPC, os.strerror(errno.ENOSPC))
 
-    monkeypatch.setattr(files.os, "fsync", full)
+    monkeypatch.setattr(outputs.os, "fsync", full)
     rc, _, err = run(["select", g, "--budget", "1", "--out", out], capsys)
     assert rc == 1 and f"cannot write {out}: No space left on device" in err
     assert not out.exists() and not [p for p in tmp_path.iterdir() if p.name.startswith(".")]
@@ -437,8 +437,8 @@ def test_shell_hints_are_quoted(tmp_path, capsys, monkeypatch):
     monkeypatch.delenv("POSECRB_DATA", raising=False)
     monkeypatch.setenv("XDG_CACHE_HOME", str(tmp_path / "xdg"))
     monkeypatch.chdir(tmp_path)
-    rc, _, err = run(["info", "my data; rm -rf ~"], capsys)
-    assert rc == 1 and "`posecrb datasets fetch 'my data; rm -rf ~'`" in err
+    rc, _, err = run(["info", "intel,my data; rm -rf ~"], capsys)
+    assert rc == 1 and "give one dataset per argument" in err and "(intel 'my data; rm -rf ~')" in err
 
 
 def test_tables_datasets_is_repeatable_and_never_splits_a_path(tmp_path, capsys, monkeypatch):

@@ -5,7 +5,7 @@ import numpy as np
 import pytest
 
 from posecrb.core.errors import UsageError
-from posecrb.sim.generators import random_graph
+from posecrb.sim.random_graphs import random_graph
 from posecrb.solver import SolverOptions, solve
 from posecrb.solver.trust_region import TROptions
 

@@ -17,7 +17,7 @@ class Select(Benchmark):
         import posecrb
 
         objective, how = method.split("-")
-        self.prepare(name, lambda graph: posecrb.select(graph, budget="20%", objective=objective, method=how))
+        self.prepare(name, lambda graph: posecrb.select(graph, budget=0.2, objective=objective, method=how))
 
     def time_select(self, name: str, method: str) -> None:
         self.call(self.input)

@@ -22,8 +22,8 @@ import numpy as np
 from ..core.arguments import check_input_argument
 from ..core.choices import ESTIMATE_SOURCES, EstimateSource
 from ..core.errors import ArgumentError, UsageError
-from ..core.files import check_input_file
 from ..core.graph import PoseGraph
+from ..core.inputs import check_input_file
 from ..core.integers import IntegerError, check_int
 from ..core.timing import Repeat, measure
 from ..datasets import search

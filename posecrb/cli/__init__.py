@@ -5,30 +5,32 @@ Exceptions become exit codes in exactly one place (``main``):
 130 interrupted (SIGINT), 143 terminated (SIGTERM; temporaries are removed first).
 Python warnings (numpy's RuntimeWarning included) never reach the user as raw text:
 ``main`` routes each through the posecrb logger as one line on stderr (filters such as
-``-W error::RuntimeWarning`` still apply, which is how the tests prove none occurs).
+``-W error::RuntimeWarning`` still apply, which is how the tests prove none occurs); so are the
+warnings other libraries log (matplotlib's about a read-only home directory, say). stdout and
+stderr show a byte of a file name that is not valid UTF-8 as ``\\xNN`` (the output layer's
+``posecrb-escape`` handler) in every locale, instead of failing.
 Subcommands live in ``posecrb.cli.commands.<name>``, each module exposing a click command as
 ``command``; they are listed in ``COMMANDS`` and imported only when invoked, so ``posecrb --help``
 loads neither numpy/scipy nor numba.
 """
 from __future__ import annotations
 
+import contextlib
 import importlib
-import importlib.abc
-import importlib.machinery
-import importlib.util
 import logging
 import os
 import sys
-import types
 import warnings
-from collections.abc import Sequence
+from collections.abc import Iterator
 from typing import TextIO
 
 import click
 
-from .. import __version__
+from .._version import __version__
 from ..core.errors import ArgumentError, PosecrbError, UsageError
-from ..core.files import Terminated, handle_sigterm, remove_temporaries
+from ..core.outputs import ESCAPE, remove_temporaries
+from .lazy_numpy import defer_unused_imports
+from .signals import Terminated, handle_sigterm
 
 log = logging.getLogger("posecrb")
 
@@ -38,6 +40,41 @@ class _StderrHandler(logging.Handler):
         level = ("error" if record.levelno >= logging.ERROR else
                  "warning" if record.levelno >= logging.WARNING else "info")
         click.echo(f"posecrb: {level}: {record.getMessage()}", err=True)
+
+
+class _LibraryLogHandler(logging.Handler):
+    """Warnings other libraries log (to the root logger's handlers), as one posecrb line each."""
+
+    def __init__(self) -> None:
+        super().__init__(logging.WARNING)
+
+    def emit(self, record: logging.LogRecord) -> None:
+        if record.name == "posecrb" or record.name.startswith("posecrb."):
+            return                                  # posecrb's own records have their handler
+        log.warning("%s: %s", record.name.split(".")[0], " ".join(record.getMessage().split()))
+
+
+@contextlib.contextmanager
+def _routed_output() -> Iterator[None]:
+    """While a command runs: other libraries' log warnings through posecrb's logger, and stdout and
+    stderr escaping undecodable file-name bytes (module docstring); both undone afterwards."""
+    handler = _LibraryLogHandler()
+    root = logging.getLogger()
+    root.addHandler(handler)
+    restore = []
+    for stream in (sys.stdout, sys.stderr):
+        errors, reconfigure = getattr(stream, "errors", None), getattr(stream, "reconfigure", None)
+        if errors is not None and reconfigure is not None:
+            with contextlib.suppress(ValueError, OSError):
+                reconfigure(errors=ESCAPE)
+                restore.append((reconfigure, errors))
+    try:
+        yield
+    finally:
+        root.removeHandler(handler)
+        for reconfigure, errors in restore:
+            with contextlib.suppress(ValueError, OSError):
+                reconfigure(errors=errors)
 
 
 def _configure_logging(verbose: int, quiet: bool) -> None:
@@ -159,45 +196,10 @@ def _route_warning(message: Warning | str, category: type[Warning], filename: st
         log.warning("%s from %s: %s", category.__name__, origin, text)
 
 
-class _DeferredImport(importlib.abc.MetaPathFinder):
-    """Import finder that loads the named modules lazily (on first attribute access).
-
-    scipy >= 1.15 builds its array-API namespace by cloning ``numpy``'s public names, which imports
-    every submodule listed in ``numpy.__all__``; ``numpy.f2py`` (a Fortran wrapper generator),
-    ``numpy.testing`` (unittest, importlib.metadata, charset_normalizer), ``numpy.ma`` and
-    ``numpy.polynomial`` are among them and cost ~70 ms of every command's start-up although a
-    solve uses none of them (``numpy.unique`` without counts consults ``numpy.ma``; the readers
-    avoid it, other paths simply load it then). Deferred, they are real
-    modules that execute on first use. Installed by ``main`` only: importing posecrb as a library
-    changes nothing in the caller's interpreter.
-    """
-
-    def __init__(self, names: frozenset[str]) -> None:
-        self.names = names
-
-    def find_spec(self, fullname: str, path: Sequence[str] | None,
-                  target: types.ModuleType | None = None) -> importlib.machinery.ModuleSpec | None:
-        if fullname not in self.names:
-            return None
-        spec = importlib.machinery.PathFinder.find_spec(fullname, path)
-        if spec is None or spec.loader is None or not hasattr(spec.loader, "exec_module"):
-            return spec
-        spec.loader = importlib.util.LazyLoader(spec.loader)
-        return spec
-
-
-_UNUSED_AT_START = frozenset({"numpy.f2py", "numpy.testing", "numpy.polynomial", "numpy.ma"})
-
-
-def _defer_unused_imports() -> None:
-    if not any(isinstance(finder, _DeferredImport) for finder in sys.meta_path):
-        sys.meta_path.insert(0, _DeferredImport(_UNUSED_AT_START))
-
-
 def main(argv: list[str] | None = None) -> int:
     """Entry point: run the CLI and map every exception to an exit code."""
-    _defer_unused_imports()
-    with warnings.catch_warnings(), handle_sigterm():
+    defer_unused_imports()
+    with warnings.catch_warnings(), handle_sigterm(), _routed_output():
         warnings.showwarning = _route_warning      # restored by catch_warnings on exit
         try:
             return _main(argv)

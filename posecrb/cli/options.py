@@ -3,6 +3,7 @@ from __future__ import annotations
 
 import logging
 import math
+import os
 import re
 import shlex
 from collections.abc import Callable
@@ -207,15 +208,14 @@ def executor_settings(executor: str, jobs: int, scheduler: str | None) -> dict:
     return {"executor": kind, "jobs": jobs, "scheduler": scheduler}
 
 
-def plot_target(plot_path: str | None, out_dir: str | None, name: str) -> str | None:
-    """Where the figure goes: ``--plot``, else ``--out DIR``/NAME.png (the directory is created)."""
+def plot_target(plot_path: str | None, out_dir: str | os.PathLike | None, name: str) -> str | None:
+    """Where the figure goes: ``--plot``, else NAME.png in the folder being written for ``--out DIR``
+    (``posecrb.core.folders.output_folder``)."""
     if plot_path:
         return plot_path
     if not out_dir:
         return None
-    from ..core.files import make_output_dir  # noqa: PLC0415 -- only when writing
-
-    return str(make_output_dir(out_dir) / f"{name}.png")
+    return os.path.join(out_dir, f"{name}.png")
 
 
 

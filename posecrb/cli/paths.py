@@ -1,4 +1,5 @@
-"""Path options of the command line: the click side of the file layer (``posecrb.core.files``).
+"""Path options of the command line: the click side of the file layer (``posecrb.core.inputs``,
+``posecrb.core.outputs``).
 
 Every option or argument that names a file is declared with one of these types, and every command
 is a ``Command`` (groups make their subcommands ``Command`` s), which checks, after the command
@@ -26,11 +27,10 @@ from typing import Any
 
 import click
 
-from ..core import files
 from ..core.errors import PosecrbError, UsageError
-
-FIGURE_EXTENSIONS = files.FIGURE_EXTENSIONS
-GRAPH_EXTENSIONS = files.GRAPH_EXTENSIONS
+from ..core.inputs import check_input_file
+from ..core.outputs import GRAPH_EXTENSIONS, check_output_dir, check_output_file
+from ..report.figures import FIGURE_EXTENSIONS
 
 
 def flag(param: click.Parameter) -> str:
@@ -125,7 +125,7 @@ class InputFile(click.ParamType):
         if not text.strip():
             raise UsageError(f"{flag(param) if param else 'FILE'}: empty path; give "
                              + (f"{' or '.join(self.keywords)} or " if self.keywords else "") + "a file name")
-        files.check_input_file(text)      # ParseError (exit 1): not a regular file, too large
+        check_input_file(text)      # ParseError (exit 1): not a regular file, too large
         return text
 
     def input_paths(self, value: str, data_dir: str | None) -> list[str]:
@@ -186,10 +186,10 @@ def check_paths(command: click.Command, params: dict[str, Any]) -> None:
                 # an option that rewrites its own input on purpose (regress --update --expected) is exempt
                 # from that one input only, never from the others of the call
                 others = [path for name, path in inputs if not (t.rewrites_input and name == p.name)]
-                files.check_output_file(v, others, option=option, extensions=t.extensions)
+                check_output_file(v, others, option=option, extensions=t.extensions)
                 written.append((option, os.path.abspath(v)))
             else:
-                files.check_output_dir(v, [path for _, path in inputs], t.names, option=option)
+                check_output_dir(v, [path for _, path in inputs], t.names, option=option)
                 written += [(option, os.path.abspath(os.path.join(v, n))) for n in t.names]
     seen: dict[str, str] = {}
     for option, path in written:

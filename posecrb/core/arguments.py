@@ -1,8 +1,8 @@
 """Arguments of the library checked once, before any work, with the error naming the argument.
 
 Choices (``posecrb.core.choices``) and flags, and paths: the library's side of the command line's
-path options (``posecrb.cli.paths``), the same rules of the file layer (``posecrb.core.files``),
-raised as ``ArgumentError`` in Python terms (``path='x.npz': directory d does not exist``).
+path options (``posecrb.cli.paths``), the same rules of the file layer (``posecrb.core.inputs``,
+``posecrb.core.outputs``), raised as ``ArgumentError`` in Python terms (``path='x.npz': directory d does not exist``).
 """
 from __future__ import annotations
 
@@ -11,7 +11,7 @@ from collections.abc import Sequence
 from typing import Any
 
 from .errors import ArgumentError, UsageError
-from .files import check_output_file, same_file
+from .outputs import check_output_file, same_file
 
 
 def choice(parameter: str, value: Any, choices: Sequence[str]) -> Any:
@@ -32,7 +32,7 @@ def flag(parameter: str, value: Any) -> bool:
 
 def check_output_argument(parameter: str, path: Any, inputs: tuple[str | os.PathLike[str] | None, ...] = (), *,
                           extensions: tuple[str, ...] | None = None, append: str | None = None) -> str:
-    """``posecrb.core.files.check_output_file`` for a library argument: the same checks (the
+    """``posecrb.core.outputs.check_output_file`` for a library argument: the same checks (the
     extension among ``extensions`` included), before any work, with the error naming
     ``parameter`` (an ``ArgumentError``: ``path='x.npz': ...``; the command line shows
     ``--path x.npz: ...``). ``append``: a suffix added unless present (numpy's rule for
@@ -41,7 +41,17 @@ def check_output_argument(parameter: str, path: Any, inputs: tuple[str | os.Path
     if append and not shown.endswith(append):
         if shown.endswith(os.sep) or os.path.basename(shown) in ("", ".", ".."):
             raise ArgumentError(parameter, shown, "names a directory; give a file name", sep=": ")
+        if os.path.lexists(shown) and not os.path.isfile(shown):
+            # the path as given names a directory or a device (/dev/null): never write beside it
+            _checked_output(parameter, shown, inputs, None)
         shown += append
+    _checked_output(parameter, shown, inputs, extensions)
+    return str(shown)
+
+
+def _checked_output(parameter: str, shown: str, inputs: tuple[str | os.PathLike[str] | None, ...],
+                    extensions: tuple[str, ...] | None) -> None:
+    """``check_output_file`` with its ``UsageError`` as an ``ArgumentError`` naming ``parameter``."""
     try:
         check_output_file(shown, inputs, option=None, extensions=extensions)
     except UsageError as exc:
@@ -50,7 +60,6 @@ def check_output_argument(parameter: str, path: Any, inputs: tuple[str | os.Path
         colon = reason.startswith(":")
         raise ArgumentError(parameter, shown, reason[1:].strip() if colon else reason.strip(),
                             sep=": " if colon else " ") from None
-    return str(shown)
 
 
 def refuse_inputs(parameter: str, path: Any, inputs: Sequence[str | os.PathLike[str] | None]) -> None:

@@ -73,7 +73,7 @@ class ParseError(PosecrbError):
 class OutputError(PosecrbError):
     """A result file cannot be written (disk full, permission denied, read-only file system):
     the path and the system's reason (exit 1). Nothing was written: the previous file, if any,
-    is intact (``posecrb.core.files.atomic_write``)."""
+    is intact (``posecrb.core.outputs.atomic_write``)."""
 
     def __init__(self, path: str, reason: str):
         self.path, self.reason = str(path), reason
@@ -82,7 +82,8 @@ class OutputError(PosecrbError):
 
 class DatasetNotFound(PosecrbError):
     """A bare dataset name found nowhere on the search path; the message lists the directories
-    searched and how to fetch the dataset.
+    searched and what else to do: fetch the dataset when the manifest knows the name (``advice``
+    replaces that hint for a name that cannot be fetched).
 
     Attributes
     ----------
@@ -101,13 +102,12 @@ class DatasetNotFound(PosecrbError):
     no-such-dataset
     """
 
-    def __init__(self, name: str, searched: list[str]):
+    def __init__(self, name: str, searched: list[str], advice: str | None = None):
         self.name, self.searched = name, searched
         hint = "; searched: " + ", ".join(searched) if searched else ""
-        super().__init__(
-            f"dataset {name!r} not found{hint}. "
-            f"Pass a path, set --data-dir or $POSECRB_DATA, or run `posecrb datasets fetch {shlex.quote(name)}`."
-        )
+        advice = advice or f"run `posecrb datasets fetch {shlex.quote(name)}`"
+        super().__init__(f"dataset {name!r} not found{hint}. "
+                         f"Pass a path, set --data-dir or $POSECRB_DATA, or {advice}.")
 
 
 class UsageError(PosecrbError, ValueError):

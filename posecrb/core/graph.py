@@ -190,7 +190,7 @@ class PoseGraph(PoseDimensions):
 
         base = os.path.basename(self.path)
         if base.lower().endswith(".gz") and base.count(".") > 1:
-            base = base[:-3]            # intel.g2o.gz is intel, read transparently (posecrb.core.files)
+            base = base[:-3]            # intel.g2o.gz is intel, read transparently (posecrb.core.inputs)
         return base.rsplit(".", 1)[0] if "." in base else base
 
     @property

@@ -16,8 +16,8 @@ from importlib.metadata import PackageNotFoundError, version
 from pathlib import Path
 from typing import Any
 
-from .. import __version__
-from .files import write_text
+from .._version import __version__
+from .outputs import write_text
 
 _DISTRIBUTIONS = ("numpy", "scipy", "pandas", "scikit-sparse", "numba", "click", "rich", "matplotlib",
                   "dask", "distributed")

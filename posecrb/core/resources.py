@@ -1,7 +1,7 @@
 """What the machine can give a run: available memory, and checks of a request against it.
 
 Options whose cost grows with their value (``datasets synth --poses``, ``experiment ... --trials``)
-and inputs whose reading grows with their size (``posecrb.core.files.read_input``) are checked
+and inputs whose reading grows with their size (``posecrb.core.inputs.read_input``) are checked
 against the memory available *before* the work starts, so that a request the machine cannot honour
 is a usage error with the estimate, never a ``MemoryError`` (or the OOM killer) after minutes.
 """

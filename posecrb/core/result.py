@@ -44,20 +44,19 @@ A field of type ``Status`` named ``<key>_status`` follows ``<key>`` and is rende
 from __future__ import annotations
 
 import dataclasses
-import io
 import json
 import math
 import os
-import zipfile
 from collections.abc import Callable, Mapping
 from typing import Any, TypeVar
 
 import numpy as np
 
+from .archives import read_npz
 from .arguments import check_input_argument, check_output_argument
 from .errors import ArgumentError, ParseError
-from .files import atomic_write, read_regular_file
 from .jsontypes import conform, is_status_json, short, type_hints, type_name
+from .outputs import atomic_write
 from .status import OK, Status, worst
 
 R = TypeVar("R", bound="Result")
@@ -343,19 +342,13 @@ class Result:
 
     @classmethod
     def load(cls: type[R], path: str | os.PathLike[str]) -> R:
-        """The result ``save`` wrote to ``path`` (read through the input layer).
+        """The result ``save`` wrote to ``path`` (read through the input layer: capped inflation, no
+        pickles).
 
         Raises ``ParseError`` (the path and the reason) for a file that is not such a result,
         and ``ArgumentError`` for a path that is not one."""
         name = check_input_argument("path", path)
-        try:
-            archive = np.load(io.BytesIO(read_regular_file(name)), allow_pickle=False)
-            if not hasattr(archive, "files"):
-                raise ValueError("a single array (.npy), not an archive")
-            with archive as npz:
-                data = {k: npz[k] for k in npz.files}
-        except (ValueError, OSError, EOFError, KeyError, zipfile.BadZipFile) as exc:
-            raise ParseError(name, None, f"not a posecrb result file ({type(exc).__name__}: {exc})") from None
+        data = read_npz(name)
         kind = str(data.pop("result_type", ""))
         if kind != cls.__name__ or "result" not in data:
             raise ParseError(name, None, f"holds a {kind or 'non-posecrb'} result, not a {cls.__name__}")

@@ -8,7 +8,7 @@ raises ``FetchError`` (exit 1). Downloads are bounded: ``timeout`` per connectio
 read, an overall ``deadline`` (a server trickling one byte at a time never trips the
 read timeout), and a size cap, the manifest's size of the file (``MAX_UNKNOWN_SIZE``
 where the manifest has none): a larger response is aborted as soon as it exceeds it.
-On SIGTERM the CLI raises ``posecrb.core.files.Terminated``, so the temporary is removed
+On SIGTERM the CLI raises ``posecrb.cli.signals.Terminated``, so the temporary is removed
 then too.
 """
 from __future__ import annotations
@@ -27,9 +27,9 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import IO
 
-from .. import __version__
+from .._version import __version__
 from ..core.errors import PosecrbError
-from ..core.files import atomic_write, make_output_dir
+from ..core.outputs import atomic_write, make_output_dir
 from .manifest import DatasetEntry, Manifest, load_manifest, verify_file
 from .search import cache_dir, locate
 

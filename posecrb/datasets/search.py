@@ -30,7 +30,7 @@ from pathlib import Path
 from typing import TYPE_CHECKING
 
 from ..core.errors import DatasetNotFound, ParseError, PosecrbError, UsageError
-from ..core.files import path_kind
+from ..core.inputs import checked_name, path_kind, unresolvable
 
 if TYPE_CHECKING:
     from .manifest import DatasetEntry, Manifest
@@ -76,8 +76,8 @@ def env_data_dirs() -> list[Path]:
             if os.path.lexists(p):
                 try:
                     kind = path_kind(os.stat(p))
-                except OSError:
-                    kind = "a dangling symbolic link"
+                except OSError as exc:
+                    kind = unresolvable(exc)      # a dangling link, a symbolic link loop, ...
                 what = f"is {kind}, not a directory"
             else:
                 what = "does not exist"
@@ -95,7 +95,7 @@ def cache_dir() -> Path:
 def search_path(data_dir: str | os.PathLike | None = None) -> list[Path]:
     dirs: list[Path] = []
     if data_dir:
-        dirs.append(Path(data_dir))
+        dirs.append(Path(checked_name(data_dir)))
     dirs += env_data_dirs()
     dirs.append(Path("datasets"))
     dirs.append(cache_dir())
@@ -109,10 +109,10 @@ def search_path(data_dir: str | os.PathLike | None = None) -> list[Path]:
 
 def _resolve_on_path(name_or_path: str | os.PathLike, data_dir: str | os.PathLike | None = None) -> Path:
     """An existing path is returned as is; a bare name (with or without extension) is searched."""
-    p = Path(name_or_path)
+    name = checked_name(name_or_path)        # ParseError for '' and NUL, never a raw ValueError
+    p = Path(name)
     if p.is_file():
         return p
-    name = str(name_or_path)
     if os.sep in name or (os.altsep and os.altsep in name):
 
         _not_regular(name)
@@ -193,10 +193,20 @@ def locate_input(name_or_path: str | os.PathLike, data_dir: str | os.PathLike | 
         found = locate(entry, data_dir) if entry is not None else None
         if found is None:
             _not_regular(name_or_path)
-            if entry is not None and entry.name != str(name_or_path):
+            if entry is None:                # `datasets fetch` would not know the name either
+                raise DatasetNotFound(exc.name, exc.searched, _not_fetchable(exc.name)) from None
+            if entry.name != str(name_or_path):
                 raise DatasetNotFound(entry.name, exc.searched) from None
             raise
         return found
+
+
+def _not_fetchable(name: str) -> str:
+    """What to do about a name that is neither on the search path nor in the manifest."""
+    if "," in name:
+        return ("give one dataset per argument: a comma does not separate names "
+                f"({' '.join(shlex.quote(n.strip()) for n in name.split(',') if n.strip())})")
+    return "see `posecrb datasets list` for the datasets posecrb can fetch"
 
 
 @lru_cache(maxsize=64)

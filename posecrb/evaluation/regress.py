@@ -19,9 +19,11 @@ from dataclasses import dataclass
 from pathlib import Path
 
 from ..core.errors import InternalError, ParseError, PosecrbError
-from ..core.files import decode_utf8, read_input, write_text
+from ..core.inputs import read_input
+from ..core.outputs import write_text
 from ..datasets import search as datasets
 from ..io import load
+from ..io.lines import decode_utf8
 from ..models.paper.crlb import crlb_from_fim
 from .evaluate import EvaluationSettings, evaluate
 

@@ -21,7 +21,6 @@ objective explicitly. Selections run as independent tasks on the Monte Carlo eng
 """
 from __future__ import annotations
 
-import os
 import re
 import time
 from collections.abc import Callable, Sequence
@@ -31,7 +30,6 @@ from typing import Any
 import numpy as np
 
 from ..core.errors import SolverError, UsageError
-from ..core.files import save_figure
 from ..core.graph import PoseGraph
 from ..core.status import put
 from ..linalg.cholesky import SymbolicCholesky
@@ -238,35 +236,3 @@ def sparsify_experiment(graph: PoseGraph, budgets: Sequence[str] = DEFAULT_BUDGE
         anchor_id=int(graph.ids[anchor]), objective=objective, reference=reference, rows=rows,
         budgets=budgets, methods=[t[0] for t in triples], seed=seed,
         seeds=[{"task": t.trial, **seed_record(t)} for t in tasks])
-
-
-def plot_sparsify(result: SparsifyResult, path: str | os.PathLike) -> str:
-    """Share of the full graph's gain in the objective (``(f(S) - f(F)) / (f(all) - f(F))``),
-    lambda_2 and ATE against the budget, one line per method; written atomically through the file
-    layer (``posecrb.core.files.save_figure``: format by the extension, .png, .svg or .pdf)."""
-
-    import matplotlib  # noqa: PLC0415 -- optional heavy dependency (matplotlib), only for --plot
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt  # noqa: PLC0415 -- optional heavy dependency (matplotlib), only for --plot
-
-    fig, axes = plt.subplots(1, 3, figsize=(13.0, 3.8))
-    names = {"tree": "tree bound (eq. 75)", "fim": "logdet FIM", "fiedler": "$\\lambda_2$"}
-    key = "fim_logdet" if result.objective == "fim" else result.objective
-    top, bottom = result.reference[key], result.reference["fixed_only"][key]
-    for label in result.methods:
-        rows = sorted((r for r in result.rows if r["method"] == label), key=lambda r: r["percent"])
-        pct = [r["percent"] for r in rows]
-        axes[0].plot(pct, [(r[key] - bottom) / (top - bottom) for r in rows], marker="o", ms=3, label=label)
-        axes[1].plot(pct, [r["fiedler"] for r in rows], marker="o", ms=3, label=label)
-        axes[2].plot(pct, [r["ate_trans"] for r in rows], marker="o", ms=3, label=label)
-    axes[0].set_ylabel(f"{names[result.objective]}: share of the full gain")
-    axes[1].set_ylabel("algebraic connectivity $\\lambda_2$")
-    axes[2].set_ylabel("ATE translation vs full-graph optimum")
-    axes[2].set_yscale("symlog", linthresh=1e-3)
-    for ax in axes:
-        ax.set_xlabel("% of loop closures kept")
-        ax.grid(True, alpha=0.3)
-    axes[0].legend(fontsize=8)
-    fig.suptitle(f"{result.dataset}: {result.candidates} candidate loop closures, {result.fixed} fixed edges")
-    return os.fspath(save_figure(fig, path))

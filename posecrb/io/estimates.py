@@ -36,7 +36,7 @@ import numpy as np
 
 from ..core.choices import ESTIMATE_FORMATS, ROW_ORDERS, EstimateFormat, RowOrder
 from ..core.errors import ParseError
-from ..core.files import read_input
+from ..core.inputs import read_input
 from ..lie.so import NotRotations, check_rotations
 from .records import SKIPPED_TAGS
 from .rotations import euler_to_rot, quat_to_rot

@@ -13,9 +13,10 @@ import os
 import numpy as np
 
 from ..core.errors import ArgumentError, UsageError
-from ..core.files import decode_utf8, read_input
 from ..core.graph import PoseGraph
+from ..core.inputs import read_input
 from .g2o import G2O
+from .lines import decode_utf8
 from .reader import QUATERNION_MODES, parse
 from .records import Format
 from .text import Fallback, scan_bytes, split_text
@@ -47,7 +48,7 @@ def load(path: str | os.PathLike, quaternions: str = "normalize") -> PoseGraph:
     SE-Sync's reader ignores) are always normalised, and 2D/TORO files are unaffected.
     Only regular files are read (a directory, FIFO or device is an error saying so), no larger
     than the memory available allows, and a gzip-compressed file (``intel.g2o.gz``) is read
-    transparently; ``sha256`` is that of the file as stored (``posecrb.core.files.read_input``).
+    transparently; ``sha256`` is that of the file as stored (``posecrb.core.inputs.read_input``).
     """
     inp = read_input(path)
     return parse_bytes(inp.data, path=inp.path, sha256=inp.sha256, quaternions=quaternions)

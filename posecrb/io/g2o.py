@@ -14,8 +14,8 @@ import numpy as np
 
 from ..core.arguments import refuse_inputs
 from ..core.errors import ParseError, UsageError
-from ..core.files import atomic_write
 from ..core.graph import PoseGraph
+from ..core.outputs import atomic_write
 from ..lie.so import so2_exp, so2_log
 from .records import Format, RecordKind
 from .rotations import quat_to_rot, rot_to_quat
@@ -94,7 +94,7 @@ def format_rows(arr: np.ndarray) -> list[str]:
 def write_lines(path: str | os.PathLike, vtag: str, etag: str, graph: PoseGraph, vcols: np.ndarray | None,
                 ecols: np.ndarray) -> None:
     """One line per vertex (when ``vcols``) then per edge, ids as read (int64, never through
-    float64), written atomically (``posecrb.core.files.atomic_write``); never onto the file the
+    float64), written atomically (``posecrb.core.outputs.atomic_write``); never onto the file the
     graph was read from (``ArgumentError``)."""
     refuse_inputs("path", path, (graph.path,))
     lines: list[str] = []
@@ -112,7 +112,7 @@ def write_g2o(graph: PoseGraph, path: str | os.PathLike, rot: np.ndarray | None 
 
     Information matrices are written in g2o order whatever the input format was. Ids are
     written from the int64 ids as read (never through float64). The file is replaced
-    atomically (``posecrb.core.files.atomic_write``): a failure or a signal leaves the previous
+    atomically (``posecrb.core.outputs.atomic_write``): a failure or a signal leaves the previous
     file, if any, and no temporary. ``path`` is never the file ``graph`` was read from (its
     ``path``, also that of a graph derived from it, such as ``SelectResult.pruned_graph``): that is
     an ``ArgumentError`` and nothing is written.

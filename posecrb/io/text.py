@@ -5,8 +5,8 @@ a tag then numeric fields. This module turns a file's content into groups of lin
 each group's numeric block into arrays, with every violation a ``ParseError`` naming file,
 line and reason (docs/design.md#formats). Robustness rules:
 
-* Lines end at ``\\n``, ``\\r\\n`` or ``\\r`` only (the line rules of the input layer,
-  ``posecrb.core.files``, shared by every text input). ``str.splitlines`` would also break at form
+* Lines end at ``\\n``, ``\\r\\n`` or ``\\r`` only (the line rules of every text input,
+  ``posecrb.io.lines``). ``str.splitlines`` would also break at form
   feed, vertical tab, ``\\x1c``-``\\x1e``, NEL and U+2028/U+2029, turning the tail of a comment
   into data and shifting every later line number.
 * Fields are separated by ASCII blanks (space, tab, form feed, vertical tab). Numbers follow
@@ -34,8 +34,8 @@ from itertools import chain
 import numpy as np
 
 from ..core.errors import InternalError, ParseError
-from ..core.files import FIELD_SEP, ODD_SPACE, split_lines
 from ..core.integers import IntegerError, parse_int, shown
+from .lines import FIELD_SEP, ODD_SPACE, split_lines
 from .records import RecordKind
 
 # Magnitude limits, checked at parse time so that no quantity built from a file overflows
@@ -110,7 +110,7 @@ class Tokens:
 # Reference tokeniser: any text, exact error locations.
 
 def _split_lines(text: str) -> list[list[str]]:
-    """Fields of every line, by the line rules of ``posecrb.core.files`` (module docstring)."""
+    """Fields of every line, by the line rules of ``posecrb.io.lines`` (module docstring)."""
     lines = split_lines(text)
     if ODD_SPACE.search(text) is None and "\f" not in text and "\v" not in text:
         return [ln.split() for ln in lines]          # only ASCII blanks occur

@@ -16,56 +16,16 @@ import scipy.sparse as sp
 from sksparse.cholmod import CholmodNotPositiveDefiniteError, Factor, analyze
 
 from ..core.errors import NotPositiveDefinite, NumericalError, UsageError
+from .factor_gc import disable_gc_clear
 from .lanczos import largest_eigenpair
 from .threads import cholmod_openmp_serial, cholmod_single_threaded, load_aware_threads
 
 log = logging.getLogger("posecrb")
 
 
-def _disable_gc_clear(tp: type) -> bool:
-    """Empty the ``tp_clear`` slot of a Cython type whose ``__dealloc__`` needs its object fields.
-
-    scikit-sparse 0.4.16's ``Factor.__dealloc__`` frees the CHOLMOD factor through
-    ``self._common``. When a Factor dies inside a reference cycle (an exception's traceback
-    holding the frame that holds the factor, say), the cyclic GC first calls the Cython-generated
-    ``tp_clear``, which sets ``_common`` to None; ``__dealloc__`` then passes CHOLMOD a pointer
-    into the memory after ``None``, CHOLMOD writes its status (-4, invalid) there, and the factor
-    leaks. That write corrupts the interpreter's static data (on Debian 12's Python 3.11.2 the
-    process dies at exit freeing a garbage pointer). Cython's ``no_gc_clear`` is the cure and
-    0.4.16 lacks it, so the slot is emptied here: the GC then breaks such cycles at their other
-    objects and the Factor is deallocated by reference count with its Common intact.
-
-    The slot's address is checked against ``PyType_GetSlot`` before anything is written; on an
-    interpreter whose type layout differs nothing is changed. Returns whether the slot is empty.
-    """
-    import ctypes  # noqa: PLC0415 -- only for the one-time scikit-sparse repair at import
-
-    get_slot = ctypes.pythonapi.PyType_GetSlot
-    get_slot.restype, get_slot.argtypes = ctypes.c_void_p, [ctypes.py_object, ctypes.c_int]
-    try:
-        current = get_slot(tp, 51)                 # Py_tp_clear (Include/typeslots.h)
-    except SystemError:                            # static types before Python 3.10
-        return False
-    if not current:
-        return True
-
-    class _TypeHead(ctypes.Structure):             # PyTypeObject up to tp_clear (Include/cpython/object.h)
-        _fields_ = [("ob_refcnt", ctypes.c_ssize_t), ("ob_type", ctypes.c_void_p), ("ob_size", ctypes.c_ssize_t),
-                    ("tp_name", ctypes.c_char_p), ("tp_basicsize", ctypes.c_ssize_t),
-                    ("tp_itemsize", ctypes.c_ssize_t)]
-        _fields_ += [(f"slot{k}", ctypes.c_void_p) for k in range(15)]   # tp_dealloc .. tp_as_buffer
-        _fields_ += [("tp_flags", ctypes.c_ulong), ("tp_doc", ctypes.c_char_p), ("tp_traverse", ctypes.c_void_p),
-                     ("tp_clear", ctypes.c_void_p)]
-
-    head = _TypeHead.from_address(id(tp))
-    if head.tp_clear != current or head.tp_basicsize != tp.__basicsize__:
-        log.debug("%s: unexpected type layout, tp_clear left in place", tp.__name__)
-        return False
-    head.tp_clear = None
-    return True
-
-
-_disable_gc_clear(Factor)
+# scikit-sparse 0.4.16 corrupts memory when a Factor dies in a reference cycle; see factor_gc.py
+# and docs/decisions/sksparse-factor-gc.md.
+disable_gc_clear(Factor)
 
 
 def _as_csc(a: sp.spmatrix) -> sp.csc_matrix:

@@ -19,13 +19,15 @@ import numpy as np
 
 from ..core.arguments import check_output_argument
 from ..core.errors import ArgumentError
-from ..core.files import FIGURE_EXTENSIONS, check_output_file, save_figure
+from ..core.outputs import check_output_file
 from ..evaluation.published import paper_row
+from .figures import FIGURE_EXTENSIONS, save_figure
 
 if TYPE_CHECKING:
 
     from ..experiments.crlb_sweep import CrlbSweepResult
     from ..experiments.octagon import OctagonResult
+    from ..experiments.sparsify import SparsifyResult
     from ..experiments.thesis import ThesisResult
     from ..incremental.result import TimelineResult
 
@@ -34,7 +36,7 @@ FIGURE_FORMATS = FIGURE_EXTENSIONS
 
 
 def check_figure_path(path: str | os.PathLike) -> Path:
-    """The figure target, checked before any work (``posecrb.core.files.check_output_file``):
+    """The figure target, checked before any work (``posecrb.core.outputs.check_output_file``):
     extension .png, .svg or .pdf, not a directory, its directory existing and writable. Raises
     UsageError (exit 2)."""
     return check_output_file(path, option=None, extensions=FIGURE_EXTENSIONS)
@@ -266,3 +268,29 @@ def plot_timeline(result: TimelineResult, path: str | os.PathLike) -> Path:
     where = "every step" if result.every == 1 else f"every {result.every}-th step"
     fig.suptitle(f"{result.dataset}: information timeline ({result.dim}D, {where})", fontsize=10)
     return save_figure(fig, path)
+
+
+def plot_sparsify(result: SparsifyResult, path: str | os.PathLike) -> str:
+    """Share of the full graph's gain in the objective (``(f(S) - f(F)) / (f(all) - f(F))``),
+    lambda_2 and ATE against the budget, one line per method; written atomically through the output
+    layer (``save_figure``: format by the extension, .png, .svg or .pdf)."""
+    fig, axes = plt.subplots(1, 3, figsize=(13.0, 3.8))
+    names = {"tree": "tree bound (eq. 75)", "fim": "logdet FIM", "fiedler": "$\\lambda_2$"}
+    key = "fim_logdet" if result.objective == "fim" else result.objective
+    top, bottom = result.reference[key], result.reference["fixed_only"][key]
+    for label in result.methods:
+        rows = sorted((r for r in result.rows if r["method"] == label), key=lambda r: r["percent"])
+        pct = [r["percent"] for r in rows]
+        axes[0].plot(pct, [(r[key] - bottom) / (top - bottom) for r in rows], marker="o", ms=3, label=label)
+        axes[1].plot(pct, [r["fiedler"] for r in rows], marker="o", ms=3, label=label)
+        axes[2].plot(pct, [r["ate_trans"] for r in rows], marker="o", ms=3, label=label)
+    axes[0].set_ylabel(f"{names[result.objective]}: share of the full gain")
+    axes[1].set_ylabel("algebraic connectivity $\\lambda_2$")
+    axes[2].set_ylabel("ATE translation vs full-graph optimum")
+    axes[2].set_yscale("symlog", linthresh=1e-3)
+    for ax in axes:
+        ax.set_xlabel("% of loop closures kept")
+        ax.grid(True, alpha=0.3)
+    axes[0].legend(fontsize=8)
+    fig.suptitle(f"{result.dataset}: {result.candidates} candidate loop closures, {result.fixed} fixed edges")
+    return os.fspath(save_figure(fig, path))

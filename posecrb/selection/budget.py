@@ -5,7 +5,7 @@ A budget is ``K`` edges or a fraction of the candidates (rounded down, as MAC do
 line's ``--budget`` spells the fraction ``P%`` (``budget_value``). ``--fixed`` is
 ``odometry`` (the edges between consecutive pose ids, joined into a connected set by the heaviest
 candidates where the chain is broken) or a text file of pose-id pairs, read through the input
-layer (``posecrb.core.files.read_lines``).
+layer (``posecrb.io.lines.read_lines``).
 """
 from __future__ import annotations
 
@@ -19,9 +19,9 @@ import numpy as np
 import scipy.sparse as sp
 
 from ..core.errors import ArgumentError, ParseError, PosecrbError
-from ..core.files import read_lines
 from ..core.graph import PoseGraph, connected_components
 from ..core.integers import IntegerError, parse_int
+from ..io.lines import read_lines
 
 log = logging.getLogger("posecrb")
 

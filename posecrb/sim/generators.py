@@ -17,16 +17,14 @@ exactly the values used to generate the noise.
 
 Generators: ``grid`` (2D/3D lattice walked in boustrophedon order, like the
 tiny/small/grid3D benchmarks), ``sphere`` (sphere2500-like rings), ``torus``
-(torus3D-like rings), ``octagon`` (the paper's Fig. 2), ``random_graph`` (random
-connected graphs with parallel edges, gaps in the ids and anisotropic
-information, for tests), ``builtin_demo`` (the fixed graph ``make run`` uses when
-no dataset is found).
+(torus3D-like rings), ``octagon`` (the paper's Fig. 2), ``builtin_demo`` (the fixed graph ``make run`` uses when
+no dataset is found). Random graphs for tests (parallel edges, gaps in the ids, anisotropic
+information) are ``posecrb.sim.random_graphs``.
 """
 from __future__ import annotations
 
 import math
 from collections.abc import Iterable, Sequence
-from dataclasses import replace
 from typing import Any
 
 import numpy as np
@@ -34,7 +32,7 @@ import numpy.typing as npt
 
 from ..core.choices import SYNTH_KINDS
 from ..core.errors import InternalError, UsageError
-from ..core.graph import PoseGraph, rotation_dimension
+from ..core.graph import PoseGraph
 from ..core.noise import isotropic_information
 from ..io.rotations import quat_to_rot
 from ..lie.se import relative_poses
@@ -69,7 +67,7 @@ def _given(rng: np.random.Generator | None) -> np.random.Generator:
     return rng
 
 
-def _assemble(dim: int, rot: np.ndarray, trans: np.ndarray, src: np.ndarray, dst: np.ndarray,
+def assemble_graph(dim: int, rot: np.ndarray, trans: np.ndarray, src: np.ndarray, dst: np.ndarray,
               tau: npt.ArrayLike, kappa: npt.ArrayLike, noise: bool, rng: np.random.Generator | None,
               ids: np.ndarray | None = None, info: np.ndarray | None = None) -> PoseGraph:
     """Measurements from the truth (optionally noisy), isotropic information, truth as vertices."""
@@ -183,7 +181,7 @@ def grid(dim: int, side: int, *, poses: int | None = None, spacing: float = 1.0,
     src = np.concatenate([np.arange(n - 1), lo[loops]])
     dst = np.concatenate([np.arange(1, n), hi[loops]])
     order = np.lexsort((src, dst))  # edges grouped by their later pose, as a robot would record them
-    return _assemble(dim, rot, trans, src[order], dst[order], tau, kappa, noise, rng)
+    return assemble_graph(dim, rot, trans, src[order], dst[order], tau, kappa, noise, rng)
 
 
 # ---- surfaces of revolution -------------------------------------------------------
@@ -228,7 +226,7 @@ def sphere(rings: int = 50, per_ring: int = 50, *, poses: int | None = None, rad
     normal = np.column_stack([np.sin(phi) * np.cos(theta), np.sin(phi) * np.sin(theta), np.cos(phi)])
     east = np.column_stack([-np.sin(theta), np.cos(theta), np.zeros(n)])
     src, dst = _ring_edges(n, per_ring, wrap=False)
-    return _assemble(3, _frames(east, normal), radius * normal, src, dst, tau, kappa, noise, rng)
+    return assemble_graph(3, _frames(east, normal), radius * normal, src, dst, tau, kappa, noise, rng)
 
 
 def torus(rings: int = 100, per_ring: int = 50, *, poses: int | None = None, major: float = 50.0,
@@ -249,7 +247,7 @@ def torus(rings: int = 100, per_ring: int = 50, *, poses: int | None = None, maj
     normal = np.column_stack([cv * cu, cv * su, sv])
     tangent = np.column_stack([-sv * cu, -sv * su, cv])
     src, dst = _ring_edges(n, per_ring, wrap=n == rings * per_ring)
-    return _assemble(3, _frames(tangent, normal), trans, src, dst, tau, kappa, noise, rng)
+    return assemble_graph(3, _frames(tangent, normal), trans, src, dst, tau, kappa, noise, rng)
 
 
 # ---- the paper's octagon (Fig. 2-5) -----------------------------------------------
@@ -294,123 +292,7 @@ def octagon(extra_edges: int | Iterable[tuple[int, int]] = 0, *, radius: float =
     rot = so2_exp(ang + np.pi / 2)
     src = np.concatenate([np.arange(7), np.array([e[0] for e in extra], dtype=np.int64)])
     dst = np.concatenate([np.arange(1, 8), np.array([e[1] for e in extra], dtype=np.int64)])
-    return _assemble(2, rot, trans, src, dst, tau, kappa, noise, gen)
-
-
-# ---- random graphs for tests ------------------------------------------------------
-
-def _random_spd(rng: np.random.Generator, m: int, k: int, lo: float, hi: float
-                ) -> tuple[np.ndarray, np.ndarray]:
-    """(m, k, k) SPD matrices Q diag(e) Q^T with log-uniform eigenvalues in [lo, hi], and their square roots."""
-    q, r = np.linalg.qr(rng.standard_normal((m, k, k)))
-    q = q * np.sign(np.diagonal(r, axis1=1, axis2=2))[:, None, :]
-    e = np.exp(rng.uniform(np.log(lo), np.log(hi), (m, k)))
-    qt = np.swapaxes(q, 1, 2)
-    a, s = (q * e[:, None, :]) @ qt, (q * np.sqrt(e)[:, None, :]) @ qt
-    # Exactly symmetric, as a file's upper triangle will make them anyway.
-    return (a + np.swapaxes(a, 1, 2)) / 2, (s + np.swapaxes(s, 1, 2)) / 2
-
-
-def random_information(rng: np.random.Generator, m: int, dim: int, kind: str = "full",
-                       tau_range: tuple[float, float] = (10.0, 1e3),
-                       kappa_range: tuple[float, float] = (50.0, 5e3)) -> np.ndarray:
-    """(m, q, q) g2o-order information matrices.
-
-    ``kind``: ``"isotropic"`` (SE-Sync diagonal form with tau, kappa log-uniform in
-    the ranges), ``"block"`` (anisotropic SPD translation and rotation blocks, eigenvalues
-    in ``tau_range`` resp. ``kappa_range``, no cross terms) or ``"full"`` (the blocks plus
-    cross terms ``rho B_t^{1/2} W B_r^{1/2}``, ``||W||_2 = 1``, ``rho < 0.6``: positive
-    definite by the Schur complement since ``rho^2 < 1``).
-    """
-    r = rotation_dimension(dim)
-    q = dim + r
-    if kind == "isotropic":
-
-        (lo_t, hi_t), (lo_k, hi_k) = np.log(tau_range), np.log(kappa_range)
-        tau = np.exp(rng.uniform(lo_t, hi_t, m))
-        kappa = np.exp(rng.uniform(lo_k, hi_k, m))
-        return isotropic_information(tau, kappa, dim)
-    if kind not in ("block", "full"):
-        raise UsageError(f"kind must be isotropic, block or full, got {kind!r}")
-    bt, st = _random_spd(rng, m, dim, *tau_range)
-    br, sr = _random_spd(rng, m, r, *kappa_range)
-    info = np.zeros((m, q, q))
-    info[:, :dim, :dim] = bt
-    info[:, dim:, dim:] = br
-    if kind == "full":
-        w = rng.standard_normal((m, dim, r))
-        w /= np.linalg.norm(w, ord=2, axis=(1, 2))[:, None, None]
-        x = rng.uniform(0.0, 0.6, m)[:, None, None] * (st @ w @ sr)
-        info[:, :dim, dim:] = x
-        info[:, dim:, :dim] = np.swapaxes(x, 1, 2)
-    return info
-
-
-def random_graph(rng: np.random.Generator, n: int, m: int, dim: int, *, info: str = "full",
-                 parallel: bool = True, id_gaps: bool = True, noise: str = "none",
-                 scale: float = 5.0, tau_range: tuple[float, float] = (10.0, 1e3),
-                 kappa_range: tuple[float, float] = (50.0, 5e3)) -> PoseGraph:
-    """A random connected pose graph with the ground truth attached (for tests).
-
-    A random spanning tree (each pose joined to a random earlier pose of a random
-    order) plus ``m - n + 1`` random extra edges; with ``parallel`` at least one extra
-    edge repeats a tree edge (when ``m >= n``). Edge directions are random. Ids are
-    sorted distinct non-negative integers with gaps (``id_gaps``) or 0..n-1. Truth:
-    Haar-uniform rotations, Gaussian positions of std ``scale``. Information: see
-    ``random_information`` (``info`` = isotropic | block | full). ``noise``:
-    ``"none"`` (exact measurements), ``"isotropic"`` (eq. 80 with the graph's own
-    SE-Sync (tau, kappa)), or ``"gaussian"`` (``xi ~ N(0, inv(info))`` in g2o's
-    (translation, rotation) tangent order, applied as ``t + xi_t`` and ``R Exp(xi_r)``).
-    """
-    if dim not in (2, 3):
-        raise UsageError(f"dimension must be 2 or 3, got {dim}")
-    if n < 2 or m < n - 1:
-        raise UsageError(f"need n >= 2 and m >= n - 1 for a connected graph (n={n}, m={m})")
-    perm = rng.permutation(n)
-    parent = perm[np.floor(rng.random(n - 1) * np.arange(1, n)).astype(np.int64)]
-    a, b = [perm[1:]], [parent]
-    extra = m - (n - 1)
-    if parallel and extra > 0:
-        k = rng.integers(0, n - 1)
-        a.append(perm[1:][k: k + 1])
-        b.append(parent[k: k + 1])
-        extra -= 1
-    if extra > 0:
-        i = rng.integers(0, n, extra)
-        j = (i + rng.integers(1, n, extra)) % n  # never a self-loop
-        a.append(i)
-        b.append(j)
-    a_all, b_all = np.concatenate(a), np.concatenate(b)
-    flip = rng.random(m) < 0.5
-    src, dst = np.where(flip, b_all, a_all), np.where(flip, a_all, b_all)
-    shuffle = rng.permutation(m)
-    src, dst = src[shuffle], dst[shuffle]
-
-    if id_gaps:
-        gaps = rng.integers(1, 5, n)
-        gaps[n // 2] += 2  # guarantees at least one gap whatever the draw
-        ids = np.cumsum(gaps) + 2
-    else:
-        ids = np.arange(n)
-    rot = uniform_rotations(n, dim, rng)
-    trans = scale * rng.standard_normal((n, dim))
-    inf = random_information(rng, m, dim, info, tau_range, kappa_range)
-    graph = _assemble(dim, rot, trans, src, dst, 1.0, 1.0, False, None, ids=ids, info=inf)
-    if noise == "none":
-        return graph
-
-    if noise == "isotropic":
-        mrot, mtrans = isotropic_noise(graph.rot, graph.trans, graph.tau, graph.kappa, dim, rng)
-    elif noise == "gaussian":
-        chol = np.linalg.cholesky(inf)
-        # xi = L^{-T} z has covariance (L L^T)^{-1} = inv(info).
-        xi = np.linalg.solve(np.swapaxes(chol, 1, 2), rng.standard_normal((m, inf.shape[1]))[..., None])[..., 0]
-        xt, xr = xi[:, :dim], xi[:, dim:]
-        mtrans = graph.trans + xt
-        mrot = graph.rot @ (so2_exp(xr[:, 0]) if dim == 2 else so3_exp(xr))
-    else:
-        raise UsageError(f"noise must be none, isotropic or gaussian, got {noise!r}")
-    return replace(graph, rot=mrot, trans=mtrans)
+    return assemble_graph(2, rot, trans, src, dst, tau, kappa, noise, gen)
 
 
 # ---- the built-in demo --------------------------------------------------------------
@@ -479,6 +361,6 @@ def _iroot_ceil(n: int, d: int) -> int:
 
 __all__: Sequence[str] = (
     "KINDS", "uniform_rotations", "boustrophedon", "grid", "sphere", "torus",
-    "octagon", "octagon_candidate_edges", "random_information", "random_graph", "builtin_demo",
+    "octagon", "octagon_candidate_edges", "builtin_demo", "assemble_graph",
     "generate", "DEMO_SEED",
 )

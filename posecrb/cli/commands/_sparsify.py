@@ -8,13 +8,13 @@ import click
 
 from ...core.choices import EXECUTORS, FIXED_RULES
 from ...core.errors import UsageError
+from ...core.folders import output_folder
 from ...core.provenance import dataset_entry, run_record
 from ...core.status import Status, log_status
 from ...experiments.sparsify import (
     DEFAULT_BUDGETS,
     DEFAULT_METHODS,
     QUICK_BUDGETS,
-    plot_sparsify,
     sparsify_experiment,
 )
 from ...report.outputs import write_experiment_outputs
@@ -110,16 +110,19 @@ def sparsify_cmd(file, budgets, methods, objective, fixed, certify, max_iter, se
                title=f"{res.dataset}: {res.candidates} loop closures, {res.fixed} fixed edges, objective "
                      f"{res.objective}; full graph: tree {ref['tree']:.6g}, λ2 {ref['fiedler']:.4g}, "
                      f"FIM logdet {ref['fim_logdet']:.6g}, tr CRLB {crlb_ref} ({elapsed:.1f} s)")
-    target = plot_target(plot_path, out_dir, "sparsify")
-    if target:
-        plot_sparsify(res, target)
-    if out_dir:
-        settings = {"file": res.path, "sha256": res.sha256, "dataset": res.dataset, "dim": res.dim,
-                    "poses": res.poses, "edges": res.edges, "fixed": res.fixed, "fixed_rule": res.fixed_rule,
-                    "candidates": res.candidates, "anchor": res.anchor_id, "objective": res.objective,
-                    "budgets": res.budgets, "methods": res.methods, "certify": certify, "max_iter": max_iter,
-                    "seed": seed, "quick": quick, "reference": res.reference, **ex}
-        record = run_record("sparsify", settings=settings, seeds=res.seeds,
-                            datasets={res.dataset: dataset_entry(res.path, res.sha256)},
-                            results={"rows": len(res.rows)}, elapsed_seconds=elapsed)
-        write_experiment_outputs(out_dir, res.rows, record)
+    with output_folder(out_dir) as folder:     # --out DIR swapped in whole
+        target = plot_target(plot_path, folder, "sparsify")
+        if target:
+            from ...report.plots import plot_sparsify  # noqa: PLC0415 -- matplotlib, only for --plot
+
+            plot_sparsify(res, target)
+        if folder is not None:
+            settings = {"file": res.path, "sha256": res.sha256, "dataset": res.dataset, "dim": res.dim,
+                        "poses": res.poses, "edges": res.edges, "fixed": res.fixed, "fixed_rule": res.fixed_rule,
+                        "candidates": res.candidates, "anchor": res.anchor_id, "objective": res.objective,
+                        "budgets": res.budgets, "methods": res.methods, "certify": certify, "max_iter": max_iter,
+                        "seed": seed, "quick": quick, "reference": res.reference, **ex}
+            record = run_record("sparsify", settings=settings, seeds=res.seeds,
+                                datasets={res.dataset: dataset_entry(res.path, res.sha256)},
+                                results={"rows": len(res.rows)}, elapsed_seconds=elapsed)
+            write_experiment_outputs(folder, res.rows, record)

@@ -8,6 +8,7 @@ cluster (``--executor dask [--scheduler ADDRESS]``); results are bit-identical f
 from __future__ import annotations
 
 import logging
+import os
 import re
 import time
 from collections.abc import Callable
@@ -17,6 +18,7 @@ import click
 
 from ...core.choices import EXECUTORS, NOISE_SCALES
 from ...core.errors import UsageError
+from ...core.folders import output_folder
 from ...core.provenance import dataset_entry, run_record
 from ...core.resources import check_memory
 from ...experiments.crlb_sweep import MAX_LEVELS, check_levels, crlb_sweep, parse_levels
@@ -79,7 +81,7 @@ def _run_options(default_trials: str, name: str, extra: tuple[str, ...] = ()
     return deco
 
 
-def _write_out(out_dir: str | None, experiment: str, settings: dict, rows: list[dict], seeds: list[dict],
+def _write_out(out_dir: str | os.PathLike | None, experiment: str, settings: dict, rows: list[dict], seeds: list[dict],
                elapsed: float, extra: dict[str, list[dict]] | None = None,
                datasets: dict[str, dict] | None = None) -> None:
     if out_dir:
@@ -179,18 +181,19 @@ def crlb_cmd(file, kc_spec, scale, kappa, tau, anchor, fim_variant, data_dir, tr
     print_rows(rows, fmt, cols if fmt == "table" else None,
                title=f"{graph.name}: MSE per pose vs CRLB ({res.trials} trials/level, scale={scale}, "
                      f"seed {seed}, {elapsed:.1f} s)", headers=CRLB_HEADERS)
-    target = plot_target(plot_path, out_dir, "crlb")
-    if target:
-        from ...report.plots import plot_crlb_sweep  # noqa: PLC0415 -- matplotlib, only for --plot
-
-        plot_crlb_sweep(res, target)
     settings = {"file": graph.path, "sha256": graph.sha256, "dataset": graph.name, "dim": graph.dim,
                 "poses": graph.n, "edges": graph.m, "anchor": res.anchor_id, "kc": kcs, "trials": trials,
                 "seed": seed, "scale": scale, "kappa": kappa, "tau": tau, "quick": quick,
                 "fim_variant": res.fim_variant, **ex,
                 "truth_certified": res.truth_certified, "truth_objective": res.truth_objective}
-    _write_out(out_dir, "crlb", settings, rows, res.seeds, elapsed, {"trials": res.trial_rows()},
-               {graph.name: dataset_entry(graph.path, graph.sha256)})
+    with output_folder(out_dir) as folder:     # --out DIR swapped in whole
+        target = plot_target(plot_path, folder, "crlb")
+        if target:
+            from ...report.plots import plot_crlb_sweep  # noqa: PLC0415 -- matplotlib, only for --plot
+
+            plot_crlb_sweep(res, target)
+        _write_out(folder, "crlb", settings, rows, res.seeds, elapsed, {"trials": res.trial_rows()},
+                   {graph.name: dataset_entry(graph.path, graph.sha256)})
 
 
 # ---------------------------------------------------------------- thesis
@@ -229,13 +232,14 @@ def thesis_cmd(m_spec, trials, seed, jobs, executor, scheduler, plot_path, out_d
     rows = res.rows()
     print_rows(rows, fmt, None, title=f"thesis ch. 6: ‖Cov − CRB‖ vs m ({trials} trials per m, seed {seed}, "
                                       f"{elapsed:.1f} s)", headers=THESIS_HEADERS)
-    target = plot_target(plot_path, out_dir, "thesis")
-    if target:
-        from ...report.plots import plot_thesis  # noqa: PLC0415 -- matplotlib, only for --plot
-
-        plot_thesis(res, target)
     settings = {"m": ms, "trials": trials, "seed": seed, "quick": quick, **ex}
-    _write_out(out_dir, "thesis", settings, rows, res.seeds, elapsed, {"eigenvalues": res.eigenvalue_rows()})
+    with output_folder(out_dir) as folder:     # --out DIR swapped in whole
+        target = plot_target(plot_path, folder, "thesis")
+        if target:
+            from ...report.plots import plot_thesis  # noqa: PLC0415 -- matplotlib, only for --plot
+
+            plot_thesis(res, target)
+        _write_out(folder, "thesis", settings, rows, res.seeds, elapsed, {"eigenvalues": res.eigenvalue_rows()})
 
 
 # ---------------------------------------------------------------- octagon
@@ -264,15 +268,16 @@ def octagon_cmd(radius, trials, seed, jobs, executor, scheduler, plot_path, out_
                title=f"octagon: {len(res.graphs)} graphs; corr(trace, degree) = {res.corr_trace_degree:.5f}, "
                      f"corr(logdet, degree) = {res.corr_logdet_degree:.5f}; {res.flagged} graphs have more "
                      f"edges but a smaller log det")
-    target = plot_target(plot_path, out_dir, "octagon")
-    if target:
-        from ...report.plots import plot_octagon  # noqa: PLC0415 -- matplotlib, only for --plot
-
-        plot_octagon(res, target)
     settings = {"trials": trials, "seed": seed, "radius": radius, "tau": res.tau, "kappa": res.kappa,
                 "corr_trace_degree": res.corr_trace_degree, "corr_logdet_degree": res.corr_logdet_degree,
                 "trace_slope": res.trace_slope, "flagged": res.flagged, "quick": quick, **ex}
-    _write_out(out_dir, "octagon", settings, rows, res.seeds, elapsed, {"graphs": res.graph_rows()})
+    with output_folder(out_dir) as folder:     # --out DIR swapped in whole
+        target = plot_target(plot_path, folder, "octagon")
+        if target:
+            from ...report.plots import plot_octagon  # noqa: PLC0415 -- matplotlib, only for --plot
+
+            plot_octagon(res, target)
+        _write_out(folder, "octagon", settings, rows, res.seeds, elapsed, {"graphs": res.graph_rows()})
 
 
 # ---------------------------------------------------------------- sparsify (posecrb.cli.commands._sparsify)

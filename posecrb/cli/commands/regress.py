@@ -9,7 +9,7 @@ from dataclasses import asdict, fields
 import click
 
 from ...core.errors import DatasetNotFound, PosecrbError, UsageError
-from ...core.files import check_output_file
+from ...core.outputs import check_output_file
 from ...evaluation.regress import Diff, checkout_expected_path, compare, compute_metrics, load_expected, save_expected
 from ...report.render import print_rows
 from ..options import data_dir_option, format_option, repeatable_datasets

@@ -2,7 +2,6 @@
 from __future__ import annotations
 
 import logging
-import os
 import sys
 from collections.abc import Sequence
 
@@ -10,7 +9,8 @@ import click
 
 from ...core.choices import EXECUTORS, TABLE_FORMATS
 from ...core.errors import PosecrbError
-from ...core.files import make_output_dir, scratch_dir, write_text
+from ...core.folders import output_folder
+from ...core.outputs import scratch_dir, write_text
 from ...core.provenance import write_run_record
 from ...evaluation.tables import (
     HEADERS,
@@ -177,19 +177,17 @@ def command(all_, tables, names, repeat, jobs, fmt, out_dir, compare_paper, rota
         click.echo(_render(rows, tables, fmt, compare_paper, settings, explicit), nl=False)
 
     if out_dir:
-
-        out = make_output_dir(out_dir)
-        for t in tables:   # every file atomically (temporary + rename)
-            trs, cols = table_rows(rows, t, compare_paper)
-            stem = out / f"table{t}"
-            write_text(stem.with_suffix(".md"), to_markdown(trs, cols, HEADERS))
-            write_text(stem.with_suffix(".csv"), to_csv(trs, cols))
-            write_text(stem.with_suffix(".json"), to_json(trs))
-            write_text(stem.with_suffix(".tex"), to_latex(trs, cols, TITLES[t], HEADERS))
-        write_text(out / "rows.csv", to_csv(rows))
-        write_text(out / "rows.json", to_json(rows))
-        write_run_record(out, tables_run_record(settings, rows, sys.argv))
-        log.info("wrote %s", os.fspath(out))
+        with output_folder(out_dir) as out:   # swapped in whole: all of this run or all of the last
+            for t in tables:
+                trs, cols = table_rows(rows, t, compare_paper)
+                stem = out / f"table{t}"
+                write_text(stem.with_suffix(".md"), to_markdown(trs, cols, HEADERS))
+                write_text(stem.with_suffix(".csv"), to_csv(trs, cols))
+                write_text(stem.with_suffix(".json"), to_json(trs))
+                write_text(stem.with_suffix(".tex"), to_latex(trs, cols, TITLES[t], HEADERS))
+            write_text(out / "rows.csv", to_csv(rows))
+            write_text(out / "rows.json", to_json(rows))
+            write_run_record(out, tables_run_record(settings, rows, sys.argv))
 
     if plot_path:
         from ...report.plots import plot_tables  # noqa: PLC0415 -- matplotlib, only for --plot
