@@ -58,5 +58,6 @@ def public_results(tmp_path_factory) -> dict[str, Result]:
         "SelectResult": select, "FixedEdges": select.fixed, "SelectionCertificate": select.certificate,
         "CertificateBounds": select.certificate.bounds, "Estimate": posecrb.Estimate(sol.rot, sol.trans),
         "TimelineResult": line, "LoopClosure": line.closures[0], "Monotonicity": line.monotonicity["lb"]["raw"],
+        "VerifyResult": posecrb.verify(g2, sol),
     }
     return out

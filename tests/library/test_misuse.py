@@ -55,6 +55,9 @@ BASE = {
                                "gains", "estimate", "seed", "anchor", "data_dir"]),
     "timeline": ({"estimate": "vertices"}, ["source", "estimate", "every", "start", "stop", "rotation_weight",
                                             "fim_variant", "data_dir"]),
+    "verify": ({"estimate": str(DATA / "g2d.g2o"), "solve": False},
+               ["source", "estimate", "estimate_format", "tum_ids", "truth", "solve", "certificate_tol", "anchor",
+                "data_dir"]),
 }
 # What the command line refuses must be refused here too: per parameter kind, values never accepted.
 REFUSED = {
@@ -71,7 +74,7 @@ KIND = {"r0": "int", "rmax": "int", "anchor": "int", "repeat": "int", "max_itera
         "fixed": "path", "estimate": "path", "quaternions": "choice", "init": "choice", "rotation_weight": "choice",
         "fim_variant": "choice", "ordering": "choice", "model": "choice", "frame": "choice", "objective": "choice",
         "method": "choice", "gains": "choice", "sesync_compat": "flag", "quotient": "flag", "certify": "flag",
-        "verbose": "flag"}
+        "verbose": "flag", "estimate_format": "choice", "tum_ids": "choice", "truth": "path", "solve": "flag"}
 
 
 def _call(name, graph, parameter, value):

@@ -11,7 +11,7 @@ from scipy.spatial.transform import Rotation
 from posecrb.core.errors import ParseError
 from posecrb.io import write_g2o
 from posecrb.io.estimates import read_estimate_file
-from posecrb.sim.generators import random_graph
+from posecrb.sim.random_graphs import random_graph
 
 RNG_SEED = 7
 

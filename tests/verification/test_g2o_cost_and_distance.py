@@ -7,7 +7,7 @@ from scipy.spatial.transform import Rotation
 
 from posecrb.models.paper.crlb import paper_crlb
 from posecrb.models.paper.fim import paper_fim
-from posecrb.sim.generators import random_graph
+from posecrb.sim.random_graphs import random_graph
 from posecrb.verification.distance import paper_delta, pose_mahalanobis, squared_mahalanobis
 from posecrb.verification.g2o_cost import g2o_chi2
 
