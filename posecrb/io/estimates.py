@@ -125,6 +125,13 @@ class EstimateFile:
         if self.dim < graph.dim:
             raise ParseError(self.path, int(self.lines[0]), f"{_shape_name(self)} rows are 2D poses; the graph is 3D")
         if self.ambiguous and rows == "order" and not np.array_equal(np.sort(self.keys), ids):
+            if self.rows != ids.size:
+                missing = np.setdiff1d(ids, self.keys)
+                extra = np.setdiff1d(self.keys, ids)
+                which = f"id {missing[0]} is missing" if missing.size else f"id {extra[0]} is not a pose of the graph"
+                raise ParseError(self.path, None, f"has {self.rows} rows for the graph's {ids.size} poses: its first "
+                                 f"column is not the graph's ids ({which}), so its lines are TUM rows in order, one "
+                                 "per pose; --estimate-format ceres reads the first column as pose ids")
             return replace(self, format="tum", keys=self.keys.astype(float), ambiguous=False).poses_for(graph)
         if self.format in ("tum", "kitti") and rows == "order":
             if self.rows != ids.size:

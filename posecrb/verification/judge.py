@@ -34,10 +34,13 @@ from ..solver.certificate import DualCertificate, dual_certificate, rows_of
 from ..solver.problem import Problem
 from ..solver.refine import relaxed_gradient
 from ..solver.rounding import recover_translations, se_objective
+from ..solver.trust_region import CONVERGING_REL_DECREASE
 
-# The trust region's decrement test (posecrb.solver.trust_region.TROptions.decrement_tol): an
-# estimate whose remaining Newton decrement is below this fraction of F is as converged as solve's.
-DECREMENT_RTOL = 1e-11
+# How converged solve's own estimates are: its trust region stops at a Newton decrement of 1e-11 F,
+# or, once an iterate is certified, after a step that lowered F by at most this fraction
+# (posecrb.solver.trust_region.CONVERGING_REL_DECREASE), so the decrement left at its estimate is
+# below it. An estimate with no more than this left to gain is as converged as solve's.
+DECREMENT_RTOL = CONVERGING_REL_DECREASE
 # The rounding excess: draws of rounding errors, and the margin over their mean excess.
 ROUNDING_SAMPLES = 8
 ROUNDING_MARGIN = 4.0

@@ -81,7 +81,7 @@ def verify_estimate(graph: PoseGraph, estimate: Poses, *, anchor: int = 0, run_s
     t1 = time.perf_counter()
     at_optimum = judge(problem, optimum.rot, optimum.trans, Precision.exact(graph.n), certificate_tol=certificate_tol)
     times["optimum_certificate"] = time.perf_counter() - t1
-    lower, source = _lower_bound(at_estimate, at_optimum, optimum)
+    lower, source = _lower_bound(at_estimate, at_optimum, optimum, problem.n * problem.d, certificate_tol)
     f_opt = optimum.objective
     f_ref = at_estimate.objective_optimal_translations if refined is None else refined.objective
     verdict, reason = _verdict(at_estimate, exact, optimum, f_ref, certificate_tol)
@@ -170,9 +170,15 @@ def _verdict(j: Judgement, exact: bool, optimum: SolveResult, f_ref: float, tol:
                              "critical point, a local minimum (or saddle) of F")
 
 
-def _lower_bound(at_est: Judgement, at_opt: Judgement, optimum: SolveResult) -> tuple[float | None, str | None]:
+def _lower_bound(at_est: Judgement, at_opt: Judgement, optimum: SolveResult, nd: int,
+                 tol: float) -> tuple[float | None, str | None]:
+    """The largest proven lower bound on F: the certificates' at the estimate and at the optimum, and
+    solve's relaxation, certified at its rank with ``lambda_min >= -tol`` (``F_opt >= f(Y) - n d tol``,
+    the bound that remains where the relaxation is not exact and the rounded optimum's certificate fails)."""
+    relaxation = optimum.relaxation_value - nd * tol if optimum.certified else None
     candidates = [(b, s) for b, s in ((at_est.lower_bound, "certificate at the estimate"),
-                                      (at_opt.lower_bound, "certificate at the optimum")) if b is not None]
+                                      (at_opt.lower_bound, "certificate at the optimum"),
+                                      (relaxation, "solve's certified relaxation")) if b is not None]
     if not candidates:
         return None, None
     return max(candidates)

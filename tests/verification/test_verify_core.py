@@ -137,3 +137,20 @@ def test_six_digits_of_the_optimum_are_certified_and_other_costs_optimum_is_not(
     assert r.verdict == "certified-optimal", r.verdict_reason
     # the same point read as exact float64 is not converged to solve's tolerance
     assert not judged(g, rot, trans, run_solve=False).certificate["critical"]
+
+
+def test_where_the_relaxation_is_not_exact_nothing_is_certified(tmp_path):
+    """A noisy grid whose relaxation is not exact: solve's own estimate is uncertified, with solve's gap."""
+    from posecrb.core.noise import precisions_from_sigma
+    from posecrb.sim.generators import generate
+
+    tau, kappa = precisions_from_sigma(0.5)       # posecrb datasets synth grid2d --poses 25 --noise 0.5 --seed 1
+    g = generate("grid2d", 25, tau=tau, kappa=kappa, noise=True, seed=1)
+    sol = solve(g)
+    assert sol.certified and not sol.duality_gap_status.ok      # the premise: an inexact relaxation
+    r = judged(g, sol.rot, sol.trans)
+    assert r.verdict == "uncertified", r.verdict_reason
+    assert f"{sol.duality_gap:.3g}" in r.verdict_reason
+    assert r.lower_bound_source == "solve's certified relaxation"
+    assert r.lower_bound <= sol.relaxation_value <= r.objective
+    assert r.optimum_status.state == "warning"
