@@ -17,6 +17,7 @@ from posecrb.experiments.crlb_sweep import crlb_sweep, parse_levels, pose_errors
 from posecrb.lie.so import so2_exp, so3_exp, so3_hat
 from posecrb.models.paper.fim import paper_fim
 from posecrb.sim import generators as synth
+from posecrb.sim.random_graphs import random_graph
 from posecrb.solver.rounding import anchor_estimate
 
 
@@ -72,7 +73,7 @@ def _dense_model_fim(g, rot, trans, anchor):
 def test_consistent_fim_is_the_simulated_models_fim():
     """The sweep's model bound comes from paper_fim(variant="consistent"): against the
     analytic dense reference above (the FD reference is in test_fim.py)."""
-    g = synth.random_graph(np.random.default_rng(1), 7, 12, 3, info="isotropic")
+    g = random_graph(np.random.default_rng(1), 7, 12, 3, info="isotropic")
     rng = np.random.default_rng(2)
     rot, trans = so3_exp(rng.normal(size=(g.n, 3))), rng.normal(size=(g.n, 3))
     for anchor in (0, 3):

@@ -13,6 +13,7 @@ from posecrb import load
 from posecrb.cli import main
 from posecrb.io import write_g2o
 from posecrb.sim import generators as synth
+from posecrb.sim.random_graphs import random_graph
 
 from .numerics import EPS, MARGIN
 
@@ -46,8 +47,8 @@ GENERATORS = {
     "torus": lambda: synth.torus(5, 6),
     "torus-partial": lambda: synth.torus(5, 6, poses=23),
     "octagon": lambda: synth.octagon(21),
-    "random2d": lambda: synth.random_graph(np.random.default_rng(0), 15, 30, 2),
-    "random3d": lambda: synth.random_graph(np.random.default_rng(1), 15, 30, 3, info="block"),
+    "random2d": lambda: random_graph(np.random.default_rng(0), 15, 30, 2),
+    "random3d": lambda: random_graph(np.random.default_rng(1), 15, 30, 3, info="block"),
 }
 
 
@@ -137,7 +138,7 @@ def test_octagon_is_the_papers_figure_2():
 
 def test_random_graph_properties():
     rng = np.random.default_rng(7)
-    g = synth.random_graph(rng, 30, 60, 3)
+    g = random_graph(rng, 30, 60, 3)
     assert (g.n, g.m) == (30, 60) and n_components(g) == 1
     assert np.any(np.diff(g.ids) > 1) and g.ids[0] > 0       # non-contiguous ids
     pairs = [tuple(sorted(p)) for p in zip(g.src.tolist(), g.dst.tolist())]
@@ -147,12 +148,12 @@ def test_random_graph_properties():
     assert np.abs(g.info[:, :3, 3:]).max() > 0               # "full": cross terms
     bt = np.linalg.eigvalsh(g.info[:, :3, :3])
     assert np.all(bt[:, -1] / bt[:, 0] > 1.0001)             # anisotropic
-    b = synth.random_graph(np.random.default_rng(7), 10, 12, 2, info="block")
+    b = random_graph(np.random.default_rng(7), 10, 12, 2, info="block")
     assert np.all(b.info[:, :2, 2:] == 0)
-    i = synth.random_graph(np.random.default_rng(7), 10, 12, 2, info="isotropic", id_gaps=False)
+    i = random_graph(np.random.default_rng(7), 10, 12, 2, info="isotropic", id_gaps=False)
     np.testing.assert_array_equal(i.ids, np.arange(10))
     np.testing.assert_allclose(i.info[:, 0, 0], i.info[:, 1, 1])
-    tree = synth.random_graph(np.random.default_rng(3), 12, 11, 2)
+    tree = random_graph(np.random.default_rng(3), 12, 11, 2)
     assert n_components(tree) == 1 and tree.m == 11
 
 
@@ -193,8 +194,8 @@ def test_isotropic_noise_has_the_model_variances(dim):
 def test_gaussian_noise_on_random_graph_is_whitened_by_its_information():
     rng = np.random.default_rng(3)
     n, m = 400, 3000
-    g = synth.random_graph(rng, n, m, 3, noise="gaussian", tau_range=(1e2, 1e3), kappa_range=(1e3, 1e4))
-    exact = synth.random_graph(np.random.default_rng(3), n, m, 3, tau_range=(1e2, 1e3), kappa_range=(1e3, 1e4))
+    g = random_graph(rng, n, m, 3, noise="gaussian", tau_range=(1e2, 1e3), kappa_range=(1e3, 1e4))
+    exact = random_graph(np.random.default_rng(3), n, m, 3, tau_range=(1e2, 1e3), kappa_range=(1e3, 1e4))
     np.testing.assert_array_equal(exact.info, g.info)
     xt = g.trans - exact.trans
     xr = Rotation.from_matrix(np.swapaxes(exact.rot, 1, 2) @ g.rot).as_rotvec()
