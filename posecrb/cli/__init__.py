@@ -145,7 +145,7 @@ def _short_help(name: str, limit: int) -> str:
     return stand_in.get_short_help_str(limit)
 
 
-_EXPLICIT_SHORT_HELP = {"select"}   # commands declared with short_help= (shown whole, wrapped)
+_EXPLICIT_SHORT_HELP = {"select", "verify"}   # commands declared with short_help= (shown whole, wrapped)
 
 
 # Named by `posecrb --version`, so a user (and `make`) can tell which checkout or install runs.

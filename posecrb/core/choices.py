@@ -50,6 +50,8 @@ EstimateFormat = Literal["auto", "g2o", "toro", "ceres", "tum", "kitti"]
 RowOrder = Literal["order", "timestamps"]
 #: What ``posecrb verify`` concludes about an estimate, strongest first.
 Verdict = Literal["certified-optimal", "global-basin", "local-minimum", "uncertified"]
+#: The verdicts ``posecrb verify --require`` can insist on.
+RequiredVerdict = Literal["certified-optimal", "global-basin"]
 #: Output formats of the commands (``tables`` adds LaTeX).
 Format = Literal["table", "json", "csv", "markdown"]
 TableFormat = Literal["table", "markdown", "csv", "json", "latex"]
@@ -73,6 +75,7 @@ NOISE_SCALES: tuple[str, ...] = get_args(NoiseScale)
 ESTIMATE_FORMATS: tuple[str, ...] = get_args(EstimateFormat)
 ROW_ORDERS: tuple[str, ...] = get_args(RowOrder)
 VERDICTS: tuple[str, ...] = get_args(Verdict)
+REQUIRED_VERDICTS: tuple[str, ...] = get_args(RequiredVerdict)
 FORMATS: tuple[str, ...] = get_args(Format)
 TABLE_FORMATS: tuple[str, ...] = get_args(TableFormat)
 
@@ -83,7 +86,8 @@ GAIN_MODES: dict[str, tuple[str, str]] = {
 }
 
 __all__ = [
-    "ESTIMATE_FORMATS", "ROW_ORDERS", "VERDICTS", "EstimateFormat", "RowOrder", "Verdict",
+    "ESTIMATE_FORMATS", "REQUIRED_VERDICTS", "ROW_ORDERS", "VERDICTS", "EstimateFormat", "RequiredVerdict",
+    "RowOrder", "Verdict",
     "ESTIMATE_SOURCES", "ESTIMATE_SOURCES_OR_NONE", "EXECUTORS", "FIM_VARIANTS", "FIXED_RULES", "FORMATS", "FRAMES",
     "GAINS", "GAIN_MODES", "INITS", "METHODS", "MODELS", "NOISE_SCALES", "OBJECTIVES", "ORDERINGS",
     "QUATERNION_MODES", "ROTATION_WEIGHTS", "SYNTH_KINDS", "TABLE_FORMATS", "EstimateSource", "EstimateSourceOrNone",

@@ -8,7 +8,7 @@ from typing import Any
 import click
 
 from ...api.verify import verify
-from ...core.choices import ESTIMATE_FORMATS, ROW_ORDERS
+from ...core.choices import ESTIMATE_FORMATS, REQUIRED_VERDICTS, ROW_ORDERS
 from ...core.errors import PosecrbError
 from ...core.status import log_statuses
 from ...report.render import print_rows
@@ -65,7 +65,8 @@ def _summary(d: dict[str, Any]) -> list[dict[str, Any]]:
     return [{"quantity": k, "value": v} for k, v in rows]
 
 
-@click.command("verify", cls=Command)
+@click.command("verify", cls=Command, short_help="Is an estimate another program computed the global optimum? "
+               "Certificate, basin and distances to the certified optimum.")
 @click.argument("file", type=DatasetArg())
 @click.option("--estimate", "estimate", required=True, type=InputFile(),
               help="The estimate to judge: g2o or TORO VERTEX lines (g2o, GTSAM's writeG2o, posecrb solve --out; "
@@ -84,7 +85,7 @@ def _summary(d: dict[str, Any]) -> list[dict[str, Any]]:
 @click.option("--no-solve", is_flag=True,
               help="Only the certificate at the estimate (no solve, no refinement, no distances to the optimum): "
                    "certified-optimal or uncertified.")
-@click.option("--require", type=click.Choice(("certified-optimal", "global-basin")), default=None,
+@click.option("--require", type=click.Choice(REQUIRED_VERDICTS), default=None,
               help="Exit 1 when the verdict is weaker (certified-optimal > global-basin > local-minimum > "
                    "uncertified): a regression job's check that a back-end still finds the optimum.")
 @click.option("--certificate-tol", type=FiniteFloat(min=0, min_open=True), default=1e-3, show_default=True,
