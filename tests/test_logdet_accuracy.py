@@ -249,6 +249,33 @@ def test_real_datasets_keep_their_status(shared_datasets):
         assert auto.error_bound >= exact.error_bound, name
 
 
+def test_every_log_det_status_passes_its_matrix(monkeypatch):
+    """``fim`` (paper and sed, default and given anchor) and ``bounds`` hand the matrix they factored
+    to the accuracy bound, so a factor worth it takes the lambda_min tier; the ``fim`` JSON names the
+    tier and what ``condition`` is; each status is the exact tier's."""
+    import posecrb
+    from posecrb.evaluation import evaluate
+
+    g, rot, trans = random_pose_graph(1500, 2, np.random.default_rng(9), loop_closures=500)
+    est = posecrb.Estimate(rot=rot, trans=trans)
+    for model, anchor in (("paper", None), ("sed", None), ("sed", int(g.ids[7]))):
+        res = posecrb.fim(g, model=model, estimate=est, anchor=anchor)
+        keys = res.to_dict()["logdet_accuracy"]
+        assert list(keys) == ["condition", "error_bound", "tier", "condition_kind"], model
+        assert (keys["tier"], keys["condition_kind"]) == ("lambda_min", "upper bound"), (model, anchor)
+        assert res.logdet_status.ok, model
+    seen = []
+
+    def spy(factor, logdet, name, **kwargs):
+        out = logdet_accuracy(factor, logdet, name, **kwargs)
+        seen.append((kwargs.get("matrix") is not None, out.tier))
+        return out
+
+    monkeypatch.setattr(evaluate, "logdet_accuracy", spy)
+    res = posecrb.bounds(g, estimate=est)
+    assert seen == [(True, "lambda_min")] and res.fim is not None and res.fim.logdet_status.ok
+
+
 def test_docstring_examples_run():
     import doctest
 
