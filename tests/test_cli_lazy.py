@@ -93,7 +93,7 @@ def small_g2o(tmp_path_factory) -> Path:
 
 @pytest.fixture(scope="module")
 def solvable_g2o(tmp_path_factory) -> Path:
-    """A connected random 3D graph (3D: the rotation weights need scipy.special; solve needs CHOLMOD)."""
+    """A connected random 3D graph (3D: the rotation weights take Bessel function ratios; solve needs CHOLMOD)."""
     path = tmp_path_factory.mktemp("lazy") / "solvable.g2o"
     write_g2o(make_random_graph(np.random.default_rng(11), n=12, extra=8, dim=3, sparse_ids=False), path)
     return path
