@@ -153,6 +153,16 @@ def test_small_inversions_import_no_numba(solvable_g2o, command):
     assert _loaded(modules, "numba") == []
 
 
+def test_bounds_loads_no_graph_or_special_function_module(solvable_g2o):
+    """The graph lower bound of lambda_min(L_w) (spanning trees: scipy.sparse.csgraph, which loads
+    scipy.linalg) is computed only where it could exceed the certified one, and eq. (59)'s Bessel
+    ratios need no scipy.special: neither is imported by a 3D ``bounds``."""
+    out, modules = _run(["bounds", str(solvable_g2o), "--format", "json"], listing=True)
+    assert out.returncode == 0, out.stderr
+    assert json.loads(out.stdout)["gap_bound"] > 0
+    assert _loaded(modules, "scipy.sparse.csgraph", "scipy.special") == []
+
+
 def test_anchored_sed_logdet_of_a_large_grid_imports_no_numba(tmp_path):
     """The log-det's accuracy bound of a factor that the selected inversion would take through the
     compiled kernels (the SE(d) FIM of the 3D grid of 1,728 poses) comes from the lambda_min tier
