@@ -149,7 +149,7 @@ def _not_certified_reason(j: Judgement) -> str:
     if not j.critical:
         what = (f"Newton decrement {j.decrement:.3g}, " if not np.isnan(j.decrement) else "") + \
             f"translation excess {j.translation_excess:.3g}"
-        parts.append(f"it is not a critical point ({what}; relative gradient {j.gradient_norm:.3g}; tolerance "
+        parts.append(f"it is not a critical point ({what}, relative gradient {j.gradient_norm:.3g}, tolerance "
                      f"{j.tolerance:.3g})")
     return " and ".join(parts)
 
