@@ -70,9 +70,10 @@ def _summary(d: dict[str, Any]) -> list[dict[str, Any]]:
                "Certificate, basin and distances to the certified optimum.")
 @click.argument("file", type=DatasetArg())
 @click.option("--estimate", "estimate", required=True, type=DatasetArg(),
-              help="The estimate to judge, a path or a dataset name: g2o or TORO VERTEX lines (g2o, GTSAM's writeG2o, posecrb solve --out; "
-                   "FILE itself judges its own vertices), Ceres' 'id x y yaw' / 'id x y z qx qy qz qw' lines, "
-                   "TUM 'timestamp x y z qx qy qz qw' lines or KITTI's 12 numbers per line.")
+              help="The estimate to judge, a path or a dataset name: g2o or TORO VERTEX lines (g2o, GTSAM's "
+                   "writeG2o, posecrb solve --out; FILE itself judges its own vertices), Ceres' 'id x y yaw' / "
+                   "'id x y z qx qy qz qw' lines, TUM 'timestamp x y z qx qy qz qw' lines or KITTI's 12 numbers "
+                   "per line.")
 @click.option("--estimate-format", type=click.Choice(ESTIMATE_FORMATS), default="auto", show_default=True,
               help="The estimate file's format; auto reads it from the content (8-column lines are Ceres' when "
                    "the first column is the graph's ids, TUM's otherwise).")
