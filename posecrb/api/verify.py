@@ -33,10 +33,11 @@ def verify(source: Source, estimate: str | os.PathLike[str] | Estimate | SolveRe
     source : PoseGraph, str or os.PathLike
         The graph: a graph, a path or a dataset name (see ``load``).
     estimate : str, os.PathLike, Estimate or SolveResult
-        The estimate to judge: a path or a dataset name (resolved as ``source``) of a file of g2o or TORO VERTEX lines (what g2o, GTSAM's ``writeG2o``
-        and ``posecrb solve --out`` write; the graph's own file judges its vertices), Ceres'
-        ``id x y yaw`` / ``id x y z qx qy qz qw`` lines, TUM ``timestamp x y z qx qy qz qw`` lines
-        or KITTI's 12 numbers per line; or poses in memory.
+        The estimate to judge: a path or a dataset name (resolved as ``source``) of a file of g2o or
+        TORO VERTEX lines (what g2o, GTSAM's ``writeG2o`` and ``posecrb solve --out`` write; the
+        graph's own file judges its vertices), Ceres' ``id x y yaw`` / ``id x y z qx qy qz qw``
+        lines, TUM ``timestamp x y z qx qy qz qw`` lines or KITTI's 12 numbers per line; or poses in
+        memory.
     estimate_format : {"auto", "g2o", "toro", "ceres", "tum", "kitti"}
         The file's format: read from the content (``"auto"``) or insisted on.
     tum_ids : {"order", "timestamps"}
