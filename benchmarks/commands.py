@@ -12,12 +12,16 @@ Groups (each written to OUT/GROUP.json; ``--groups`` picks some):
   timeline  ``posecrb timeline FILE --estimate none`` against one ``posecrb bounds FILE --estimate
             none --repeat 1`` (goal: at most 3x) on city10000, sphere2500, the 2D grid of 10^5 poses
             and the 2D chain of 2,000,000 poses (the longest sums the drift check compares).
+  verify    ``posecrb verify FILE --estimate OPT`` (OPT: solve's optimum, written once untimed) against
+            ``posecrb solve FILE`` and ``posecrb crlb FILE --estimate OPT`` (goal: verify at most their sum),
+            and ``verify --no-solve`` (goal: its certificate stage at most twice solve's own certificate
+            check, the ``verify`` stage of solve's times) on the SE-Sync datasets.
   threads   ``posecrb solve`` of the 2D grid of 10^5 poses and ``posecrb fim --estimate vertices`` of
             the 3D grid of 2*10^4 poses as posecrb runs them (its own thread policy) against every
             BLAS/OpenMP pool held at one thread (OPENBLAS_NUM_THREADS=1 and the like).
 
 ``--quick`` runs every group once on small inputs. Usage: python benchmarks/commands.py [--quick]
-[--groups startup,goals,timeline,threads] [--runs K] [--warmup K] [--threads T] [--out DIR]
+[--groups startup,goals,timeline,verify,threads] [--runs K] [--warmup K] [--threads T] [--out DIR]
 """
 from __future__ import annotations
 
@@ -27,7 +31,7 @@ import harness
 from harness import Command, posecrb_cli
 from suite import inputs
 
-GROUPS = ("startup", "goals", "timeline", "threads")
+GROUPS = ("startup", "goals", "timeline", "verify", "threads")
 IMPORT_FLOOR = "import numpy, scipy.sparse, sksparse.cholmod"
 ONE_THREAD = tuple((var, "1") for var in harness.THREAD_VARS)
 
@@ -79,6 +83,31 @@ def timeline(group: harness.Group) -> None:
         ])
 
 
+def verify(group: harness.Group) -> None:
+    names = ["intel"] if group.options.quick else list(inputs.SESYNC_DATASETS)
+    for name, path in harness.found("verify", names):
+        file = str(path)
+        optimum = inputs.cache_dir() / f"{name}_optimum.g2o"
+        if not optimum.is_file():
+            optimum.parent.mkdir(parents=True, exist_ok=True)
+            made = harness.check_run(Command("solve --out", posecrb_cli("-q", "solve", file, "--out", str(optimum))))
+            if not made.ok:
+                print(f"verify {name}: solve --out failed: {made.reason()}", file=sys.stderr)
+                continue
+        entry = group.compare(name, [
+            Command("verify", posecrb_cli("verify", file, "--estimate", str(optimum), "--format", "json")),
+            Command("verify --no-solve", posecrb_cli("verify", file, "--estimate", str(optimum), "--no-solve",
+                                                     "--format", "json")),
+            Command("solve", posecrb_cli("solve", file, "--format", "json")),
+            Command("crlb", posecrb_cli("crlb", file, "--estimate", str(optimum), "--format", "json")),
+        ])
+        if entry:
+            outputs = entry["outputs"]
+            entry["checks"].update(verdict=outputs["verify"].json().get("verdict"),
+                                   certificate=outputs["verify --no-solve"].json().get("times", {}).get("certificate"),
+                                   solve_certificate=outputs["solve"].json().get("times", {}).get("verify"))
+
+
 def threads(group: harness.Group) -> None:
     grid2, grid3 = ("grid2d-400", "grid3d-125") if group.options.quick else ("grid2d-100000", "grid3d-20000")
     for label, args in ((f"solve {grid2}", ("solve", str(inputs.path(grid2)), "--format", "json")),
@@ -96,7 +125,7 @@ def main(argv: list[str] | None = None) -> int:
     unknown = sorted(set(chosen) - set(GROUPS))
     if unknown:
         ap.error(f"unknown groups {unknown}; choose from {list(GROUPS)}")
-    run = {"startup": startup, "goals": goals, "timeline": timeline, "threads": threads}
+    run = {"startup": startup, "goals": goals, "timeline": timeline, "verify": verify, "threads": threads}
     for name in chosen:
         group = harness.start(name, args)
         if group is None:

@@ -269,6 +269,17 @@ def goals(run: AsvRun, groups: dict[str, dict]) -> str:
         rows.append(["`timeline --estimate none` at most 3x one `bounds --estimate none`",
                      "; ".join(f"{n} {ratio(a, b)}x" for n, a, b in ratios),
                      _goal(bool(ratios) and all(a is not None and b and a <= 3 * b for _, a, b in ratios))])
+    verifies = [c for c in by_label.get("verify", {}).values() if "hyperfine" in c]
+    if verifies:
+        sums = [(c["label"], median(c, "verify"), (median(c, "solve") or 0.0) + (median(c, "crlb") or 0.0))
+                for c in verifies]
+        rows.append(["`verify` at most one `solve` plus one `crlb` of the same graph (whole process)",
+                     "; ".join(f"{n} {seconds(a)} s against {seconds(b)} s" for n, a, b in sums),
+                     _goal(all(a is not None and a <= b for _, a, b in sums))])
+        stages = [(c["label"], c["checks"].get("certificate"), c["checks"].get("solve_certificate")) for c in verifies]
+        rows.append(["`verify --no-solve`: the certificate at the estimate at most twice `solve`'s own certificate "
+                     "check", "; ".join(f"{n} {seconds(a)} s against {seconds(b)} s" for n, a, b in stages),
+                     _goal(all(a is not None and b is not None and a <= 2 * b for _, a, b in stages))])
     return table(["goal", "measured", "met"], rows)
 
 
