@@ -135,7 +135,7 @@ ESTIMATE_FUNCTIONS = [name for name in posecrb.__all__ if inspect.isfunction(get
 
 
 def test_every_public_function_with_an_estimate_is_listed():
-    assert set(ESTIMATE_FUNCTIONS) == {"bounds", "fim", "crlb", "select", "timeline"}
+    assert set(ESTIMATE_FUNCTIONS) == {"bounds", "fim", "crlb", "select", "timeline", "verify"}
 
 
 @pytest.mark.parametrize("name", ESTIMATE_FUNCTIONS)
@@ -148,7 +148,7 @@ def test_every_function_evaluates_a_slightly_off_estimate_at_the_nearest_rotatio
     assert any("replaced by the nearest rotations" in r.getMessage() for r in caplog.records)
     exact = posecrb.Estimate(_nearest(g.vertex_rot * (1 + 1e-9)), g.vertex_trans)
     a, b = fn(g, estimate=off, **kwargs).to_dict(), fn(g, estimate=exact, **kwargs).to_dict()
-    for key in ("fim_logdet", "lb", "logdet", "trace_crlb", "value"):
+    for key in ("fim_logdet", "lb", "logdet", "trace_crlb", "value", "objective"):
         if isinstance(a.get(key), float):
             assert a[key] == pytest.approx(b[key], rel=1e-12, abs=1e-12), key
 
