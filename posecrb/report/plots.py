@@ -9,7 +9,7 @@ from __future__ import annotations
 import os
 from collections.abc import Iterable, Sequence
 from pathlib import Path
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Any
 
 import matplotlib
 
@@ -133,28 +133,25 @@ _TIMES = (  # (our column, paper key, label, marker, colour)
 )
 
 
-def _legends_below(ax: Axes, legends: Sequence[tuple[list, list, dict]]) -> None:
-    """Legends under the panels, where they hide no point: below ``ax``'s tick labels and axis label,
-    or inside ``ax`` when it is a row of its own with its axis off. The figure's tight layout
-    (``save_figure``) makes room for them. ``legends``: (handles, labels, placement) each, the
-    placement's ``bbox_to_anchor`` in ``ax``'s axes coordinates."""
-    from matplotlib.legend import Legend  # noqa: PLC0415 -- with matplotlib, already loaded
-    from matplotlib.transforms import ScaledTranslation  # noqa: PLC0415
+def _legend_row(fig: Any, cell: Any) -> Axes:
+    """An axes with no axis of its own in the grid ``cell`` under a figure's panels, for
+    ``_legends_below``: the figure's tight layout (``save_figure``) keeps it clear of the panels'
+    tick labels, and it is as wide as the panels together."""
+    row = fig.add_subplot(cell)
+    row.axis("off")
+    return row
 
-    fig = ax.figure
-    depth = 0.0
-    if ax.axison:
-        # the depth of the tick labels and axis label under the axes, in inches (a gap of 0.1 more):
-        # fixed while the layout resizes the axes, so the legends stay just below them
-        renderer = fig.canvas.get_renderer()    # type: ignore[attr-defined]  # Agg's canvas (module top)
-        under = ax.xaxis.get_tightbbox(renderer)
-        if under is not None:
-            depth = (ax.get_window_extent(renderer).y0 - under.y0) / fig.dpi + 0.1
-    below = ax.transAxes + ScaledTranslation(0, -depth, fig.dpi_scale_trans)
+
+def _legends_below(row: Axes, legends: Sequence[tuple[list, list, dict]]) -> None:
+    """Legends in ``row`` (``_legend_row``), where they hide no point and are as wide as the figure.
+    ``legends``: (handles, labels, placement) each, the placement's ``bbox_to_anchor`` in ``row``'s
+    axes coordinates."""
+    from matplotlib.legend import Legend  # noqa: PLC0415 -- with matplotlib, already loaded
+
     for handles, labels, where in legends:
-        legend = Legend(ax, handles, labels, fontsize=LEGEND_FONTSIZE, title_fontsize=LEGEND_FONTSIZE,
-                        frameon=False, bbox_transform=below, **where)
-        ax.add_artist(legend).set_clip_on(False)    # outside the axes: neither clipped nor left out of the layout
+        legend = Legend(row, handles, labels, fontsize=LEGEND_FONTSIZE, title_fontsize=LEGEND_FONTSIZE,
+                        frameon=False, **where)
+        row.add_artist(legend).set_clip_on(False)    # may overhang the row: not clipped, and in the layout
 
 
 def _plottable(rows: Iterable[dict]) -> list[dict]:
@@ -181,8 +178,13 @@ def plot_tables(rows: Sequence[dict], path: str | os.PathLike, note: str | None 
     gap_fim = (np.array([r["fim_logdet"] for r in data], dtype=float) - lb) / lb
     gap_ub = (np.array([r["ub"] for r in data], dtype=float) - lb) / lb
 
-    fig, (top, bottom) = plt.subplots(2, 1, sharex=True, figsize=(max(8.5, 0.42 * len(data) + 5.0), 8.0),
-                                      gridspec_kw={"height_ratios": [1, 1]})
+    fig = plt.figure(figsize=(max(8.5, 0.42 * len(data) + 5.0), 8.0))
+    # the two panels close together in one cell, the legends in a row of their own below
+    outer = fig.add_gridspec(2, 1, height_ratios=[1, 0.14])
+    panels = outer[0].subgridspec(2, 1, hspace=0.06)
+    top = fig.add_subplot(panels[0])
+    bottom = fig.add_subplot(panels[1], sharex=top)
+    top.tick_params(labelbottom=False)
     top.vlines(x, np.minimum(gap_fim, gap_ub), np.maximum(gap_fim, gap_ub), color="0.75", lw=1.5, zorder=1)
     top.scatter(x, gap_fim, marker="o", color=_COLOURS["fim"], zorder=3,
                 label="FIM log-det\n(certified optimum)")
@@ -206,12 +208,13 @@ def plot_tables(rows: Sequence[dict], path: str | os.PathLike, note: str | None 
     bottom.axhline(1.0, color="k", lw=0.8)
     bottom.set_yscale("log")
     bottom.set_ylabel("our time / paper's time\n(log; below 1: faster)")
-    # Legends below the panels, where they hide no point and are as wide as the figure.
-    legends = [(*top.get_legend_handles_labels(),
-                {"bbox_to_anchor": (0, 0), "loc": "upper left", "title": "above the lower bound lb"})]
+    # the legends in a row below the panels, where they hide no point
+    legends: list[tuple[list, list, dict[str, Any]]] = [
+        (*top.get_legend_handles_labels(),
+         {"bbox_to_anchor": (0, 1), "loc": "upper left", "title": "above the lower bound lb"})]
     if shown:
         legends.append((*bottom.get_legend_handles_labels(),
-                        {"bbox_to_anchor": (1, 0), "loc": "upper right", "ncols": 2,
+                        {"bbox_to_anchor": (1, 1), "loc": "upper right", "ncols": 2,
                          "title": "time of ... vs the paper's (its machine, not this one)"}))
     else:
         bottom.text(0.5, 0.5, "no dataset of the paper among these rows", ha="center", va="center",
@@ -236,7 +239,7 @@ def plot_tables(rows: Sequence[dict], path: str | os.PathLike, note: str | None 
     footer = "* not in the paper" if any(paper_row(r["dataset"]) is None for r in data) else ""
     if note:
         footer = f"{note}   {footer}".strip()
-    _legends_below(bottom, legends)
+    _legends_below(_legend_row(fig, outer[1]), legends)
     if footer:
         fig.text(0.01, 0.005, footer, fontsize=7, color="0.35", ha="left", va="bottom")
     return save_figure(fig, path)
@@ -304,12 +307,9 @@ def plot_sparsify(result: SparsifyResult, path: str | os.PathLike) -> str:
     """Share of the full graph's gain in the objective (``(f(S) - f(F)) / (f(all) - f(F))``),
     lambda_2 and ATE against the budget, one line per method; written atomically through the output
     layer (``save_figure``: format by the extension, .png, .svg or .pdf)."""
-    # a row of its own under the three panels for the legend, as wide as all three
     fig = plt.figure(figsize=(13.0, 4.4))
     grid = fig.add_gridspec(2, 3, height_ratios=[1, 0.06])
     axes = [fig.add_subplot(grid[0, k]) for k in range(3)]
-    legend_row = fig.add_subplot(grid[1, :])
-    legend_row.axis("off")
     names = {"tree": "tree bound (eq. 75)", "fim": "logdet FIM", "fiedler": "$\\lambda_2$"}
     key = "fim_logdet" if result.objective == "fim" else result.objective
     top, bottom = result.reference[key], result.reference["fixed_only"][key]
@@ -326,7 +326,7 @@ def plot_sparsify(result: SparsifyResult, path: str | os.PathLike) -> str:
     for ax in axes:
         ax.set_xlabel("% of loop closures kept")
         ax.grid(True, alpha=0.3)
-    _legends_below(legend_row, [(*axes[0].get_legend_handles_labels(),
-                                 {"bbox_to_anchor": (0.5, 1), "loc": "upper center", "ncols": len(result.methods)})])
+    _legends_below(_legend_row(fig, grid[1, :]), [(*axes[0].get_legend_handles_labels(),
+                   {"bbox_to_anchor": (0.5, 1), "loc": "upper center", "ncols": len(result.methods)})])
     fig.suptitle(f"{result.dataset}: {result.candidates} candidate loop closures, {result.fixed} fixed edges")
     return os.fspath(save_figure(fig, path))
