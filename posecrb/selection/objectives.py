@@ -53,8 +53,9 @@ _EIG_TOL = 1e-10
 _EIG_RESTARTS = 250
 # H_e of many edges by whole-factor solves (``LogDetBlock.h_solve``) instead of a selected inversion
 # when the block's rows times the edges' columns stay within this many entries: a solve with those
-# right-hand sides then costs milliseconds, and selected inversion's compiled kernels would load
-# numba (0.7-0.9 s in a fresh process, posecrb.linalg.selinv). Solved in batches of this many entries.
+# right-hand sides then costs less than loading numba in a fresh process, which the selected
+# inversion's compiled kernels would (posecrb.linalg.selinv, docs/decisions/selection-at-scale.md).
+# Solved in batches of this many entries.
 H_SOLVE_ENTRIES = 4_000_000
 
 

@@ -302,10 +302,10 @@ def select_edges(graph: PoseGraph, budget: str | int | float, *, objective: str 
 
     BLAS runs single-threaded inside, as in the solver: the work is many small products (vectors
     of the graph's size, selected inversions of Laplacians), for which OpenBLAS's threads cost more
-    than they save and collapse when another process holds the other core (city10000, fiedler
-    relax on a loaded 2-core machine: about 3x the time with two threads). threadpoolctl scans the
-    libraries loaded at the call; a library loaded later (scipy's BLAS, on the first selected
-    inversion) is limited by that inversion's own call (posecrb.linalg.selinv). The tree objective's
+    than they save and collapse when another process holds the other core
+    (docs/decisions/blas-threads.md). threadpoolctl scans the libraries loaded at the call; a
+    library loaded later (scipy's BLAS, on the first selected inversion) is limited by that
+    inversion's own call (posecrb.linalg.selinv). The tree objective's
     incremental greedy on a large factor runs each step on two threads of its own when two cores
     are free (``posecrb.selection.greedy``), with the same choices bit for bit.
     """
