@@ -332,3 +332,53 @@ def test_inputs_dimension_of_a_dataset_from_its_lines(tmp_path, monkeypatch):
     monkeypatch.setenv("POSECRB_DATA", str(tmp_path))
     assert (inputs.dimension("flat"), inputs.dimension("space")) == (2, 3)
     assert inputs.lattice_side(100000, 2) == 317 and inputs.lattice_side(1000, 3) == 10
+
+
+def test_alternating_rounds_merge_one_run_per_call_in_reversed_orders(monkeypatch):
+    """``alternating`` calls hyperfine once per round with one run of each command, the order reversed
+    every other round, and merges the runs: every time kept, the median of them all."""
+    import argparse
+
+    harness = _module("harness")
+    calls = []
+
+    def fake(commands, options):
+        calls.append(([c.label for c in commands], options.runs, options.warmup))
+        k = len(calls)
+        return {"results": [{"command": c.label, "times": [10.0 * k + i]} for i, c in enumerate(commands)]}
+
+    monkeypatch.setattr(harness, "hyperfine", fake)
+    a, b = harness.Command("now", ("true",)), harness.Command("before", ("true",))
+    out = harness.alternating([a, b], argparse.Namespace(runs=3, warmup=2))
+    assert calls == [(["now", "before"], 1, 2), (["before", "now"], 1, 0), (["now", "before"], 1, 0)]
+    now, before = out["results"]
+    assert now["command"] == "now" and now["times"] == [10.0, 21.0, 30.0] and now["median"] == 21.0
+    assert before["times"] == [11.0, 20.0, 31.0] and before["median"] == 20.0 and out["alternated"] == 3
+
+
+def test_report_baseline_judges_the_cost_goals(tmp_path):
+    """The baseline table from records made here: bounds against the allowance from solve, select's
+    exponent over the grids (a closed-form power law), its certified ratios, the parse speed-up."""
+    report = _module("report")
+
+    def timed(**medians):
+        return {"results": [{"command": k.replace("_", " "), "median": v, "times": [v]} for k, v in medians.items()]}
+
+    comps = [
+        {"label": "bounds intel", "hyperfine": timed(bounds=0.5, bounds_before=1.3, solve=0.4), "checks": {}},
+        {"label": "bounds torus3D", "hyperfine": timed(bounds=2.0, bounds_before=2.5, solve=1.0), "checks": {}},
+    ]
+    for n in (10_000, 30_000, 100_000):            # time = c n^1.1
+        comps.append({"label": f"select grid2d-{n}", "hyperfine": timed(select=1e-4 * n ** 1.1, select_before=1.0),
+                      "checks": {"candidates": n, "ratio": 0.80, "ratio_before": 0.805, "method": "rounds"}})
+    comps.append({"label": "parse grid2d-100000", "hyperfine": timed(info=0.5, info_before=1.2),
+                  "checks": {"parse": 0.2, "parse_before": 1.0}})
+    text = report.baseline({"baseline": {"environment": {"baseline_commit": "65df671"}, "comparisons": comps}})
+    assert text.startswith("Against 65df671")
+    goals = {line.split("|")[1].strip(): line.split("|")[-2].strip() for line in text.splitlines()
+             if line.startswith("| ") and line.count("|") == 4}
+    assert goals["`bounds` at most the larger of `solve` + 0.3 s and 1.3x `solve`"] == "**no**"   # 2.0 > 1.3
+    exponent = [line for line in text.splitlines() if "exponent in the candidates" in line][0]
+    assert "| 1.10 |" in exponent and exponent.endswith("| yes |")
+    assert goals["parsing the 2D grid at least 4x faster"] == "yes"
+    assert goals["certified ratio at least the earlier greedy's minus 0.01"] == "yes"
