@@ -111,7 +111,7 @@ class Group:
             print(f"{self.name} {label}: failed: {failed}", file=sys.stderr)
             return None
         try:
-            side_by_side = self.options.alternate if alternate is None else alternate
+            side_by_side = getattr(self.options, "alternate", False) if alternate is None else alternate
             entry["hyperfine"] = alternating(commands, self.options) if side_by_side else \
                 hyperfine(commands, self.options)
         except subprocess.CalledProcessError as exc:   # a timed run failed where the check run did not
