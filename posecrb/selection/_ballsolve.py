@@ -12,16 +12,9 @@ import numpy as np
 from ..linalg.pathchol import njit
 
 
-@njit(cache=True, nogil=True)
-def _push(hd, hv, size, d, v):  # pragma: no cover - compiled
-    """Push (d, v) on the binary min-heap (hd, hv) of ``size`` entries, growing it when full."""
-    if size == hd.shape[0]:
-        hd2 = np.empty(2 * size)
-        hv2 = np.empty(2 * size, np.int64)
-        hd2[:size] = hd
-        hv2[:size] = hv
-        hd, hv = hd2, hv2
-    j = size
+@njit(cache=True, nogil=True, inline="always")
+def _sift_up(hd, hv, j, d, v):  # pragma: no cover - compiled
+    """Place (d, v) at the free slot j of the binary min-heap (hd, hv), moving larger parents down."""
     while j > 0:
         p = (j - 1) >> 1
         if hd[p] <= d:
@@ -31,31 +24,25 @@ def _push(hd, hv, size, d, v):  # pragma: no cover - compiled
         j = p
     hd[j] = d
     hv[j] = v
-    return hd, hv, size + 1
 
 
-@njit(cache=True, nogil=True)
-def _pop(hd, hv, size):  # pragma: no cover - compiled
-    """Pop the smallest (d, v) of the binary min-heap; returns it and the new size."""
-    d0, v0 = hd[0], hv[0]
-    size -= 1
-    if size > 0:
-        d, v = hd[size], hv[size]
-        j = 0
-        while True:
-            c = 2 * j + 1
-            if c >= size:
-                break
-            if c + 1 < size and hd[c + 1] < hd[c]:
-                c += 1
-            if hd[c] >= d:
-                break
-            hd[j] = hd[c]
-            hv[j] = hv[c]
-            j = c
-        hd[j] = d
-        hv[j] = v
-    return d0, v0, size
+@njit(cache=True, nogil=True, inline="always")
+def _sift_down(hd, hv, size, d, v):  # pragma: no cover - compiled
+    """Place (d, v) at the root of the binary min-heap of ``size`` entries, moving smaller children up."""
+    j = 0
+    while True:
+        c = 2 * j + 1
+        if c >= size:
+            break
+        if c + 1 < size and hd[c + 1] < hd[c]:
+            c += 1
+        if hd[c] >= d:
+            break
+        hd[j] = hd[c]
+        hv[j] = hv[c]
+        j = c
+    hd[j] = d
+    hv[j] = v
 
 
 @njit(cache=True, nogil=True)
@@ -65,19 +52,23 @@ def ball(v0, v1, radius, adj_ptr, adj_to, adj_len, dist, tpar, spos):  # pragma:
     first), and each one's parent in the shortest-path tree as a position in that order (-1 for v0
     and v1). ``dist`` (all inf), ``tpar`` and ``spos`` are work arrays over the poses; ``dist`` is
     left all inf."""
-    hd = np.empty(64)
-    hv = np.empty(64, np.int64)
-    poses = np.empty(64, np.int64)
-    par = np.empty(64, np.int64)
+    hd = np.empty(256)
+    hv = np.empty(256, np.int64)
+    poses = np.empty(256, np.int64)
+    par = np.empty(256, np.int64)
     size = 0
     k = 0
     for s in (v0, v1):
         if dist[s] > 0.0:
             dist[s] = 0.0
             tpar[s] = -1
-            hd, hv, size = _push(hd, hv, size, 0.0, s)
+            _sift_up(hd, hv, size, 0.0, s)
+            size += 1
     while size > 0:
-        d, v, size = _pop(hd, hv, size)
+        d, v = hd[0], hv[0]
+        size -= 1
+        if size > 0:
+            _sift_down(hd, hv, size, hd[size], hv[size])
         if d > dist[v]:
             continue
         dist[v] = -1.0                     # settled
@@ -98,7 +89,15 @@ def ball(v0, v1, radius, adj_ptr, adj_to, adj_len, dist, tpar, spos):  # pragma:
             if nd <= radius and nd < dist[w]:
                 dist[w] = nd
                 tpar[w] = v
-                hd, hv, size = _push(hd, hv, size, nd, w)
+                if size == hd.shape[0]:
+                    grown_d = np.empty(2 * size)
+                    grown_d[:size] = hd
+                    hd = grown_d
+                    grown = np.empty(2 * size, np.int64)
+                    grown[:size] = hv
+                    hv = grown
+                _sift_up(hd, hv, size, nd, w)
+                size += 1
     for t in range(k):                     # only settled poses had a distance set (pushes need nd <= radius)
         dist[poses[t]] = np.inf
     return poses[:k], par[:k]
