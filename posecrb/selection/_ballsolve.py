@@ -46,12 +46,12 @@ def _sift_down(hd, hv, size, d, v):  # pragma: no cover - compiled
 
 
 @njit(cache=True, nogil=True)
-def ball(v0, v1, radius, adj_ptr, adj_to, adj_len, dist, tpar, spos):  # pragma: no cover - compiled
+def ball(v0, v1, radius, cap, adj_ptr, adj_to, adj_len, dist, tpar, spos):  # pragma: no cover - compiled
     """The poses within distance ``radius`` of the poses v0 and v1 in the graph (adj_ptr, adj_to,
-    adj_len) (CSR over the poses, edge lengths), in the order Dijkstra settles them (v0 and v1
-    first), and each one's parent in the shortest-path tree as a position in that order (-1 for v0
-    and v1). ``dist`` (all inf), ``tpar`` and ``spos`` are work arrays over the poses; ``dist`` is
-    left all inf."""
+    adj_len) (CSR over the poses, edge lengths), at most the ``cap`` nearest, in the order Dijkstra
+    settles them (v0 and v1 first), and each one's parent in the shortest-path tree as a position
+    in that order (-1 for v0 and v1). ``dist`` (all inf), ``tpar`` and ``spos`` are work arrays
+    over the poses; ``dist`` is left all inf."""
     hd = np.empty(256)
     hv = np.empty(256, np.int64)
     poses = np.empty(256, np.int64)
@@ -71,6 +71,12 @@ def ball(v0, v1, radius, adj_ptr, adj_to, adj_len, dist, tpar, spos):  # pragma:
             _sift_down(hd, hv, size, hd[size], hv[size])
         if d > dist[v]:
             continue
+        if k == cap:                       # full: what is still queued stays out
+            dist[v] = np.inf
+            for t in range(size):
+                if dist[hv[t]] >= 0.0:     # tentative (settled poses hold -1)
+                    dist[hv[t]] = np.inf
+            break
         dist[v] = -1.0                     # settled
         if k == poses.shape[0]:
             grown = np.empty(2 * k, np.int64)
@@ -98,7 +104,7 @@ def ball(v0, v1, radius, adj_ptr, adj_to, adj_len, dist, tpar, spos):  # pragma:
                     hv = grown
                 _sift_up(hd, hv, size, nd, w)
                 size += 1
-    for t in range(k):                     # only settled poses had a distance set (pushes need nd <= radius)
+    for t in range(k):                     # the other poses with a distance were reset above
         dist[poses[t]] = np.inf
     return poses[:k], par[:k]
 

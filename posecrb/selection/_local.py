@@ -134,13 +134,14 @@ def _sift_down(heap, hkey, j, size):  # pragma: no cover - compiled
 
 
 @njit(cache=True, nogil=True)
-def round_steps(keys, hs, us, mult, ends, radius, inc_ptr, inc_cand, adj_ptr, adj_to, adj_len, pose_rows, indptr,
-                indices, data, take, tol, maxit):  # pragma: no cover - compiled
+def round_steps(keys, hs, us, mult, ends, radius, cap, inc_ptr, inc_cand, adj_ptr, adj_to, adj_len, pose_rows,
+                indptr, indices, data, take, tol, maxit):  # pragma: no cover - compiled
     """One round's ``take`` choices among the candidates of gains ``keys`` (their ``H`` per block
     ``hs`` (blocks, c, r, r), changed in place, as ``keys``), greedily: the candidate of largest
     gain (ties: the first), then, unless it is the round's last, its ``potential`` in its ball (the
-    poses within ``radius[f]`` of its end poses, ``ball``) corrects every alive candidate g with
-    both end poses in the ball: ``H_g -= C (I + H_f)^{-1} C^T``, ``C = U_g^T Phi_f`` per block.
+    poses within ``radius[f]`` of its end poses, at most ``cap`` of them, ``ball``) corrects every
+    alive candidate g with both end poses in the ball: ``H_g -= C (I + H_f)^{-1} C^T``,
+    ``C = U_g^T Phi_f`` per block.
 
     ``inc_ptr``/``inc_cand``: the candidates at each pose (CSR); the graph (adj_*) is the current
     one; ``data`` (blocks, nnz) the values of the blocks' matrices on their common CSC pattern
@@ -187,7 +188,7 @@ def round_steps(keys, hs, us, mult, ends, radius, inc_ptr, inc_cand, adj_ptr, ad
         nchosen += 1
         if nchosen == take:
             break
-        poses, par = ball(ends[f, 0], ends[f, 1], radius[f], adj_ptr, adj_to, adj_len, dist, tpar, spos)
+        poses, par = ball(ends[f, 0], ends[f, 1], radius[f], cap, adj_ptr, adj_to, adj_len, dist, tpar, spos)
         lrow, phi, its, bad = potential(f, ends, us, h0, poses, par, pose_rows, indptr, indices, data, loc, tol,
                                         maxit)
         stats[0] += 1

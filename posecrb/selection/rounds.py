@@ -42,12 +42,17 @@ ROUNDS_FROM_STEPS = 4096
 ROUNDS_FROM_POSES = 20_000
 # Rounds of the round greedy: each costs one factorization and one selected inversion.
 ROUNDS = 24
-# The ball of a chosen candidate e reaches RADIUS x R_e from its end poses.
+# The ball of a chosen candidate e reaches RADIUS x R_e from its end poses, with at most BALL_ROWS rows
+# (the nearest poses): the Fisher information's R_e grows with a path's length cubed (rotation errors
+# move the poses by their lever arms), so without it a ball would hold most of a large graph.
 RADIUS = 2.0
-# A ball's potential: conjugate gradients to this relative residual, at most this many iterations
-# (preconditioned by the ball's shortest-path tree, they took 2-15 on the grids' balls).
-CG_TOL = 1e-4
-CG_MAX_ITER = 200
+BALL_ROWS = 4096
+# A ball's potential: conjugate gradients to this relative residual (the potential corrects gains, two
+# or three digits suffice), at most this many iterations: preconditioned by the ball's shortest-path
+# tree they took 2-15 on the tree objective's balls on the grids, 10-60 on the Fisher information's,
+# whose off-tree blocks carry the loop closures' rotation coupling. A stopped solve is counted.
+CG_TOL = 1e-3
+CG_MAX_ITER = 40
 
 
 def _compiled() -> ModuleType:
@@ -134,7 +139,8 @@ def _round(obj: LogDetObjective, x: np.ndarray, ce: np.ndarray, hs: np.ndarray, 
     # each candidate's R_e from its exact H at the round's start: its ball's radius
     reach = radius * (np.trace(hs[0], axis1=1, axis2=2) / hs.shape[2]) / strength[ce]
     mult = np.array([b.mult for b in obj.blocks])
-    return _compiled().round_steps(keys, hs, us, mult, ends, reach, inc_ptr, inc_cand, *adj, pose_rows,
+    cap = max(2, BALL_ROWS // pose_rows.shape[1])
+    return _compiled().round_steps(keys, hs, us, mult, ends, reach, cap, inc_ptr, inc_cand, *adj, pose_rows,
                                    mats[0].indptr.astype(np.int64), mats[0].indices.astype(np.int64), data, take,
                                    CG_TOL, CG_MAX_ITER)
 
