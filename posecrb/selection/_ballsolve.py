@@ -13,36 +13,34 @@ from ..linalg.pathchol import njit
 
 
 @njit(cache=True, nogil=True, inline="always")
-def _sift_up(hd, hv, j, d, v):  # pragma: no cover - compiled
-    """Place (d, v) at the free slot j of the binary min-heap (hd, hv), moving larger parents down."""
-    while j > 0:
-        p = (j - 1) >> 1
-        if hd[p] <= d:
-            break
-        hd[j] = hd[p]
-        hv[j] = hv[p]
-        j = p
-    hd[j] = d
-    hv[j] = v
+def _first(ka, a, kb, b):  # pragma: no cover - compiled
+    """Whether entry (ka, a) comes before (kb, b) in a heap: the smaller key, then the smaller id."""
+    return ka < kb or (ka == kb and a < b)
 
 
 @njit(cache=True, nogil=True, inline="always")
-def _sift_down(hd, hv, size, d, v):  # pragma: no cover - compiled
-    """Place (d, v) at the root of the binary min-heap of ``size`` entries, moving smaller children up."""
+def sift_up(hk, hv, j, k, v):  # pragma: no cover - compiled
+    """Place (k, v) at the free slot j of the binary heap (hk keys, hv ids; ``_first`` on top)."""
+    while j > 0 and _first(k, v, hk[(j - 1) >> 1], hv[(j - 1) >> 1]):
+        hk[j], hv[j] = hk[(j - 1) >> 1], hv[(j - 1) >> 1]
+        j = (j - 1) >> 1
+    hk[j], hv[j] = k, v
+
+
+@njit(cache=True, nogil=True, inline="always")
+def sift_down(hk, hv, size, k, v):  # pragma: no cover - compiled
+    """Place (k, v) at the root of the binary heap of ``size`` entries (its root slot free)."""
     j = 0
-    while True:
-        c = 2 * j + 1
-        if c >= size:
-            break
-        if c + 1 < size and hd[c + 1] < hd[c]:
+    c = 1
+    while c < size:
+        if c + 1 < size and _first(hk[c + 1], hv[c + 1], hk[c], hv[c]):
             c += 1
-        if hd[c] >= d:
+        if not _first(hk[c], hv[c], k, v):
             break
-        hd[j] = hd[c]
-        hv[j] = hv[c]
+        hk[j], hv[j] = hk[c], hv[c]
         j = c
-    hd[j] = d
-    hv[j] = v
+        c = 2 * j + 1
+    hk[j], hv[j] = k, v
 
 
 @njit(cache=True, nogil=True)
@@ -62,13 +60,13 @@ def ball(v0, v1, radius, cap, adj_ptr, adj_to, adj_len, dist, tpar, spos):  # pr
         if dist[s] > 0.0:
             dist[s] = 0.0
             tpar[s] = -1
-            _sift_up(hd, hv, size, 0.0, s)
+            sift_up(hd, hv, size, 0.0, s)
             size += 1
     while size > 0:
         d, v = hd[0], hv[0]
         size -= 1
         if size > 0:
-            _sift_down(hd, hv, size, hd[size], hv[size])
+            sift_down(hd, hv, size, hd[size], hv[size])
         if d > dist[v]:
             continue
         if k == cap:                       # full: what is still queued stays out
@@ -102,7 +100,7 @@ def ball(v0, v1, radius, cap, adj_ptr, adj_to, adj_len, dist, tpar, spos):  # pr
                     grown = np.empty(2 * size, np.int64)
                     grown[:size] = hv
                     hv = grown
-                _sift_up(hd, hv, size, nd, w)
+                sift_up(hd, hv, size, nd, w)
                 size += 1
     for t in range(k):                     # the other poses with a distance were reset above
         dist[poses[t]] = np.inf

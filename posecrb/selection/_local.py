@@ -12,37 +12,9 @@ import math
 
 import numpy as np
 
-from ..linalg.pathchol import njit
-from ._ballsolve import ball, ball_system, pcg, tree_factor
-
-
-@njit(cache=True, nogil=True)
-def logdet_eye_plus1(h):  # pragma: no cover - compiled
-    """``logdet(I + (H + H^T)/2)`` of one r x r matrix by Cholesky, at least 0 (a gain), and 0 when
-    ``I + H`` is not positive definite: the local model has corrected the gain below zero."""
-    r = h.shape[0]
-    if r == 1:
-        return math.log1p(max(h[0, 0], 0.0))
-    a = np.empty((r, r))
-    for i in range(r):
-        for j in range(r):
-            a[i, j] = 0.5 * (h[i, j] + h[j, i]) + (1.0 if i == j else 0.0)
-    total = 0.0
-    for j in range(r):
-        d = a[j, j]
-        for k in range(j):
-            d -= a[j, k] * a[j, k]
-        if not d > 0.0:
-            return 0.0
-        d = math.sqrt(d)
-        a[j, j] = d
-        total += math.log(d)
-        for i in range(j + 1, r):
-            v = a[i, j]
-            for k in range(j):
-                v -= a[i, k] * a[j, k]
-            a[i, j] = v / d
-    return max(2.0 * total, 0.0)
+from ..linalg.pathchol import logdet_eye_plus, njit
+from ._ballsolve import ball, ball_system, pcg, sift_down, tree_factor
+from ._kernels import sandwich_subtract
 
 
 @njit(cache=True, nogil=True)
@@ -110,34 +82,11 @@ def potential(f, ends, us, h0, poses, par, pose_rows, indptr, indices, data, loc
 
 
 @njit(cache=True, nogil=True)
-def _before(ka, a, kb, b):  # pragma: no cover - compiled
-    """Whether candidate a (gain ka) comes before b (gain kb): the larger gain, then the first."""
-    return ka > kb or (ka == kb and a < b)
-
-
-@njit(cache=True, nogil=True)
-def _sift_down(heap, hkey, j, size):  # pragma: no cover - compiled
-    f, kf = heap[j], hkey[j]
-    while True:
-        c = 2 * j + 1
-        if c >= size:
-            break
-        if c + 1 < size and _before(hkey[c + 1], heap[c + 1], hkey[c], heap[c]):
-            c += 1
-        if not _before(hkey[c], heap[c], kf, f):
-            break
-        heap[j] = heap[c]
-        hkey[j] = hkey[c]
-        j = c
-    heap[j] = f
-    hkey[j] = kf
-
-
-@njit(cache=True, nogil=True)
 def round_steps(keys, hs, us, mult, ends, radius, cap, inc_ptr, inc_cand, adj_ptr, adj_to, adj_len, pose_rows,
                 indptr, indices, data, take, tol, maxit):  # pragma: no cover - compiled
     """One round's ``take`` choices among the candidates of gains ``keys`` (their ``H`` per block
-    ``hs`` (blocks, c, r, r), changed in place, as ``keys``), greedily: the candidate of largest
+    ``hs`` (blocks, c, r, r), changed in place, as ``keys``; a corrected gain is
+    ``posecrb.linalg.pathchol.logdet_eye_plus``'s, never below 0), greedily: the candidate of largest
     gain (ties: the first), then, unless it is the round's last, its ``potential`` in its ball (the
     poses within ``radius[f]`` of its end poses, at most ``cap`` of them, ``ball``) corrects every
     alive candidate g with both end poses in the ball: ``H_g -= C (I + H_f)^{-1} C^T``,
@@ -154,12 +103,12 @@ def round_steps(keys, hs, us, mult, ends, radius, cap, inc_ptr, inc_cand, adj_pt
     stats = np.zeros(6, np.int64)
     chosen = np.empty(take, np.int64)
     h0 = hs.copy()                       # the round's exact H: the balls' potentials are of its matrix
-    heap = np.empty(c, np.int64)
+    heap = np.empty(c, np.int64)                          # a heap by (-gain, position)
     hkey = np.empty(c)
-    order = np.argsort(-keys, kind="mergesort")          # stable: ties keep the first
+    order = np.argsort(-keys, kind="mergesort")          # stable: ties keep the first; sorted is a heap
     for i in range(c):
         heap[i] = order[i]
-        hkey[i] = keys[order[i]]
+        hkey[i] = -keys[order[i]]
     size = c
     alive = np.ones(c, np.bool_)
     dist = np.full(n, np.inf)
@@ -176,13 +125,12 @@ def round_steps(keys, hs, us, mult, ends, radius, cap, inc_ptr, inc_cand, adj_pt
     nchosen = 0
     while nchosen < take and size > 0:
         f = heap[0]
-        if hkey[0] != keys[f]:           # stale: gains only decrease
-            hkey[0] = keys[f]
-            _sift_down(heap, hkey, 0, size)
+        if hkey[0] != -keys[f]:          # stale: gains only decrease
+            sift_down(hkey, heap, size, -keys[f], f)
             continue
         size -= 1
-        heap[0], hkey[0] = heap[size], hkey[size]
-        _sift_down(heap, hkey, 0, size)
+        if size > 0:
+            sift_down(hkey, heap, size, hkey[size], heap[size])
         alive[f] = False
         chosen[nchosen] = f
         nchosen += 1
@@ -226,19 +174,9 @@ def round_steps(keys, hs, us, mult, ends, radius, cap, inc_ptr, inc_cand, adj_pt
                             if ug != 0.0:
                                 for j in range(r):
                                     cm[i, j] += ug * phi[row, b, j]
-                    for i in range(r):
-                        for j in range(r):
-                            v = 0.0
-                            for k in range(r):
-                                v += cm[i, k] * invs[b, k, j]
-                            tmp[i, j] = v
-                    for i in range(r):
-                        for j in range(r):
-                            v = 0.0
-                            for k in range(r):
-                                v += tmp[i, k] * cm[j, k]
-                            hs[b, g, i, j] -= v
-                    key += mult[b] * logdet_eye_plus1(hs[b, g])
+                    sandwich_subtract(hs[b, g], cm, invs[b], tmp)
+                    key += mult[b] * (math.log1p(max(hs[b, g, 0, 0], 0.0)) if r == 1
+                                      else logdet_eye_plus(hs[b, g:g + 1])[0])
                 keys[g] = key
                 stats[3] += 1
     return chosen[:nchosen], stats
