@@ -3,8 +3,9 @@ candidate's potential in its ball (``posecrb.selection._ballsolve``), scaled to 
 one round's greedy steps with the gains corrected by those potentials.
 
 Compiled with numba (``cache=True``) like ``posecrb.selection._kernels``; numba's cache is keyed on
-this file only, so after a change to ``_ballsolve`` the cache of this module must be cleared too
-(``__pycache__/*.nbi``, ``*.nbc``).
+this file only, so after a change to what it calls (``_ballsolve``, ``_kernels``,
+``posecrb.linalg.pathchol``) the cache of this module must be cleared too (``__pycache__/*.nbi``,
+``*.nbc``).
 """
 from __future__ import annotations
 
