@@ -26,12 +26,13 @@ import numpy as np
 
 from ..core.errors import NumericalError, UsageError
 from .objectives import FiedlerObjective, LogDetObjective, logdet_eye_plus
+from .rounds import ROUNDS_FROM_POSES, ROUNDS_FROM_STEPS
 
 if TYPE_CHECKING:
     from ..linalg.pathchol import PathFactor
 
 GAINS = ("auto", "exact", "jl")
-STRATEGIES = ("auto", "incremental", "lazy")
+STRATEGIES = ("auto", "incremental", "lazy", "rounds")
 ENGINES = ("auto", "path", "cholmod")
 # ``auto`` takes the CHOLMOD engine, which loads no numba, when the whole greedy is a few thousand
 # whole-factor solves of small blocks at most: at most this many entries of M^{-1} U touched over
@@ -341,9 +342,11 @@ def _steps_two_threads(kernels: ModuleType, pool: ThreadPoolExecutor, pf: PathFa
     return chosen, gains
 
 
-def pick_strategy(strategy: str, gains: str) -> str:
-    """The greedy strategy ``auto`` stands for: the lazy greedy when its queue is to be seeded by
-    random projections (``gains="jl"``), otherwise the incremental greedy, whose step costs one solve with
+def pick_strategy(strategy: str, gains: str, k: int, poses: int) -> str:
+    """The greedy strategy ``auto`` stands for on K steps over a graph of ``poses`` poses: the lazy
+    greedy when its queue is to be seeded by random projections (``gains="jl"``); the round greedy
+    (``posecrb.selection.rounds``) above ROUNDS_FROM_STEPS steps on ROUNDS_FROM_POSES poses or more;
+    otherwise the incremental greedy, whose step costs one solve with
     the whole factor and one pass over the candidates, whatever the graph; the lazy greedy's costs
     as many path solves as stale gains it re-evaluates, 30-90 per step on the shared datasets, whose
     loop closures cluster, and about 200 on a regular grid, whose gains are nearly all equal: it was
@@ -352,7 +355,9 @@ def pick_strategy(strategy: str, gains: str) -> str:
         raise UsageError(f"unknown greedy strategy {strategy!r}; choose from {', '.join(STRATEGIES)}")
     if strategy != "auto":
         return strategy
-    return "lazy" if gains == "jl" else "incremental"
+    if gains == "jl":
+        return "lazy"
+    return "rounds" if k > ROUNDS_FROM_STEPS and poses >= ROUNDS_FROM_POSES else "incremental"
 
 
 def lazy_greedy(obj: LogDetObjective, x: np.ndarray, cand: np.ndarray, k: int, gains: str,
