@@ -137,3 +137,45 @@ def test_integers_are_exact_and_refuse_what_is_not_an_id():
         assert integers(*_layout(["1", token])) is None, token
     many = [str(k) for k in range(100000)]
     np.testing.assert_array_equal(integers(*_layout(many, columns=2)).ravel(), np.arange(100000))
+
+
+def _rows_layout(rows: list[list[str]], seps: list[str]) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Lines of tokens, row i's tokens joined by ``seps[i]``; (k, c) starts and ends."""
+    data, starts, ends = "", [], []
+    for row, sep in zip(rows, seps):
+        for j, token in enumerate(row):
+            if j:
+                data += sep
+            starts.append(len(data))
+            data += token
+            ends.append(len(data))
+        data += "\n"
+    c = len(rows[0])
+    return np.frombuffer(data.encode(), np.uint8), np.array(starts).reshape(-1, c), np.array(ends).reshape(-1, c)
+
+
+@pytest.mark.parametrize("change", ["none", "last digit", "longer", "separator", "first row", "every row"])
+def test_a_column_of_one_repeated_token_gives_every_row_its_own_value(change):
+    """Columns repeated on every row are read once; a row that differs anywhere (a digit, the
+    length, the blanks inside a run of such columns) is read on its own."""
+    k = 3000
+    rows = [[f"{0.1 * i!r}", "399.99999999999994", "0", "0", "199.99999999999997", "-2.5e-3"] for i in range(k)]
+    seps = [" "] * k
+    if change == "last digit":
+        rows[-1][1] = "399.99999999999995"
+    elif change == "longer":
+        rows[k // 2][2] = "0.0"
+    elif change == "separator":
+        seps[7] = "  "
+    elif change == "first row":
+        rows[0][4] = "199.99999999999999"
+    elif change == "every row":
+        rows = [[row[0], str(i), *row[2:]] for i, row in enumerate(rows)]
+    buf, starts, ends = _rows_layout(rows, seps)
+    got = decimals.decimals(buf, starts, ends)
+    want = np.array([[float(t) for t in row] for row in rows])
+    np.testing.assert_array_equal(got, want)
+    varies = {"none": [], "last digit": [1], "longer": [2], "separator": [], "first row": [4], "every row": [1]}
+    expected = np.ones(6, bool)
+    expected[[0, *varies[change]]] = False
+    np.testing.assert_array_equal(decimals._constant_columns(buf, starts, ends), expected)

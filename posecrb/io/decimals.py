@@ -179,20 +179,28 @@ def _scale(w: np.ndarray, q: np.ndarray, neg: np.ndarray) -> tuple[np.ndarray, n
     sign = neg.astype(np.intp)
     exact = (w <= _U(2 ** 53)) & (q <= 0) & (q >= -22)      # Clinger: two exact doubles, one division
     powers = _extended_powers()
-    rest = np.flatnonzero(~exact) if powers is not None else np.empty(0, np.intp)
-    if rest.size * 2 > w.size:    # mostly long digit strings: all at once in extended precision
-        rest = np.arange(w.size)
-        value = np.empty(w.size)
-    else:
+    if powers is None:
         value = w.astype(np.float64)
         value /= _SIGNED_POW10[np.minimum(down, 22) + 23 * sign]
-    if rest.size and powers is not None:    # one rounding to 64 bits, then to 53 unless exactly halfway
-        wide = w[rest].astype(np.longdouble)
-        wide /= powers[down[rest] + (_MAX_EXACT_POWER + 1) * sign[rest]]
-        exact[rest] = ((q[rest] <= 0) & (q[rest] >= -_MAX_EXACT_POWER)
-                       & ((wide.view(_U)[::2] & _U(0x7FF)) != _U(0x400)))
-        value[rest] = wide
+        return value, exact
+    rest = np.flatnonzero(~exact)
+    if rest.size * 2 > w.size:    # mostly long digit strings: all at once in extended precision
+        return _extended(w, q, down, sign, powers)
+    value = w.astype(np.float64)
+    value /= _SIGNED_POW10[np.minimum(down, 22) + 23 * sign]
+    if rest.size:
+        value[rest], exact[rest] = _extended(w[rest], q[rest], down[rest], sign[rest], powers)
     return value, exact
+
+
+def _extended(w: np.ndarray, q: np.ndarray, down: np.ndarray, sign: np.ndarray,
+              powers: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """``_scale`` in x87 extended precision: one rounding to 64 bits, then to 53 unless that one is
+    exactly halfway between two doubles (module docstring)."""
+    wide = w.astype(np.longdouble)
+    wide /= powers[down + (_MAX_EXACT_POWER + 1) * sign]
+    halfway = (wide.view(_U)[::2] & _U(0x7FF)) == _U(0x400)
+    return wide.astype(np.float64), (q <= 0) & (q >= -_MAX_EXACT_POWER) & ~halfway
 
 
 def _plain(buf: np.ndarray, rows_of: _Rows, starts: np.ndarray,
@@ -233,10 +241,49 @@ def _row_chunks(starts: np.ndarray) -> range:
     return range(0, starts.shape[0], max(1, _CHUNK // max(1, starts.shape[1])))
 
 
+def _same_bytes(buf: np.ndarray, starts: np.ndarray, ends: np.ndarray) -> bool:
+    """Whether every ``buf[starts[i]:ends[i]]`` is the first one's bytes."""
+    size = int(ends[0] - starts[0])
+    view = np.ndarray((buf.size - size + 1,), f"S{size}", buf, strides=(1,))
+    return bool(((ends - starts) == size).all() and (view[starts] == view[starts[0]]).all())
+
+
+def _constant_columns(buf: np.ndarray, starts: np.ndarray, ends: np.ndarray) -> np.ndarray:
+    """Which columns hold one token throughout (the same bytes on every row): an information
+    matrix shared by every edge, as most datasets have, is then read once. Rows spread over the
+    column rule most columns out; a run of the remaining columns is compared as one span of bytes
+    (tokens and blanks), and column by column only when the span differs."""
+    sample = slice(None, None, max(1, starts.shape[0] // 64))
+    constant = np.array([_same_bytes(buf, starts[sample, j], ends[sample, j]) for j in range(starts.shape[1])])
+    constant &= ends[0] - starts[0] <= WIDTH
+    edges = np.diff(np.concatenate(([0], constant.view(np.int8), [0])))
+    for first, stop in zip(np.flatnonzero(edges == 1), np.flatnonzero(edges == -1)):
+        if not _same_bytes(buf, starts[:, first], ends[:, stop - 1]):
+            constant[first: stop] = [_same_bytes(buf, starts[:, j], ends[:, j]) for j in range(first, stop)]
+    return constant
+
+
 def decimals(buf: np.ndarray, starts: np.ndarray, ends: np.ndarray) -> np.ndarray | None:
     """float64 of the tokens ``buf[starts[i, j]:ends[i, j]]`` ((k, c) arrays, views welcome; uint8
     ``buf``), each as Python's ``float`` reads it, or None when one is not a plain decimal number
-    (module docstring)."""
+    (module docstring). A column of one repeated token is read once."""
+    if starts.shape[0] < 2:
+        return _decimals(buf, starts, ends)
+    constant = _constant_columns(buf, starts, ends)
+    if not constant.any():
+        return _decimals(buf, starts, ends)
+    out = np.empty(starts.shape)
+    once = _decimals(buf, starts[:1, constant], ends[:1, constant])
+    rest = _decimals(buf, starts[:, ~constant], ends[:, ~constant]) if not constant.all() else out[:, :0]
+    if once is None or rest is None:
+        return None
+    out[:, constant] = once
+    out[:, ~constant] = rest
+    return out
+
+
+def _decimals(buf: np.ndarray, starts: np.ndarray, ends: np.ndarray) -> np.ndarray | None:
+    """``decimals`` token by token."""
     out = np.empty(starts.shape)
     flat = out.reshape(-1)
     columns = starts.shape[1]
