@@ -42,7 +42,7 @@ def _blocks(rng: np.random.Generator, b: int) -> list[np.ndarray]:
     for k in range(400):
         a = rng.standard_normal((b, b))
         spd = a @ a.T + 0.1 * np.eye(b)
-        scale = np.diag(10.0 ** rng.uniform(-6, 12, b))
+        scale = np.diag(10.0 ** rng.uniform(-6, 12, b) if k % 3 else 10.0 ** rng.uniform(-150, 150, b))
         kind = k % 5
         if kind == 0:
             block = scale @ spd @ scale

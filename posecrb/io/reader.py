@@ -45,35 +45,41 @@ def _check_positive_definite(path: str, lines: np.ndarray, tag: str, ends: tuple
     The block is scaled to unit diagonal, D^-1/2 A D^-1/2 (diag(1e12, 1e-3) becomes I), and
     the smallest eigenvalue of that correlation matrix must exceed its rounding error
     (b eps per entry, margin 100). An absolute or max-eigenvalue-relative threshold would
-    reject well-defined matrices whose diagonal spans many decades.
+    reject well-defined matrices whose diagonal spans many decades. The eigenvalues are computed
+    only for the blocks that Gershgorin's bound, 1 - sum_j!=i |c_ij|, does not show definite by
+    ``_SURELY_DEFINITE``.
     """
     b = block.shape[-1]
-    diag = np.diagonal(block, axis1=1, axis2=2)
-    pos = np.asarray((diag > 0).all(axis=1))
-    d = np.where(diag > 0, diag, 1.0) ** -0.5
-    corr = block * d[:, :, None] * d[:, None, :]
-    surely = pos.copy()
-    for i in range(b):   # Gershgorin: c_ii - sum_j!=i |c_ij| bounds the smallest eigenvalue from below
-        lower = corr[:, i, i].copy()
-        for j in range(b):
-            if j != i:
-                lower -= np.abs(corr[:, i, j])
-        surely &= lower > _SURELY_DEFINITE
+    pos = block[:, 0, 0] > 0
+    for i in range(1, b):
+        pos &= block[:, i, i] > 0
+    surely = pos
+    with np.errstate(all="ignore"):        # NaN or inf where not positive or extreme: not sure
+        scale = [1 / np.sqrt(block[:, i, i]) for i in range(b)]
+        for i in range(b):
+            off = np.zeros(block.shape[0])
+            for j in range(b):
+                if j != i:
+                    off += np.abs(block[:, i, j]) * (scale[i] * scale[j])
+            surely = surely & (off < 1 - _SURELY_DEFINITE)
     doubt = np.flatnonzero(~surely)
     if not doubt.size:
         return
-    eig = np.linalg.eigvalsh(corr[doubt])[:, 0]
+    block = block[doubt]
+    diag = np.diagonal(block, axis1=1, axis2=2)
+    d = np.where(diag > 0, diag, 1.0) ** -0.5
+    eig = np.linalg.eigvalsh(block * d[:, :, None] * d[:, None, :])[:, 0]
     tol = 100 * b * np.finfo(float).eps
     failed = ~pos[doubt] | ~(eig > tol)
     if not failed.any():
         return
-    bad = doubt[failed]
-    eig = eig[failed]
+    first = int(np.argmax(failed))
+    bad, eig, diag = doubt[failed], eig[first:], diag[first:]
     k = bad[0]
     where = f"{tag} {ends[0][k]} {ends[1][k]}: {name} block of the information matrix is not positive definite"
     if not pos[k]:
-        j = int(np.argmin(diag[k]))
-        reason = f"(diagonal entry {j + 1} is {fmt_number(diag[k, j])})"
+        j = int(np.argmin(diag[0]))
+        reason = f"(diagonal entry {j + 1} is {fmt_number(diag[0, j])})"
     elif eig[0] > -tol:
         reason = "(singular to working precision)"
     else:

@@ -189,23 +189,28 @@ def split_text(text: str) -> Tokens:
 # --------------------------------------------------------------------------------------------
 # Fast tokeniser: whole-buffer numpy operations, no Python loop per line or token.
 
-def _boundaries(buf: np.ndarray) -> tuple[np.ndarray, bool]:
+def _boundaries(buf: np.ndarray) -> tuple[np.ndarray, int]:
     """Token starts and ends (alternating, sorted) of the bytes, where a byte above the blank
-    (32) meets one that is not, and whether any control character other than \\n occurs; in
-    blocks whose temporaries stay in the cache."""
-    parts, others = [], False
+    (32) meets one that is not, and the number of control characters (below 32); in blocks whose
+    temporaries stay in the cache, written into one array (untouched pages of its bound, one entry
+    per byte, cost nothing)."""
+    out = np.empty(buf.size + 1, np.intp)
+    count = controls = 0
     for a in range(0, buf.size, _BLOCK):
         piece = buf[a: a + _BLOCK]
         word = piece > 32
+        if word[0] != (a > 0 and buf[a - 1] > 32):
+            out[count] = a
+            count += 1
         change = np.flatnonzero(word[1:] != word[:-1])
         change += a + 1
-        if word[0] != (a > 0 and buf[a - 1] > 32):
-            change = np.concatenate(([a], change))
-        parts.append(change)
-        others = others or np.count_nonzero(piece < 32) != np.count_nonzero(piece == 10)
+        out[count: count + change.size] = change
+        count += change.size
+        controls += int(np.count_nonzero(piece < 32))
     if buf[-1] > 32:
-        parts.append(np.array([buf.size]))
-    return np.concatenate(parts), others
+        out[count] = buf.size
+        count += 1
+    return out[:count], controls
 
 
 def _lines(buf: np.ndarray, data: bytes, tok_start: np.ndarray,
@@ -213,19 +218,24 @@ def _lines(buf: np.ndarray, data: bytes, tok_start: np.ndarray,
     """(index of the first token of each line that has tokens, its 0-based line), from the
     newlines in the gaps between tokens: a gap of one byte is a newline or a blank; wider gaps
     (indentation, trailing blanks, empty lines) are counted."""
-    breaks = np.empty(tok_start.size, np.intp)
-    breaks[0] = data.count(b"\n", 0, int(tok_start[0]))
-    gap_start = tok_end[:-1]
-    np.equal(buf[gap_start], 10, out=breaks[1:], casting="unsafe")
-    wide = np.flatnonzero(tok_start[1:] - gap_start > 1)
+    gap = tok_end[:-1]                              # gap k precedes token k + 1
+    starts_line = np.empty(tok_start.size, bool)
+    starts_line[0] = True
+    np.equal(buf[gap], 10, out=starts_line[1:])
+    wide = np.flatnonzero(buf[1:][gap] <= 32)       # its second byte is a blank too
+    breaks = np.empty(0, np.intp)
     if wide.size:
         newlines = np.flatnonzero(buf == 10)
-        breaks[wide + 1] = (np.searchsorted(newlines, tok_start[wide + 1])
-                            - np.searchsorted(newlines, gap_start[wide]))
-    starts_line = breaks > 0
-    starts_line[0] = True
+        breaks = np.searchsorted(newlines, tok_start[wide + 1]) - np.searchsorted(newlines, gap[wide])
+        starts_line[wide + 1] = breaks > 0
     first = np.flatnonzero(starts_line)
-    return first, np.cumsum(breaks[first])
+    step = np.ones(first.size, np.intp)             # newlines before each line's first token
+    step[0] = data.count(b"\n", 0, int(tok_start[0]))
+    if wide.size:
+        at = np.searchsorted(first, wide + 1)
+        hit = (at < first.size) & (first[np.minimum(at, first.size - 1)] == wide + 1)
+        step[at[hit]] = breaks[hit]
+    return first, np.cumsum(step)
 
 
 def _group_tags(buf: np.ndarray, tag_start: np.ndarray, tag_len: np.ndarray) -> dict[str, np.ndarray]:
@@ -266,15 +276,15 @@ def scan_bytes(data: bytes) -> Tokens:
     if not data or not data.isascii() or b"\x7f" in data:
         raise Fallback
     buf = np.frombuffer(data, dtype=np.uint8)
-    bounds, others = _boundaries(buf)
-    if others:
-        returns = data.count(b"\r")
-        if data.translate(None, _FAST_BYTES) or (returns and returns != data.count(b"\r\n")):
-            raise Fallback        # other control characters, or a lone \r (a line end): split_text's rules
+    bounds, controls = _boundaries(buf)
     tok_start, tok_end = bounds[0::2], bounds[1::2]       # tok_end exclusive
     if tok_start.size == 0:
         raise Fallback
     first, line = _lines(buf, data, tok_start, tok_end)
+    if controls != line[-1] + data.count(b"\n", int(tok_start[first[-1]])):   # control bytes besides \n
+        returns = data.count(b"\r")
+        if data.translate(None, _FAST_BYTES) or (returns and returns != data.count(b"\r\n")):
+            raise Fallback        # other control characters, or a lone \r (a line end): split_text's rules
     counts = np.diff(first, append=tok_start.size)          # tokens per line
     position = np.full(int(line[-1]) + 1, -1, np.intp)      # of each line among those with tokens
     position[line] = np.arange(line.size)
