@@ -12,6 +12,7 @@ from __future__ import annotations
 
 import logging
 from collections.abc import Mapping
+from typing import overload
 
 import numpy as np
 
@@ -143,6 +144,29 @@ def _decode_vertices(path: str, fmt: Format, rec: RecordKind, ids: np.ndarray, v
     return ids[:, 0], fmt.decode_vertices(path, rec, vals, lines), trans
 
 
+@overload
+def _handed_over(array: np.ndarray) -> np.ndarray: ...
+
+
+@overload
+def _handed_over(array: None) -> None: ...
+
+
+def _handed_over(array: np.ndarray | None) -> np.ndarray | None:
+    """``array``, made here and referenced nowhere else, read-only down to the memory it views, so
+    that ``PoseGraph`` keeps it rather than a copy (``frozen_array``); a narrow view of a wider
+    block (translations among a record's values) is copied first, so the block is not kept."""
+    if array is None:
+        return None
+    if array.base is not None and array.base.size > 2 * array.size:
+        array = array.copy()
+    base: object = array
+    while isinstance(base, np.ndarray):
+        base.setflags(write=False)
+        base = base.base
+    return array
+
+
 def _positions(ids: np.ndarray, end: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """Index of each of ``end`` in the increasing ``ids``, and where it is none of them."""
     if ids[-1] - ids[0] == ids.size - 1:    # consecutive ids (the usual numbering): an offset
@@ -227,9 +251,10 @@ def parse(tokens: Tokens, formats: Mapping[str, Format], path: str = "<string>",
         summary = ", ".join(f"{n} {'comment' if t == '#' else t}" for t, n in sorted(skipped.items()))
         log.warning("%s: skipped %s line(s)", path, summary)
     graph = PoseGraph(
-        dim=erec.dim, ids=ids, src=src, dst=dst,
-        rot=erot, trans=etrans, info=einfo, vertex_rot=vertex_rot, vertex_trans=vertex_trans,
-        path=path, format=erec.family, skipped=skipped, edge_lines=e_lines, sha256=sha256, quaternions=quaternions,
+        dim=erec.dim, ids=_handed_over(ids), src=_handed_over(src), dst=_handed_over(dst), rot=_handed_over(erot),
+        trans=_handed_over(etrans), info=_handed_over(einfo), vertex_rot=_handed_over(vertex_rot),
+        vertex_trans=_handed_over(vertex_trans), path=path, format=erec.family, skipped=skipped,
+        edge_lines=_handed_over(e_lines), sha256=sha256, quaternions=quaternions,
     )
     graph.__dict__["_precisions"] = precisions   # seed the cached (tau, kappa): computed and checked above
     return graph
