@@ -4,8 +4,8 @@ For each file (paths or dataset names; default: the 2D grid of 10^5 poses of the
 the median over --repeat runs after a warm-up, as CPU seconds of this process (the machine is
 shared: wall times follow the load) and MB/s:
 
-* ``numbers``: ``np.fromstring`` of the file's numeric fields alone (the tags removed beforehand,
-  untimed): the price of the decimal-to-double conversion by strtod;
+* ``numbers``: ``np.fromstring`` of the file's numeric fields alone (tags and comment lines removed
+  beforehand, untimed): the price of the decimal-to-double conversion by strtod;
 * ``load``: ``posecrb.load`` (read, SHA-256, tokenise, convert, decode, check, build the graph);
 * ``read``, ``scan``, ``numbers``, ``decode`` and ``graph``: the stages of ``load``;
 
@@ -36,7 +36,7 @@ import posecrb
 from posecrb.core.inputs import read_input
 from posecrb.io import FORMATS, reader, text
 
-_TAG = re.compile(rb"^[ \t]*[A-Za-z#][^ \t\n]*", re.M)
+_NOT_NUMBERS = re.compile(rb"^[ \t]*#.*$|^[ \t]*[A-Za-z][^ \t\n]*", re.M)    # comment lines, tags
 
 
 def cpu(fn, repeat: int) -> float:
@@ -102,7 +102,7 @@ def main() -> None:
     for path in paths:
         data = path.read_bytes()
         mb = len(data) / 1e6
-        blob = _TAG.sub(b"", data)
+        blob = _NOT_NUMBERS.sub(b"", data)
         numbers = cpu(lambda: np.fromstring(blob, dtype=np.float64, sep=" "), args.repeat)
         load = cpu(lambda: posecrb.load(path), args.repeat)
         parts = stages(path, args.repeat)
