@@ -1,8 +1,8 @@
 """Reading a file: ``posecrb.load`` (read, SHA-256, tokenise, decode, check).
 
 Besides the datasets and the scaling grids, the full suite reads the 2D grid of a million poses
-(330 MB, about 3 s a call on the 2-core machine): the reader's own scaling, where no other command of
-the suite goes.
+(330 MB, well within a benchmark's budget of a minute): the reader's own scaling, where no other
+command of the suite goes.
 """
 from __future__ import annotations
 

@@ -131,8 +131,8 @@ def _guarded(path: str | os.PathLike, max_bytes: int | None, read: bool) -> byte
             return None
         try:
             # The size stat gave, plus one byte to see growth: read(limit + 1) would allocate the
-            # whole limit and copy the data into a smaller object at the end (a third of the cost
-            # of reading a large graph); a file that grew since is read on up to the limit.
+            # whole limit and copy the data into a smaller object at the end; a file that grew
+            # since is read on up to the limit.
             data = fh.read(st.st_size + 1)
             if len(data) > st.st_size:
                 data += fh.read(limit + 1 - len(data))
