@@ -6,12 +6,13 @@ into a row of 8, 16 or 24 bytes (the widest token of a step of ``_CHUNK`` tokens
 numpy operations, over steps that stay in the cache, split it into a sign, a digit string with the
 decimal point removed and an exponent, and the digits become an integer ``w < 10^19`` eight at a
 time (SWAR: a 64-bit word holds eight digits, three multiply-shift steps sum them). The value is
-then ``w * 10^q``, rounded once:
+then ``w * 10^q``; a positive power is multiplied into ``w`` while that stays below 2^64, and the
+rest is one division, rounded once:
 
-* Clinger's fast path: for ``w <= 2^53`` and ``|q| <= 22`` both operands are exact doubles and one
-  IEEE division or multiplication rounds the exact value;
+* Clinger's fast path: for ``w <= 2^53`` and ``-22 <= q <= 0`` both operands are exact doubles and
+  one IEEE division rounds the exact value;
 * beyond it, with x87 extended precision (``np.longdouble`` on x86-64 Linux, a 64-bit significand),
-  ``w`` and ``10^|q|`` (``|q| <= 27``, so ``5^|q| < 2^64``) are exact, so one division rounds the
+  ``w`` and ``10^-q`` (``q >= -27``, so ``5^-q < 2^64``) are exact, so one division rounds the
   exact value to 64 bits; rounding that to a double is the correctly rounded result unless the
   64-bit one lies exactly halfway between two doubles (its 11 extra bits are ``10000000000``),
   where the two roundings could differ: those few tokens go to ``strtod``.
@@ -142,8 +143,9 @@ def _digits(rows: np.ndarray, first: np.ndarray, length: np.ndarray) -> tuple[np
     keep -= 1                                                     # 0xFF at digits
     packed = np.bitwise_and(chars, keep, out=chars).view(_LE).reshape(n, words)
     packed &= mask
-    # drop the point: the columns before it move one to the right (its own column 0 stays 0 or
-    # fails ``fits`` either way, so the carry between rows of the flat array does not matter)
+    # drop the point: the columns before it move one to the right. Column 0 is left alone: it is
+    # outside the token (rows of 8 and 16 bytes are wider than their tokens) or, in a full row of
+    # 24, fails ``fits``; so what the flat shift carries into it from the row before does not matter
     flat = packed.reshape(-1)
     shifted = flat << _U(8)
     shifted[1:] |= flat[:-1] >> _U(56)
