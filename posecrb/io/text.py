@@ -269,8 +269,8 @@ def scan_bytes(data: bytes) -> Tokens:
     """The fast tokeniser (module docstring); raises ``Fallback`` where it cannot decide.
 
     Token starts and ends are found once over the whole buffer; each line's first token (its tag)
-    is compared as a fixed-width byte string, so grouping costs a sort of the tags, not a loop over
-    lines. A group's numbers are converted from the token boundaries by ``posecrb.io.decimals``:
+    is compared as a fixed-width byte string, so grouping costs a comparison per kind of tag, not a
+    loop over lines. A group's numbers are converted from the token boundaries by ``posecrb.io.decimals``:
     the tokens of a run of lines of one record kind are one slice of the boundary arrays.
     """
     if not data or not data.isascii() or b"\x7f" in data:
