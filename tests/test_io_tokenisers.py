@@ -78,14 +78,32 @@ def test_hostile_corpus_same_outcome_on_both_paths(name):
 
 
 def test_fast_path_gives_up_rather_than_guess():
-    """Inputs outside the fast path's alphabet or id range go to the reference tokeniser."""
+    """Inputs outside the fast path's alphabet or grammar go to the reference tokeniser."""
     line = f"EDGE_SE2 0 1 1 0 0 {INFO2}\n"
-    for data in (line.replace("\n", "\r\n"), line.replace(" 1 0 0", " 1\f0 0"), "# \u00e9\n" + line,
-                 line.replace("0 1", f"0 {2 ** 53}"), line.replace("1 0 0", "nan 0 0"),
-                 line.replace("1 0 0", "1_0 0 0")):
+    odd = (line.replace("\n", "\r"), line + "\r" + line, line.replace(" 1 0 0", " 1\x1c0 0"), "# \u00e9\n" + line,
+           line.replace(" 1 0 0", " 1\x7f 0 0"))
+    bad_ids = (line.replace("0 1", f"0 {2 ** 63}"), line.replace("0 1", "0 +1"), line.replace("0 1", "0 1.0"),
+               line.replace("0 1", "0 " + "0" * 24 + "1"))
+    bad_numbers = tuple(line.replace("1 0 0", f"{token} 0 0") for token in ("nan", "1_0", "1e5e5"))
+    for data in odd + bad_ids + bad_numbers:
         with pytest.raises(Fallback):
             parse(scan_bytes(data.encode("utf-8")), FORMATS, "t.g2o")
         _assert_same_outcome(data.encode("utf-8"))
+
+
+def test_fast_path_takes_every_plain_layout():
+    """CRLF, tabs, vertical tabs and form feeds between fields, indentation, trailing blanks, empty
+    lines, interleaved records and ids up to 2^63 - 1 are read by the fast tokeniser, as the
+    reference reads them."""
+    line = f"EDGE_SE2 0 1 1 0 0 {INFO2}\n"
+    vertex = "VERTEX_SE2 {} 0 0 0\n"
+    for data in (line.replace("\n", "\r\n") * 2, line.replace(" 1 0 0", " 1\f0\v0\t"), "\n\n  " + line + " \n",
+                 line.replace("0 1", f"0 {2 ** 63 - 1}"), line.replace("0 1", f"0 {2 ** 53 + 1}"),
+                 vertex.format(0) + line + vertex.format(1), line.replace("1 0 0", "1.5e-300 1E+2 -.5") + "\n\n",
+                 line.replace("0 1", "00 0001"), line + "# a comment with \t a tab\n" + line.replace("0 1", "1 2")):
+        data_bytes = data.encode()
+        fast = parse(scan_bytes(data_bytes), FORMATS, "t.g2o")     # no Fallback
+        _assert_same_graph(fast, _reference(data_bytes))
 
 
 _NUMBER_FORMATS = ["{!r}", "{:.17g}", "{:.25g}", "{:.3e}", "{:.0f}", "{:+.20E}", "{:.40f}"]
