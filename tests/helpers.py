@@ -15,12 +15,18 @@ import numpy as np
 from scipy.linalg import expm
 from scipy.spatial.transform import Rotation
 
+import posecrb
 from posecrb.core.graph import PoseGraph
 from posecrb.core.noise import isotropic_information, rotation_weights
+from posecrb.core.result import Result
 from posecrb.lie import se as L
 from posecrb.lie.so import so2_exp, so3_exp
 from posecrb.sim.generators import uniform_rotations
 from posecrb.sim.random_graphs import random_graph
+
+# Every public result type by name: the protocol and misuse tests run over all of them.
+PUBLIC_RESULT_TYPES = sorted(n for n in posecrb.__all__ if isinstance(getattr(posecrb, n), type)
+                             and issubclass(getattr(posecrb, n), Result))
 
 
 def _small_rotations(m: int, dim: int, sigma: float, rng: np.random.Generator) -> np.ndarray:
@@ -190,7 +196,7 @@ def body_fim_reference(graph: PoseGraph, rot, trans) -> np.ndarray:
 
     The perturbation ``expm(hat(+-H e_a))`` is one 4x4 (3x3) matrix per coordinate; the
     logarithm of the perturbed relative poses is ``se_lie.se_log`` (closed form, checked
-    against scipy's logm in test_se_lie.py), batched over the edges."""
+    against scipy's logm in tests/lie/test_se_lie.py), batched over the edges."""
     q, n, d = graph.q, graph.n, graph.dim
     info = gtsam_information(graph)
     xs = np.stack([homog(rot[i], trans[i]) for i in range(n)])
