@@ -182,7 +182,7 @@ bench: install
 	$(PY) benchmarks/run.py
 
 # Every benchmark once on small inputs, in a few minutes: a broken benchmark fails (the test suite runs the same,
-# tests/test_benchmarks.py, so CI does too). Comparisons whose program is missing say so and are skipped.
+# tests/benchmarks/test_benchmarks.py, so CI does too). Comparisons whose program is missing say so and are skipped.
 bench-quick: install
 	@$(PY) benchmarks/run.py --quick
 

@@ -12,22 +12,36 @@ Groups (each written to OUT/GROUP.json; ``--groups`` picks some):
   timeline  ``posecrb timeline FILE --estimate none`` against one ``posecrb bounds FILE --estimate
             none --repeat 1`` (goal: at most 3x) on city10000, sphere2500, the 2D grid of 10^5 poses
             and the 2D chain of 2,000,000 poses (the longest sums the drift check compares).
+  verify    ``posecrb verify FILE --estimate OPT`` (OPT: solve's optimum, written once untimed) against
+            ``posecrb solve FILE`` and ``posecrb crlb FILE --estimate OPT`` (goal: verify at most their sum),
+            and ``verify --no-solve`` (goal: its certificate stage at most twice solve's own certificate
+            check, the ``verify`` stage of solve's times) on the SE-Sync datasets.
+  baseline  this checkout against an earlier one (``POSECRB_BASELINE``: the directory of another posecrb
+            source tree, e.g. a git worktree of an older commit; skipped without it), side by side:
+            ``bounds`` (default) and this checkout's ``solve`` of every SE-Sync dataset and the 3D grid of
+            21,952 poses (goal: bounds at most the larger of solve + 0.3 s and 1.3x solve); ``select
+            --budget 20%`` of the 2D grids of 10^4, 3*10^4 and 10^5 poses, intel and city10000 (goals: an
+            exponent in the candidates of at most 1.2, at most 15 s at 10^5 poses, a certified ratio at
+            least the earlier one's minus 0.01); ``bounds --estimate none`` and ``info`` of the 2D grid
+            of 10^5 poses (goal: its parse at least 4x faster). Always in alternating rounds.
   threads   ``posecrb solve`` of the 2D grid of 10^5 poses and ``posecrb fim --estimate vertices`` of
             the 3D grid of 2*10^4 poses as posecrb runs them (its own thread policy) against every
             BLAS/OpenMP pool held at one thread (OPENBLAS_NUM_THREADS=1 and the like).
 
 ``--quick`` runs every group once on small inputs. Usage: python benchmarks/commands.py [--quick]
-[--groups startup,goals,timeline,threads] [--runs K] [--warmup K] [--threads T] [--out DIR]
+[--groups startup,goals,timeline,verify,baseline,threads] [--alternate] [--runs K] [--warmup K]
+[--threads T] [--out DIR]
 """
 from __future__ import annotations
 
+import os
 import sys
 
 import harness
 from harness import Command, posecrb_cli
 from suite import inputs
 
-GROUPS = ("startup", "goals", "timeline", "threads")
+GROUPS = ("startup", "goals", "timeline", "verify", "baseline", "threads")
 IMPORT_FLOOR = "import numpy, scipy.sparse, sksparse.cholmod"
 ONE_THREAD = tuple((var, "1") for var in harness.THREAD_VARS)
 
@@ -79,6 +93,72 @@ def timeline(group: harness.Group) -> None:
         ])
 
 
+def verify(group: harness.Group) -> None:
+    names = ["intel"] if group.options.quick else list(inputs.SESYNC_DATASETS)
+    for name, path in harness.found("verify", names):
+        file = str(path)
+        optimum = inputs.cache_dir() / f"{name}_optimum.g2o"
+        if not optimum.is_file():
+            optimum.parent.mkdir(parents=True, exist_ok=True)
+            made = harness.check_run(Command("solve --out", posecrb_cli("-q", "solve", file, "--out", str(optimum))))
+            if not made.ok:
+                print(f"verify {name}: solve --out failed: {made.reason()}", file=sys.stderr)
+                continue
+        entry = group.compare(name, [
+            Command("verify", posecrb_cli("verify", file, "--estimate", str(optimum), "--format", "json")),
+            Command("verify --no-solve", posecrb_cli("verify", file, "--estimate", str(optimum), "--no-solve",
+                                                     "--format", "json")),
+            Command("solve", posecrb_cli("solve", file, "--format", "json")),
+            Command("crlb", posecrb_cli("crlb", file, "--estimate", str(optimum), "--format", "json")),
+        ])
+        if entry:
+            outputs = entry["outputs"]
+            entry["checks"].update(verdict=outputs["verify"].json().get("verdict"),
+                                   certificate=outputs["verify --no-solve"].json().get("times", {}).get("certificate"),
+                                   solve_certificate=outputs["solve"].json().get("times", {}).get("verify"))
+
+
+def baseline(group: harness.Group) -> None:
+    base = os.environ.get("POSECRB_BASELINE")
+    if not base or not os.path.isfile(os.path.join(base, "posecrb", "__init__.py")):
+        print("baseline: skipped: POSECRB_BASELINE is not set to another posecrb source tree", file=sys.stderr)
+        return
+    before = (("PYTHONPATH", base),)
+    quick = group.options.quick
+    bounds_inputs = ["intel"] if quick else [*inputs.SESYNC_DATASETS, "grid3d-20000"]
+    for name, path in harness.found("baseline", bounds_inputs):
+        args = ("bounds", str(path), "--repeat", "1", "--format", "json")
+        group.compare(f"bounds {name}", [Command("bounds", posecrb_cli(*args)),
+                                         Command("bounds before", posecrb_cli(*args), before),
+                                         Command("solve", posecrb_cli("solve", str(path), "--format", "json"))],
+                      alternate=True)
+    select_inputs = ["grid2d-400"] if quick else ["grid2d-10000", "grid2d-30000", "grid2d-100000", "intel",
+                                                  "city10000"]
+    for name, path in harness.found("baseline", select_inputs):
+        args = ("select", str(path), "--budget", "20%", "--format", "json")
+        entry = group.compare(f"select {name}", [Command("select", posecrb_cli(*args)),
+                                                 Command("select before", posecrb_cli(*args), before)],
+                              alternate=True)
+        if entry:
+            out = {k: entry["outputs"][k].json() for k in ("select", "select before")}
+            entry["checks"].update(candidates=out["select"].get("candidates"),
+                                   ratio=out["select"].get("certified_ratio"),
+                                   ratio_before=out["select before"].get("certified_ratio"),
+                                   value=out["select"].get("value"), value_before=out["select before"].get("value"),
+                                   method=(out["select"].get("stats") or {}).get("strategy"))
+    for name, path in harness.found("baseline", ["grid2d-400"] if quick else ["grid2d-100000"]):
+        args = ("bounds", str(path), "--estimate", "none", "--repeat", "1", "--format", "json")
+        entry = group.compare(f"parse {name}", [Command("bounds --estimate none", posecrb_cli(*args)),
+                                                Command("bounds --estimate none before", posecrb_cli(*args), before),
+                                                Command("info", posecrb_cli("info", str(path))),
+                                                Command("info before", posecrb_cli("info", str(path)), before)],
+                              alternate=True)
+        if entry:
+            entry["checks"].update(
+                parse=entry["outputs"]["bounds --estimate none"].json().get("times", {}).get("parse"),
+                parse_before=entry["outputs"]["bounds --estimate none before"].json().get("times", {}).get("parse"))
+
+
 def threads(group: harness.Group) -> None:
     grid2, grid3 = ("grid2d-400", "grid3d-125") if group.options.quick else ("grid2d-100000", "grid3d-20000")
     for label, args in ((f"solve {grid2}", ("solve", str(inputs.path(grid2)), "--format", "json")),
@@ -96,7 +176,8 @@ def main(argv: list[str] | None = None) -> int:
     unknown = sorted(set(chosen) - set(GROUPS))
     if unknown:
         ap.error(f"unknown groups {unknown}; choose from {list(GROUPS)}")
-    run = {"startup": startup, "goals": goals, "timeline": timeline, "threads": threads}
+    run = {"startup": startup, "goals": goals, "timeline": timeline, "verify": verify, "baseline": baseline,
+           "threads": threads}
     for name in chosen:
         group = harness.start(name, args)
         if group is None:

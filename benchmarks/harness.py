@@ -96,9 +96,11 @@ class Group:
     options: argparse.Namespace
     comparisons: list[dict] = field(default_factory=list)
 
-    def compare(self, label: str, commands: list[Command], checks: dict | None = None) -> dict | None:
+    def compare(self, label: str, commands: list[Command], checks: dict | None = None, *,
+                alternate: bool | None = None) -> dict | None:
         """Check-run every command, then time them with hyperfine; record and return the comparison
-        (None, and a failure recorded, when a check run fails)."""
+        (None, and a failure recorded, when a check run fails). ``alternate`` (default: the option
+        ``--alternate``) times them side by side in alternating rounds (``alternating``)."""
         runs = {c.label: check_run(c) for c in commands}
         entry: dict = {"label": label, "commands": {c.label: c.shell_words() for c in commands},
                        "peak_rss": {k: r.peak_rss for k, r in runs.items()}, "checks": dict(checks or {})}
@@ -109,7 +111,9 @@ class Group:
             print(f"{self.name} {label}: failed: {failed}", file=sys.stderr)
             return None
         try:
-            entry["hyperfine"] = hyperfine(commands, self.options)
+            side_by_side = getattr(self.options, "alternate", False) if alternate is None else alternate
+            entry["hyperfine"] = alternating(commands, self.options) if side_by_side else \
+                hyperfine(commands, self.options)
         except subprocess.CalledProcessError as exc:   # a timed run failed where the check run did not
             entry["failed"] = {"hyperfine": f"exit {exc.returncode}"}
             self.comparisons.append(entry)
@@ -140,6 +144,10 @@ def parser(description: str) -> argparse.ArgumentParser:
     ap.add_argument("--threads", type=int, default=0,
                     help="threads of every OpenMP/BLAS/numba pool of the programs; 0 leaves each pool its "
                          "default [default: 0]")
+    ap.add_argument("--alternate", action="store_true",
+                    help="one timed run of each command per hyperfine call, the calls in alternating order, "
+                         "--runs rounds (side by side under the same load) instead of all runs of one command "
+                         "then the next")
     ap.add_argument("--out", default=str(REPO / ".bench" / "hyperfine"),
                     help="directory of the result files [default: .bench/hyperfine]")
     return ap
@@ -156,6 +164,27 @@ def parse(ap: argparse.ArgumentParser, argv: list[str] | None) -> argparse.Names
 
 def hyperfine_binary() -> str | None:
     return shutil.which("hyperfine")
+
+
+def alternating(commands: list[Command], options: argparse.Namespace) -> dict:
+    """hyperfine's export of ``commands`` timed side by side: ``options.runs`` rounds, each one
+    hyperfine call of one run per command, the commands' order reversed every other round (the
+    first round after ``options.warmup`` untimed runs), their times merged into one export."""
+    merged: dict[str, dict] = {}
+    for k in range(options.runs):
+        order = commands if k % 2 == 0 else commands[::-1]
+        one = argparse.Namespace(**{**vars(options), "runs": 1, "warmup": options.warmup if k == 0 else 0})
+        for result in hyperfine(order, one)["results"]:
+            slot = merged.setdefault(result["command"], {**result, "times": []})
+            slot["times"].extend(result["times"])
+    results = []
+    for c in commands:
+        r = merged[c.label]
+        times = sorted(r["times"])
+        r.update(mean=sum(times) / len(times), median=times[len(times) // 2] if len(times) % 2 else
+                 (times[len(times) // 2 - 1] + times[len(times) // 2]) / 2, min=times[0], max=times[-1])
+        results.append(r)
+    return {"results": results, "alternated": options.runs}
 
 
 def hyperfine(commands: list[Command], options: argparse.Namespace) -> dict:
@@ -284,4 +313,15 @@ def environment(options: argparse.Namespace | None = None) -> dict:
         "python": platform.python_version(), "versions": versions, "hyperfine": hyperfine_version,
         "threads": getattr(options, "threads", 0), "runs": getattr(options, "runs", None),
         "warmup": getattr(options, "warmup", None), "quick": getattr(options, "quick", False),
+        "alternate": getattr(options, "alternate", False), "baseline_commit": _baseline_commit(),
     }
+
+
+def _baseline_commit() -> str | None:
+    """The commit of the earlier checkout ``POSECRB_BASELINE`` names (the baseline group's)."""
+    base = os.environ.get("POSECRB_BASELINE")
+    if not base:
+        return None
+    out = subprocess.run(["git", "-C", base, "rev-parse", "--short", "HEAD"], capture_output=True, text=True,
+                         check=False).stdout.strip()
+    return out or base

@@ -15,6 +15,8 @@ markdown file per table, and the scaling figure:
   scaling.png    the same as a log-log figure
   orderings.md   fim's time with each fill-reducing ordering
   threads.md     posecrb's thread policy against one thread, and the start-up and timeline tables
+  baseline.md    this checkout against an earlier one (POSECRB_BASELINE), side by side: bounds and solve,
+                 select on the grids, parsing; with the cost goals
 
 A table whose results are absent says so in one line. The same text goes to stdout.
 Usage: python benchmarks/report.py [--asv DIR] [--hyperfine DIR] [--commit HASH] [--out DIR]
@@ -33,7 +35,8 @@ import sys
 from pathlib import Path
 
 REPO = Path(__file__).resolve().parents[1]
-TABLES = ("provenance", "goals", "sesync", "gtsam", "mac", "inprocess", "scaling", "orderings", "threads")
+TABLES = ("provenance", "goals", "sesync", "gtsam", "mac", "inprocess", "scaling", "orderings", "threads",
+          "baseline")
 # asv benchmarks of the scaling table and figure: label -> (time benchmark, peak-memory benchmark, extra params)
 SCALING = {
     "solve": ("bench_solve.Solve.time_solve", "bench_solve.Solve.peakmem_solve", ()),
@@ -269,6 +272,17 @@ def goals(run: AsvRun, groups: dict[str, dict]) -> str:
         rows.append(["`timeline --estimate none` at most 3x one `bounds --estimate none`",
                      "; ".join(f"{n} {ratio(a, b)}x" for n, a, b in ratios),
                      _goal(bool(ratios) and all(a is not None and b and a <= 3 * b for _, a, b in ratios))])
+    verifies = [c for c in by_label.get("verify", {}).values() if "hyperfine" in c]
+    if verifies:
+        sums = [(c["label"], median(c, "verify"), (median(c, "solve") or 0.0) + (median(c, "crlb") or 0.0))
+                for c in verifies]
+        rows.append(["`verify` at most one `solve` plus one `crlb` of the same graph (whole process)",
+                     "; ".join(f"{n} {seconds(a)} s against {seconds(b)} s" for n, a, b in sums),
+                     _goal(all(a is not None and a <= b for _, a, b in sums))])
+        stages = [(c["label"], c["checks"].get("certificate"), c["checks"].get("solve_certificate")) for c in verifies]
+        rows.append(["`verify --no-solve`: the certificate at the estimate at most twice `solve`'s own certificate "
+                     "check", "; ".join(f"{n} {seconds(a)} s against {seconds(b)} s" for n, a, b in stages),
+                     _goal(all(a is not None and b is not None and a <= 2 * b for _, a, b in stages))])
     return table(["goal", "measured", "met"], rows)
 
 
@@ -481,11 +495,79 @@ def threads(groups: dict[str, dict]) -> str:
     return "\n\n".join(parts)
 
 
+def _exponent(points: list[tuple[float, float]]) -> float | None:
+    """The least-squares slope of log(time) against log(size)."""
+    if len(points) < 2:
+        return None
+    xs, ys = [math.log(x) for x, _ in points], [math.log(y) for _, y in points]
+    mx, my = sum(xs) / len(xs), sum(ys) / len(ys)
+    sxx = sum((x - mx) ** 2 for x in xs)
+    return None if sxx == 0 else sum((x - mx) * (y - my) for x, y in zip(xs, ys)) / sxx
+
+
+def baseline(groups: dict[str, dict]) -> str:
+    group = groups.get("baseline")
+    if not group:
+        return absent("this checkout against an earlier one", "POSECRB_BASELINE=DIR python benchmarks/commands.py "
+                      "--groups baseline --alternate")
+    comps = [c for c in group["comparisons"] if "hyperfine" in c]
+    commit = group.get("environment", {}).get("baseline_commit") or "the baseline"
+    rows, goal_rows = [], []
+    bounds_ok, select_points, ratios_ok = [], [], []
+    for c in comps:
+        kind, name = c["label"].split(" ", 1)
+        if kind == "bounds":
+            now, before, solve = median(c, "bounds"), median(c, "bounds before"), median(c, "solve")
+            allowed = None if solve is None else max(solve + 0.3, 1.3 * solve)
+            ok = now is not None and allowed is not None and now <= allowed
+            bounds_ok.append(ok)
+            rows.append([f"`bounds` {name}", seconds(before), seconds(now), ratio(now, before),
+                         f"solve {seconds(solve)} s, allowed {seconds(allowed)} s: {_goal(ok)}"])
+        elif kind == "select":
+            now, before = median(c, "select"), median(c, "select before")
+            ch = c.get("checks", {})
+            ok = ch.get("ratio") is not None and ch.get("ratio_before") is not None and \
+                ch["ratio"] >= ch["ratio_before"] - 0.01
+            ratios_ok.append(ok)
+            if name.startswith("grid2d") and now is not None and ch.get("candidates"):
+                select_points.append((float(ch["candidates"]), now, name))
+            rows.append([f"`select --budget 20%` {name}", seconds(before), seconds(now), ratio(now, before),
+                         f"certified ratio {ch.get('ratio_before', 0):.4f} -> {ch.get('ratio', 0):.4f} "
+                         f"({ch.get('method')}): {_goal(ok)}"])
+        elif kind == "parse":
+            ch = c.get("checks", {})
+            p_now, p_before = ch.get("parse"), ch.get("parse_before")
+            ok = p_now is not None and p_before is not None and p_before >= 4 * p_now
+            rows.append([f"parse {name} (in-process)", seconds(p_before), seconds(p_now), ratio(p_now, p_before),
+                         _goal(ok)])
+            rows.append([f"`info` {name}", seconds(median(c, "info before")), seconds(median(c, "info")),
+                         ratio(median(c, "info"), median(c, "info before")), ""])
+            goal_rows.append(["parsing the 2D grid at least 4x faster", f"{seconds(p_before)} s -> {seconds(p_now)} s",
+                              _goal(ok)])
+    if bounds_ok:
+        goal_rows.append(["`bounds` at most the larger of `solve` + 0.3 s and 1.3x `solve`",
+                          f"{sum(bounds_ok)} of {len(bounds_ok)} files", _goal(all(bounds_ok))])
+    if select_points:
+        exponent = _exponent([(x, y) for x, y, _ in select_points])
+        largest = max(select_points)
+        goal_rows.append(["`select --budget 20%` on the 2D grids: exponent in the candidates at most 1.2",
+                          "n/a" if exponent is None else f"{exponent:.2f}",
+                          _goal(exponent is not None and exponent <= 1.2)])
+        goal_rows.append([f"`select --budget 20%` of {largest[2]} at most 15 s", f"{seconds(largest[1])} s",
+                          _goal(largest[1] <= 15)])
+    if ratios_ok:
+        goal_rows.append(["certified ratio at least the earlier greedy's minus 0.01",
+                          f"{sum(ratios_ok)} of {len(ratios_ok)} graphs", _goal(all(ratios_ok))])
+    return "\n\n".join([f"Against {commit}, side by side (alternating rounds), whole process:",
+                         table(["run", "before s", "after s", "after/before", "check"], rows),
+                         table(["goal", "measured", "met"], goal_rows)])
+
+
 def build(run: AsvRun, groups: dict[str, dict], out: Path | None) -> dict[str, str]:
     """Every table's markdown, by name (``out``: where the figure goes; None draws no figure)."""
     return {"provenance": provenance(run, groups), "goals": goals(run, groups), "sesync": sesync(groups),
             "gtsam": gtsam(groups), "mac": mac(groups), "inprocess": inprocess(run), "scaling": scaling(run, out),
-            "orderings": orderings(run), "threads": threads(groups)}
+            "orderings": orderings(run), "threads": threads(groups), "baseline": baseline(groups)}
 
 
 def main(argv: list[str] | None = None) -> int:

@@ -9,7 +9,7 @@
 3. benchmarks/report.py on what the two wrote.
 
 Exit status 1 when a step fails. ``make bench`` and ``make bench-quick`` run this; the test suite
-runs ``--quick`` (tests/test_benchmarks.py), so CI fails on a broken benchmark.
+runs ``--quick`` (tests/benchmarks/test_benchmarks.py), so CI fails on a broken benchmark.
 --bench REGEX runs only the asv benchmarks it matches (and the report).
 Usage: python benchmarks/run.py [--quick] [--out DIR] [--bench REGEX]
 """

@@ -1,7 +1,7 @@
 """Sphinx configuration of the posecrb documentation (``make docs``).
 
 The build is offline (no intersphinx, no remote images or fonts) and runs with warnings as errors
-(``sphinx -W``), here and in the test suite (tests/test_docs.py).
+(``sphinx -W``), here and in the test suite (tests/docs/test_site.py).
 """
 from __future__ import annotations
 

@@ -8,6 +8,7 @@ from typing import TYPE_CHECKING
 
 import pytest
 
+from .fileserver import server  # noqa: F401 -- a fixture for every test folder
 from .helpers import make_random_graph
 
 if TYPE_CHECKING:

@@ -15,12 +15,18 @@ import numpy as np
 from scipy.linalg import expm
 from scipy.spatial.transform import Rotation
 
+import posecrb
 from posecrb.core.graph import PoseGraph
-from posecrb.core.noise import rotation_weights
+from posecrb.core.noise import isotropic_information, rotation_weights
+from posecrb.core.result import Result
 from posecrb.lie import se as L
 from posecrb.lie.so import so2_exp, so3_exp
 from posecrb.sim.generators import uniform_rotations
 from posecrb.sim.random_graphs import random_graph
+
+# Every public result type by name: the protocol and misuse tests run over all of them.
+PUBLIC_RESULT_TYPES = sorted(n for n in posecrb.__all__ if isinstance(getattr(posecrb, n), type)
+                             and issubclass(getattr(posecrb, n), Result))
 
 
 def _small_rotations(m: int, dim: int, sigma: float, rng: np.random.Generator) -> np.ndarray:
@@ -190,7 +196,7 @@ def body_fim_reference(graph: PoseGraph, rot, trans) -> np.ndarray:
 
     The perturbation ``expm(hat(+-H e_a))`` is one 4x4 (3x3) matrix per coordinate; the
     logarithm of the perturbed relative poses is ``se_lie.se_log`` (closed form, checked
-    against scipy's logm in test_se_lie.py), batched over the edges."""
+    against scipy's logm in tests/lie/test_se_lie.py), batched over the edges."""
     q, n, d = graph.q, graph.n, graph.dim
     info = gtsam_information(graph)
     xs = np.stack([homog(rot[i], trans[i]) for i in range(n)])
@@ -341,3 +347,26 @@ def record_factor_full(monkeypatch) -> list[tuple[str, float]]:
 
     monkeypatch.setattr(Problem, "factor_full", recording)
     return calls
+
+
+def ring(n: int, dim: int, seed: int = 1, noise: float = 0.01, closures: int = 0) -> PoseGraph:
+    """A noisy ring of n poses on a circle of radius 10 (plus a few chords), vertices the truth."""
+    rng = np.random.default_rng(seed)
+    ang = 2 * np.pi * np.arange(n) / n
+    z = np.zeros(n)
+    if dim == 2:
+        rot, trans = so2_exp(ang + np.pi / 2), 10 * np.column_stack([np.cos(ang), np.sin(ang)])
+    else:
+        rot = so3_exp(np.column_stack([z, z, ang + np.pi / 2]))
+        trans = 10 * np.column_stack([np.cos(ang), np.sin(ang), z])
+    src, dst = np.arange(n), (np.arange(n) + 1) % n
+    if closures:
+        a = rng.choice(n, closures, replace=False)
+        src, dst = np.concatenate([src, a]), np.concatenate([dst, (a + n // 2) % n])
+    m = src.size
+    turn = so2_exp(noise * rng.standard_normal(m)) if dim == 2 else so3_exp(noise * rng.standard_normal((m, 3)))
+    rel = np.swapaxes(rot[src], 1, 2) @ rot[dst] @ turn
+    rel_t = np.einsum("eba,eb->ea", rot[src], trans[dst] - trans[src]) + noise * rng.standard_normal((m, dim))
+    info = isotropic_information(np.full(m, 100.0), np.full(m, 100.0), dim)
+    return PoseGraph(dim=dim, ids=np.arange(n) * 3 + 5, src=src, dst=dst, rot=rel, trans=rel_t, info=info,
+                     vertex_rot=rot, vertex_trans=trans, format="synthetic")

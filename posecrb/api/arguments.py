@@ -70,7 +70,9 @@ def public(**removed: str) -> Callable[[F], F]:
             try:
                 signature.bind(*args, **kwargs)
             except TypeError as exc:
-                raise ArgumentError(fn.__name__, _shown(args), f"{exc} (see help(posecrb.{fn.__name__}))",
+                # the call's shape, not its values: an argument's repr may be long (a graph's arrays)
+                shown = f"{len(args)} positional argument(s) and keywords {sorted(kwargs)}"
+                raise ArgumentError(fn.__name__, shown, f"{exc} (see help(posecrb.{fn.__name__}))",
                                     sep=": ") from None
             return fn(*args, **kwargs)
 

@@ -38,8 +38,8 @@ def select(source: Source, *, budget: int | float, objective: Objective = "tree"
         anchored paper FIM at ``estimate``; ``"fiedler"``: algebraic connectivity of the
         rotation-weighted Laplacian.
     method : {"greedy", "relax", "random", "naive"}
-        Exact greedy, Frank-Wolfe on the convex relaxation with rounding, seeded random, or the
-        heaviest rotation weights.
+        The greedy (see ``gains``), Frank-Wolfe on the convex relaxation with rounding, seeded
+        random, or the heaviest rotation weights.
     fixed : "odometry" or path
         Edges always kept: the odometry chain, or a file of pose-id pairs ``i j``.
     certify : bool
@@ -48,12 +48,16 @@ def select(source: Source, *, budget: int | float, objective: Objective = "tree"
         Frank-Wolfe iterations (default 100; 20 for fiedler).
     tol : float
         Stop Frank-Wolfe when the duality gap is below ``tol`` x (bound - base value); in (0, 1].
-    gains : {"auto", "lazy", "lazy-exact", "jl"}
-        How the log-det greedy evaluates gains: every gain exact at every step (``"auto"``, the
-        incremental greedy); the lazy greedy's priority queue (``"lazy"``: its first gains by
-        random projections above 50,000 candidates; ``"lazy-exact"``: never random projections;
-        ``"jl"``: always seeded by random projections). The command line's ``--lazy``, ``--jl``
-        and ``--exact``.
+    gains : {"auto", "exact", "rounds", "lazy", "lazy-exact", "jl"}
+        How the log-det greedy evaluates gains: ``"auto"``, every gain exact at every step (the
+        incremental greedy), and for more than 4096 steps on graphs of 20,000 poses or more the
+        round greedy (exact gains and Minoux's bound once per round, each choice's effect on the
+        others within a round from a local solve; ``stats.strategy`` says which ran, the
+        certificate is a proven bound either way); ``"exact"``, the incremental greedy whatever the
+        size; ``"rounds"``, the round greedy; the lazy greedy's priority queue (``"lazy"``: its
+        first gains by random projections above 50,000 candidates; ``"lazy-exact"``: never random
+        projections; ``"jl"``: always seeded by random projections). The command line's
+        ``--gains``.
     estimate : "solve", "vertices", path, SolveResult or Estimate
         ``objective="fim"``: where the poses come from.
     seed : int

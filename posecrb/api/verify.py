@@ -33,10 +33,11 @@ def verify(source: Source, estimate: str | os.PathLike[str] | Estimate | SolveRe
     source : PoseGraph, str or os.PathLike
         The graph: a graph, a path or a dataset name (see ``load``).
     estimate : str, os.PathLike, Estimate or SolveResult
-        The estimate to judge: a file of g2o or TORO VERTEX lines (what g2o, GTSAM's ``writeG2o``
-        and ``posecrb solve --out`` write; the graph's own file judges its vertices), Ceres'
-        ``id x y yaw`` / ``id x y z qx qy qz qw`` lines, TUM ``timestamp x y z qx qy qz qw`` lines
-        or KITTI's 12 numbers per line; or poses in memory.
+        The estimate to judge: a path or a dataset name (resolved as ``source``) of a file of g2o or
+        TORO VERTEX lines (what g2o, GTSAM's ``writeG2o`` and ``posecrb solve --out`` write; the
+        graph's own file judges its vertices), Ceres' ``id x y yaw`` / ``id x y z qx qy qz qw``
+        lines, TUM ``timestamp x y z qx qy qz qw`` lines or KITTI's 12 numbers per line; or poses in
+        memory.
     estimate_format : {"auto", "g2o", "toro", "ceres", "tum", "kitti"}
         The file's format: read from the content (``"auto"``) or insisted on.
     tum_ids : {"order", "timestamps"}
@@ -90,8 +91,8 @@ def verify(source: Source, estimate: str | os.PathLike[str] | Estimate | SolveRe
     certificate_tol = arg.finite("certificate_tol", certificate_tol, 0.0, low_open=True)
     ids = arg.one_anchor(anchor)
     graph, times = arg.load_graph(source, data_dir)
-    est = _poses(graph, estimate, "estimate", fmt, rows)
-    gt = None if truth is None else _poses(graph, truth, "truth", "auto", "order")
+    est = _poses(graph, estimate, "estimate", fmt, rows, data_dir)
+    gt = None if truth is None else _poses(graph, truth, "truth", "auto", "order", data_dir)
     res = verify_estimate(graph, est, anchor=graph.anchor_index(ids[0] if ids else None), run_solve=solve,
                           certificate_tol=certificate_tol, truth=gt)
     if times:
@@ -99,8 +100,10 @@ def verify(source: Source, estimate: str | os.PathLike[str] | Estimate | SolveRe
     return res
 
 
-def _poses(graph: PoseGraph, value: Any, parameter: str, fmt: EstimateFormat, tum_ids: RowOrder) -> Poses:
-    """The poses ``value`` gives on ``graph``, with their precision."""
+def _poses(graph: PoseGraph, value: Any, parameter: str, fmt: EstimateFormat, tum_ids: RowOrder,
+           data_dir: str | os.PathLike[str] | None) -> Poses:
+    """The poses ``value`` gives on ``graph`` (a path or a dataset name, or poses in memory), with their
+    precision."""
     import numpy as np  # noqa: PLC0415 -- lazy: start-up time
 
     from ..io.estimates import read_estimate_file  # noqa: PLC0415 -- lazy: start-up time
@@ -115,7 +118,7 @@ def _poses(graph: PoseGraph, value: Any, parameter: str, fmt: EstimateFormat, tu
         raise ArgumentError(parameter, value, "is not a file, an Estimate or a SolveResult")
     path = arg.path_or_none(parameter, value)
     assert path is not None
-    found = read_estimate_file(arg.resolve_source(path), format=fmt)
+    found = read_estimate_file(arg.resolve_source(path, data_dir), format=fmt)
     poses = found.poses_for(graph, rows=tum_ids)
     return Poses(poses.rot, poses.trans, Precision(poses.rotation_quantum, poses.translation_quantum),
                  {"path": found.path, "format": poses.format,

@@ -86,7 +86,7 @@ def _configure_logging(verbose: int, quiet: bool) -> None:
 
 # The command table: name -> (module under posecrb.cli.commands, short help shown by `posecrb --help`).
 # `posecrb --help` lists commands from this table without importing any command module (start-up
-# time: the command modules import scipy, sksparse and numba); tests/test_cli_lazy.py checks that
+# time: the command modules import scipy, sksparse and numba); tests/cli/test_lazy_commands.py checks that
 # every entry matches its command's own help.
 COMMANDS: dict[str, tuple[str, str]] = {
     "bounds": ("bounds", "D-optimality of each FILE: FIM log-det at an estimate and its graph-only bounds (one "

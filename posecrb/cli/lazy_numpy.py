@@ -5,10 +5,10 @@ scipy >= 1.15 builds its array-API namespace (``scipy._lib.array_api_compat.nump
 ``scipy.sparse``) by cloning ``numpy``'s public names, which imports every submodule listed in
 ``numpy.__all__``: ``numpy.f2py`` (a Fortran wrapper generator), ``numpy.testing`` (unittest,
 importlib.metadata), ``numpy.ma`` and ``numpy.polynomial``. Every command that needs scipy.sparse
-(bounds, solve, fim, crlb, select, timeline, tables, experiments) paid for them, about 75 ms of CPU
-per run measured, although none uses them; our own lazy imports cannot avoid it (the cost is inside
-``import scipy.sparse``). ``numpy.unique`` without counts consults ``numpy.ma``: the readers avoid
-it, other paths simply load it then.
+(bounds, solve, fim, crlb, select, timeline, tables, experiments) paid for them, a noticeable
+share of a small ``bounds`` or ``solve`` (docs/decisions/import-hook.md), although none uses them;
+our own lazy imports cannot avoid it (the cost is inside ``import scipy.sparse``). ``numpy.unique``
+without counts consults ``numpy.ma``: the readers avoid it, other paths simply load it then.
 
 The remedy is importlib's documented lazy loading: a meta-path finder that gives those four modules
 an ``importlib.util.LazyLoader``, so they are real modules that execute on first attribute access.

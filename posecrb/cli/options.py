@@ -226,8 +226,9 @@ ordering_option = click.option(
          "would apply AMD to a symmetric matrix, so COLAMD's permutation of A A^T is computed and passed "
          "in; more fill than AMD here). metis, nesdis: nested dissection of the pose graph, expanded to "
          "each pose's rows. auto: amd, but metis for the FIM/ub/CRLB of 3D graphs with >= 10000 poses "
-         "and 2D graphs with >= 50000 (measured, see docs/performance.md). The JSON key 'ordering' says "
-         "what was used.")
+         "and 2D graphs with >= 50000, where it needs fewer flops and was measured faster (the "
+         "documentation's how-to guide 'Choose a fill-reducing ordering'). The JSON key 'ordering' "
+         "says what was used.")
 
 
 model_option = click.option(

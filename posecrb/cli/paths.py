@@ -16,7 +16,7 @@ against every input of the same call:
   (regular file, size); ``keywords`` are values that name no file (``odometry``, ``solve``).
 * ``InputDir``: an existing directory that is read (``--data-dir``).
 
-A new command complies by declaring its paths with these types; tests/test_outputs.py walks the
+A new command complies by declaring its paths with these types; tests/files/test_output_options.py walks the
 whole command tree and tries every output option against the rules (docs/howto/output-files.md).
 """
 from __future__ import annotations

@@ -26,7 +26,8 @@ def progress_display(*, transfer: bool = False) -> Progress:
 
     ``transfer=False``: counted units (done/total, elapsed, remaining), transient.
     ``transfer=True``: bytes (size, speed, remaining), one persistent bar per task."""
-    # lazy: rich costs ~40 ms of start-up and is not needed off a terminal (see ``progress``)
+    # lazy: rich's import is a noticeable part of start-up (docs/decisions/fixed-costs.md) and is
+    # not needed off a terminal (see ``progress``)
     from rich.console import Console  # noqa: PLC0415
     from rich.progress import (  # noqa: PLC0415
         BarColumn,

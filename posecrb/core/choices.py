@@ -22,11 +22,13 @@ Ordering = Literal["auto", "amd", "colamd", "metis", "nesdis"]
 Objective = Literal["tree", "fim", "fiedler"]
 #: How a measurement selection chooses.
 Method = Literal["greedy", "relax", "random", "naive"]
-#: How the log-det greedy evaluates gains: ``auto`` (every gain exact at every step, the
-#: incremental greedy), ``lazy`` (a priority queue; random projections seed it above 50,000
-#: candidates), ``lazy-exact`` (the lazy greedy, never random projections) or ``jl`` (the lazy
-#: greedy seeded by random projections).
-Gains = Literal["auto", "lazy", "lazy-exact", "jl"]
+#: How the log-det greedy evaluates gains: ``auto`` (the incremental greedy, every gain exact at
+#: every step; the round greedy for more than 4096 steps on graphs of 20,000 poses or more),
+#: ``exact`` (the incremental greedy whatever the size), ``rounds`` (the round greedy: exact gains
+#: once per round, local corrections within it), ``lazy`` (a priority queue; random projections
+#: seed it above 50,000 candidates), ``lazy-exact`` (the lazy greedy, never random projections) or
+#: ``jl`` (the lazy greedy seeded by random projections).
+Gains = Literal["auto", "exact", "rounds", "lazy", "lazy-exact", "jl"]
 #: Where the poses of an evaluation come from (besides a path, a ``SolveResult`` or an ``Estimate``).
 EstimateSource = Literal["solve", "vertices"]
 #: The same, or no estimate at all (graph-only results).
@@ -82,7 +84,8 @@ TABLE_FORMATS: tuple[str, ...] = get_args(TableFormat)
 # What each gain strategy is for the selection driver: (greedy strategy, gains mode)
 # (posecrb.selection.greedy.STRATEGIES, GAINS).
 GAIN_MODES: dict[str, tuple[str, str]] = {
-    "auto": ("auto", "auto"), "lazy": ("lazy", "auto"), "lazy-exact": ("lazy", "exact"), "jl": ("lazy", "jl"),
+    "auto": ("auto", "auto"), "exact": ("incremental", "exact"), "rounds": ("rounds", "exact"),
+    "lazy": ("lazy", "auto"), "lazy-exact": ("lazy", "exact"), "jl": ("lazy", "jl"),
 }
 
 __all__ = [

@@ -87,7 +87,7 @@ _SERIES_BELOW = 0.05
 _S12, _S01 = _power_series_differences(8)
 # The same coefficients from the highest power down, for numpy.polyval's Horner scheme (the
 # operations of numpy.polynomial's polyval in the same order, without importing numpy.polynomial
-# and its six modules: 3-4 ms of a 3D command's start-up, which the CLI otherwise defers).
+# and its six modules, which the CLI otherwise defers: docs/decisions/fixed-costs.md).
 _S12_DESCENDING, _S01_DESCENDING = _S12[::-1].copy(), _S01[::-1].copy()
 
 

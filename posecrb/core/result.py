@@ -74,6 +74,10 @@ STATUS_OF = "status_of"
 LABEL = "label"
 
 
+# Values that are their own JSON form (floats are not: NaN and infinities are replaced).
+_PLAIN_SCALARS = frozenset({int, str, bool, type(None)})
+
+
 def plain(value: Any) -> Any:
     """``value`` with numpy arrays and scalars as Python lists and numbers, NaN as None and
     infinities as ``"inf"`` / ``"-inf"`` (what ``json.dumps(..., allow_nan=False)`` accepts)."""
@@ -84,8 +88,12 @@ def plain(value: Any) -> Any:
     if isinstance(value, dict):
         return {k: plain(v) for k, v in value.items()}
     if isinstance(value, (list, tuple)):
+        if all(type(v) in _PLAIN_SCALARS for v in value):     # already plain (ids, positions): no walk
+            return list(value)
         return [plain(v) for v in value]
     if isinstance(value, np.ndarray):
+        if value.dtype.kind in "iub":                            # integers: nothing to replace
+            return value.tolist()
         return plain(value.tolist())
     if isinstance(value, np.generic):
         return plain(value.item())

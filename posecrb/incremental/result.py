@@ -33,7 +33,7 @@ class TimelineResult(GraphKeys):
     Graph: ``dataset``, ``path``, ``sha256``, ``dim``, ``poses`` and ``edges`` (n and m of the whole
     graph), ``anchor`` (the smallest id, anchored in every prefix), ``rotation_weight``,
     ``fim_variant`` and ``estimate`` (an ``Estimate``; None for graph-only rows). Range: ``first``
-    .. ``last`` (numbers of poses) and ``every``. ``rows``: one entry per kept step, as columns
+    to ``last`` (numbers of poses) and ``every``. ``rows``: one entry per kept step, as columns
     (``TimelineRows``: ``poses``, ``pose``, ``edges``, ``loop_closures``, ``components``, ``lb``,
     ``ub``, ``t_opt_graph``, ``fim_logdet``, ``gain``). ``lb_status``, ``ub_status``,
     ``fim_status``: a metric that could not be verified, or a range in which no prefix is

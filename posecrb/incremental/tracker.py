@@ -53,7 +53,7 @@ TOLERANCE_MARGIN = 16.0
 SUM_MARGIN = 2.0
 # Rank-one updates applied in one traversal of the elimination tree (columns of the work array).
 BATCH = 16
-# Vectors per kernel call (signals are handled between calls; a call costs microseconds).
+# Vectors per kernel call (signals are handled between calls, and a call of this many is short).
 CALL = 2048
 # The first segment holds about 1/FIRST_SEGMENTS of the updates of the range (then 1/2, then the rest
 # while the drift stays small: three checkpoints after the start).

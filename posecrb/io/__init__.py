@@ -4,7 +4,8 @@
 ``PoseGraph``; ``save(graph, path)`` writes the format of the suffix. Modules: ``formats``
 (the registry, ``load``, ``save``), ``g2o`` and ``toro`` (record tables, field decoders,
 writers), ``reader`` (the format-independent checks), ``text`` (fields, numbers, limits; a
-vectorised tokeniser and the reference one), ``lines`` (the line rules of every text input, and
+vectorised tokeniser and the reference one), ``decimals`` (decimal tokens to float64 and int64,
+vectorised and correctly rounded), ``lines`` (the line rules of every text input, and
 ``read_lines``), ``records`` (what a format is), ``rotations`` (quaternions, Euler angles). Files
 are read through ``posecrb.core.inputs`` and written through ``posecrb.core.outputs.atomic_write``.
 """

@@ -12,6 +12,7 @@ from __future__ import annotations
 
 import logging
 from collections.abc import Mapping
+from typing import overload
 
 import numpy as np
 
@@ -26,12 +27,16 @@ log = logging.getLogger("posecrb")
 
 
 def _upper_to_full(vals: np.ndarray, q: int) -> np.ndarray:
-    """(k, q, q) symmetric matrices from row-major upper triangles."""
-    iu = np.triu_indices(q)
-    out = np.zeros((vals.shape[0], q, q))
-    out[:, iu[0], iu[1]] = vals
-    out[:, iu[1], iu[0]] = vals
-    return out
+    """(k, q, q) symmetric matrices from row-major upper triangles (one take of the columns)."""
+    upper = np.zeros((q, q), np.intp)
+    upper[np.triu_indices(q)] = np.arange(q * (q + 1) // 2)
+    return np.take(vals, np.maximum(upper, upper.T).ravel(), axis=1).reshape(-1, q, q)
+
+
+# Blocks whose Gershgorin bound on the smallest eigenvalue of the unit-diagonal scaling exceeds this
+# are positive definite far beyond any rounding of the test below (its tolerance is ~1e-13), so the
+# eigenvalues are computed only for the others, which decide exactly as before.
+_SURELY_DEFINITE = 1e-6
 
 
 def _check_positive_definite(path: str, lines: np.ndarray, tag: str, ends: tuple, name: str,
@@ -41,27 +46,45 @@ def _check_positive_definite(path: str, lines: np.ndarray, tag: str, ends: tuple
     The block is scaled to unit diagonal, D^-1/2 A D^-1/2 (diag(1e12, 1e-3) becomes I), and
     the smallest eigenvalue of that correlation matrix must exceed its rounding error
     (b eps per entry, margin 100). An absolute or max-eigenvalue-relative threshold would
-    reject well-defined matrices whose diagonal spans many decades.
+    reject well-defined matrices whose diagonal spans many decades. The eigenvalues are computed
+    only for the blocks that Gershgorin's bound, 1 - sum_j!=i |c_ij|, does not show definite by
+    ``_SURELY_DEFINITE``.
     """
     b = block.shape[-1]
-    diag = np.diagonal(block, axis1=1, axis2=2)
-    pos = np.asarray((diag > 0).all(axis=1))
-    d = np.where(diag > 0, diag, 1.0) ** -0.5
-    corr = block * d[:, :, None] * d[:, None, :]
-    eig = np.linalg.eigvalsh(corr)[:, 0]
-    tol = 100 * b * np.finfo(float).eps
-    bad = np.flatnonzero(~pos | ~(eig > tol))
-    if not bad.size:
+    pos = block[:, 0, 0] > 0
+    for i in range(1, b):
+        pos &= block[:, i, i] > 0
+    surely = pos
+    with np.errstate(all="ignore"):        # NaN or inf where not positive or extreme: not sure
+        scale = [1 / np.sqrt(block[:, i, i]) for i in range(b)]
+        for i in range(b):
+            off = np.zeros(block.shape[0])
+            for j in range(b):
+                if j != i:
+                    off += np.abs(block[:, i, j]) * (scale[i] * scale[j])
+            surely = surely & (off < 1 - _SURELY_DEFINITE)
+    doubt = np.flatnonzero(~surely)
+    if not doubt.size:
         return
+    block = block[doubt]
+    diag = np.diagonal(block, axis1=1, axis2=2)
+    d = np.where(diag > 0, diag, 1.0) ** -0.5
+    eig = np.linalg.eigvalsh(block * d[:, :, None] * d[:, None, :])[:, 0]
+    tol = 100 * b * np.finfo(float).eps
+    failed = ~pos[doubt] | ~(eig > tol)
+    if not failed.any():
+        return
+    first = int(np.argmax(failed))
+    bad, eig, diag = doubt[failed], eig[first:], diag[first:]
     k = bad[0]
     where = f"{tag} {ends[0][k]} {ends[1][k]}: {name} block of the information matrix is not positive definite"
     if not pos[k]:
-        j = int(np.argmin(diag[k]))
-        reason = f"(diagonal entry {j + 1} is {fmt_number(diag[k, j])})"
-    elif eig[k] > -tol:
+        j = int(np.argmin(diag[0]))
+        reason = f"(diagonal entry {j + 1} is {fmt_number(diag[0, j])})"
+    elif eig[0] > -tol:
         reason = "(singular to working precision)"
     else:
-        reason = f"(smallest eigenvalue {fmt_number(eig[k])} after scaling to unit diagonal)"
+        reason = f"(smallest eigenvalue {fmt_number(eig[0])} after scaling to unit diagonal)"
     raise ParseError(path, int(lines[k]), f"{where} {reason}")
 
 
@@ -121,6 +144,38 @@ def _decode_vertices(path: str, fmt: Format, rec: RecordKind, ids: np.ndarray, v
     return ids[:, 0], fmt.decode_vertices(path, rec, vals, lines), trans
 
 
+@overload
+def _handed_over(array: np.ndarray) -> np.ndarray: ...
+
+
+@overload
+def _handed_over(array: None) -> None: ...
+
+
+def _handed_over(array: np.ndarray | None) -> np.ndarray | None:
+    """``array``, made here and referenced nowhere else, read-only down to the memory it views, so
+    that ``PoseGraph`` keeps it rather than a copy (``frozen_array``); a narrow view of a wider
+    block (translations among a record's values) is copied first, so the block is not kept."""
+    if array is None:
+        return None
+    if array.base is not None and array.base.size > 2 * array.size:
+        array = array.copy()
+    base: object = array
+    while isinstance(base, np.ndarray):
+        base.setflags(write=False)
+        base = base.base
+    return array
+
+
+def _positions(ids: np.ndarray, end: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Index of each of ``end`` in the increasing ``ids``, and where it is none of them."""
+    if ids[-1] - ids[0] == ids.size - 1:    # consecutive ids (the usual numbering): an offset
+        pos = end - ids[0]
+        return pos, (pos < 0) | (pos >= ids.size)
+    pos = np.searchsorted(ids, end)
+    return pos, ids[np.minimum(pos, ids.size - 1)] != end
+
+
 def parse(tokens: Tokens, formats: Mapping[str, Format], path: str = "<string>", sha256: str | None = None,
           quaternions: str = "normalize") -> PoseGraph:
     """A checked ``PoseGraph`` from a file's tokens (module docstring; ``posecrb.io.load`` for
@@ -170,31 +225,36 @@ def parse(tokens: Tokens, formats: Mapping[str, Format], path: str = "<string>",
         v_lines = v_idx + 1
         vids, vvals = tokens.numeric(path, vrec, v_idx)
         vid, vrot, vtrans = _decode_vertices(path, fmt, vrec, vids, vvals, v_lines)
-        order = np.argsort(vid, kind="stable")
-        ids = vid[order]
-        dup = np.flatnonzero(ids[1:] == ids[:-1])
-        if dup.size:
-            later = v_lines[order[dup[0] + 1]]
-            raise ParseError(path, int(later), f"duplicate vertex id {ids[dup[0]]}")
-        vertex_rot, vertex_trans = vrot[order], vtrans[order]
-        for end in (ei, ej):
-            pos = np.minimum(np.searchsorted(ids, end), ids.size - 1)
-            unknown = np.flatnonzero(ids[pos] != end)
-            if unknown.size:
-                k = unknown[0]
+        if (vid[1:] > vid[:-1]).all():   # written in order (the usual case): nothing to sort
+            ids, vertex_rot, vertex_trans = vid, vrot, vtrans
+        else:
+            order = np.argsort(vid, kind="stable")
+            ids = vid[order]
+            dup = np.flatnonzero(ids[1:] == ids[:-1])
+            if dup.size:
+                later = v_lines[order[dup[0] + 1]]
+                raise ParseError(path, int(later), f"duplicate vertex id {ids[dup[0]]}")
+            vertex_rot, vertex_trans = vrot[order], vtrans[order]
+        src, unknown_src = _positions(ids, ei)
+        dst, unknown_dst = _positions(ids, ej)
+        for end, unknown in ((ei, unknown_src), (ej, unknown_dst)):
+            if unknown.any():
+                k = int(np.argmax(unknown))
                 raise ParseError(path, int(e_lines[k]), f"{erec.tag}: edge to undeclared vertex id {end[k]}")
     else:
         # sorted distinct ids (not np.unique, which consults numpy.ma, deferred by the CLI)
         ids = np.sort(np.concatenate([ei, ej]))
         ids = ids[np.flatnonzero(np.diff(ids, prepend=ids[:1] - 1))]
+        src, dst = _positions(ids, ei)[0], _positions(ids, ej)[0]
 
     if skipped:
         summary = ", ".join(f"{n} {'comment' if t == '#' else t}" for t, n in sorted(skipped.items()))
         log.warning("%s: skipped %s line(s)", path, summary)
     graph = PoseGraph(
-        dim=erec.dim, ids=ids, src=np.searchsorted(ids, ei), dst=np.searchsorted(ids, ej),
-        rot=erot, trans=etrans, info=einfo, vertex_rot=vertex_rot, vertex_trans=vertex_trans,
-        path=path, format=erec.family, skipped=skipped, edge_lines=e_lines, sha256=sha256, quaternions=quaternions,
+        dim=erec.dim, ids=_handed_over(ids), src=_handed_over(src), dst=_handed_over(dst), rot=_handed_over(erot),
+        trans=_handed_over(etrans), info=_handed_over(einfo), vertex_rot=_handed_over(vertex_rot),
+        vertex_trans=_handed_over(vertex_trans), path=path, format=erec.family, skipped=skipped,
+        edge_lines=_handed_over(e_lines), sha256=sha256, quaternions=quaternions,
     )
     graph.__dict__["_precisions"] = precisions   # seed the cached (tau, kappa): computed and checked above
     return graph

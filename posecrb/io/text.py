@@ -18,11 +18,13 @@ line and reason (docs/design.md#formats). Robustness rules:
 * Magnitudes stay inside the range where everything downstream is finite (``MAX_*`` below).
 
 Two tokenisers give the same groups and blocks. ``scan_bytes`` is the fast one: it works on the
-file's bytes with whole-buffer numpy operations (newlines, token boundaries, tags) and converts
-each tag's numeric block with one ``np.fromstring`` call; it takes only plain ASCII files whose
-lines are ``TAG`` + blank-separated tokens of ``[0-9.eE+-]`` with short integer ids, and gives up
-(``Fallback``) on anything else. ``split_text`` is the reference tokeniser over ``str``; it takes
-every input and locates every error, so the fast path never has to.
+file's bytes with whole-buffer numpy operations (token boundaries, the lines from the newlines
+between tokens, tags) and converts each group's numbers from the token boundaries with
+``posecrb.io.decimals`` (correctly rounded, ids never through float64); it takes ASCII files whose
+fields are separated by blanks (``\\r`` only in ``\\r\\n``) and gives up (``Fallback``) on anything
+else: another control character, a line with another field count, a token outside the plain
+decimal grammar, an id above 2^63 - 1. ``split_text`` is the reference tokeniser over ``str``; it
+takes every input and locates every error, so the fast path never has to.
 """
 from __future__ import annotations
 
@@ -35,6 +37,7 @@ import numpy as np
 
 from ..core.errors import InternalError, ParseError
 from ..core.integers import IntegerError, parse_int, shown
+from .decimals import decimals, integers
 from .lines import FIELD_SEP, ODD_SPACE, split_lines
 from .records import RecordKind
 
@@ -56,13 +59,11 @@ _NOT_NUMBER_CHAR = re.compile(r"[^0-9eE.+\- nNaAiIfFtTyY]")
 _NOT_ID_CHAR = re.compile(r"[^0-9 ]")
 _INT64_MAX = np.iinfo(np.int64).max
 
-# The fast tokeniser's alphabet: printable ASCII, tab and newline (no \r, \f, \v or other
-# control characters: their line and field rules are split_text's), and inside numeric blocks
-# only the characters of plain decimal numbers and blanks.
-_PRINTABLE = bytes([9, 10] + list(range(32, 127)))
-_NUMERIC_BYTES = b"0123456789.eE+- \t\n"
-# Ids of at most this many digits are below 2^53, so exact in float64.
-_FAST_ID_DIGITS = 15
+# The fast tokeniser's alphabet: printable ASCII, the blanks (tab, vertical tab, form feed) and
+# newline, \r only in \r\n (other control characters and a lone \r: split_text's rules decide).
+_FAST_BYTES = bytes([9, 10, 11, 12, 13] + list(range(32, 127)))
+_FEW_TAGS = 8                   # tags told apart by comparison before np.unique groups the rest
+_BLOCK = 1 << 18                # bytes per step of the boundary scan (its temporaries stay in the cache)
 
 
 class Fallback(Exception):
@@ -77,6 +78,8 @@ def fmt_number(x: float) -> str:
 
 def check_magnitude(path: str, lines: np.ndarray, tag: str, vals: np.ndarray, limit: float, what: str) -> None:
     """Every entry of each record's ``vals`` within ``limit`` in magnitude (``MAX_*`` above)."""
+    if vals.size == 0 or (vals.max() <= limit and vals.min() >= -limit):
+        return                    # two reductions without a temporary; rows only to locate an error
     big = np.abs(vals).reshape(vals.shape[0], -1).max(axis=1) > limit
     if big.any():
         k = int(np.flatnonzero(big)[0])
@@ -86,6 +89,10 @@ def check_magnitude(path: str, lines: np.ndarray, tag: str, vals: np.ndarray, li
 
 
 def _check_finite(path: str, rec: RecordKind, lines: np.ndarray, vals: np.ndarray) -> None:
+    with np.errstate(over="ignore", invalid="ignore"):
+        total = vals.sum()
+    if np.isfinite(total):
+        return                    # a finite sum has finite terms (a NaN or an inf makes it NaN or inf)
     finite = np.isfinite(vals).all(axis=1)
     if not finite.all():
         k = int(np.flatnonzero(~finite)[0])
@@ -180,91 +187,126 @@ def split_text(text: str) -> Tokens:
 
 
 # --------------------------------------------------------------------------------------------
-# Fast tokeniser: whole-buffer numpy operations, no Python loop per line.
+# Fast tokeniser: whole-buffer numpy operations, no Python loop per line or token.
+
+def _boundaries(buf: np.ndarray) -> tuple[np.ndarray, int]:
+    """Token starts and ends (alternating, sorted) of the bytes, where a byte above the blank
+    (32) meets one that is not, and the number of control characters (below 32); in blocks whose
+    temporaries stay in the cache, written into one array (untouched pages of its bound, one entry
+    per byte, cost nothing)."""
+    out = np.empty(buf.size + 1, np.intp)
+    count = controls = 0
+    for a in range(0, buf.size, _BLOCK):
+        piece = buf[a: a + _BLOCK]
+        word = piece > 32
+        if word[0] != (a > 0 and buf[a - 1] > 32):
+            out[count] = a
+            count += 1
+        change = np.flatnonzero(word[1:] != word[:-1])
+        change += a + 1
+        out[count: count + change.size] = change
+        count += change.size
+        controls += int(np.count_nonzero(piece < 32))
+    if buf[-1] > 32:
+        out[count] = buf.size
+        count += 1
+    return out[:count], controls
+
+
+def _lines(buf: np.ndarray, data: bytes, tok_start: np.ndarray,
+           tok_end: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """(index of the first token of each line that has tokens, its 0-based line), from the
+    newlines in the gaps between tokens: a gap of one byte is a newline or a blank; wider gaps
+    (indentation, trailing blanks, empty lines) are counted."""
+    gap = tok_end[:-1]                              # gap k precedes token k + 1
+    starts_line = np.empty(tok_start.size, bool)
+    starts_line[0] = True
+    np.equal(buf[gap], 10, out=starts_line[1:])
+    wide = np.flatnonzero(buf[1:][gap] <= 32)       # its second byte is a blank too
+    breaks = np.empty(0, np.intp)
+    if wide.size:
+        newlines = np.flatnonzero(buf == 10)
+        breaks = np.searchsorted(newlines, tok_start[wide + 1]) - np.searchsorted(newlines, gap[wide])
+        starts_line[wide + 1] = breaks > 0
+    first = np.flatnonzero(starts_line)
+    step = np.ones(first.size, np.intp)             # newlines before each line's first token
+    step[0] = data.count(b"\n", 0, int(tok_start[0]))
+    if wide.size:
+        at = np.searchsorted(first, wide + 1)
+        hit = (at < first.size) & (first[np.minimum(at, first.size - 1)] == wide + 1)
+        step[at[hit]] = breaks[hit]
+    return first, np.cumsum(step)
+
+
+def _group_tags(buf: np.ndarray, tag_start: np.ndarray, tag_len: np.ndarray) -> dict[str, np.ndarray]:
+    """Positions (into the lines that have tokens) of each tag, tags in order of first occurrence.
+
+    Per length, each tag is one fixed-width byte string (a window view of the buffer); the lines
+    of the first remaining tag are split off by one comparison, which is all a file of a few
+    record kinds needs. Past ``_FEW_TAGS`` kinds (comments that differ, say) np.unique groups the
+    rest."""
+    of_tag: dict[str, np.ndarray] = {}
+    # (bincount, not np.unique on the lengths: numpy's unique consults numpy.ma, which the CLI defers)
+    for length in np.flatnonzero(np.bincount(tag_len)):
+        sel = np.flatnonzero(tag_len == length)
+        names = np.ndarray((buf.size - length + 1,), f"S{length}", buf, strides=(1,))[tag_start[sel]]
+        for _ in range(_FEW_TAGS):
+            same = names == names[0]
+            of_tag[names[0].decode("ascii")] = sel[same]
+            sel, names = sel[~same], names[~same]
+            if not sel.size:
+                break
+        if sel.size:
+            unique, inverse = np.unique(names, return_inverse=True)
+            order = np.argsort(inverse, kind="stable")
+            bounds = np.searchsorted(inverse[order], np.arange(unique.size + 1))
+            for u, name in enumerate(unique):
+                of_tag[name.decode("ascii")] = sel[order[bounds[u]: bounds[u + 1]]]
+    return {tag: of_tag[tag] for tag in sorted(of_tag, key=lambda tag: int(of_tag[tag][0]))}
+
 
 def scan_bytes(data: bytes) -> Tokens:
     """The fast tokeniser (module docstring); raises ``Fallback`` where it cannot decide.
 
-    Newlines, token starts and ends are found once over the whole buffer; each line's first
-    token (its tag) is compared as a fixed-width byte string, so grouping costs a sort of the
-    tags, not a loop over lines.
+    Token starts and ends are found once over the whole buffer; each line's first token (its tag)
+    is compared as a fixed-width byte string, so grouping costs a comparison per kind of tag, not a
+    loop over lines. A group's numbers are converted from the token boundaries by ``posecrb.io.decimals``:
+    the tokens of a run of lines of one record kind are one slice of the boundary arrays.
     """
-    if not data.isascii() or data.translate(None, _PRINTABLE):
+    if not data or not data.isascii() or b"\x7f" in data:
         raise Fallback
     buf = np.frombuffer(data, dtype=np.uint8)
-    nl = np.flatnonzero(buf == 10)
-    word = (buf != 32) & (buf != 9) & (buf != 10)
-    edge = np.diff(word.view(np.int8), prepend=np.int8(0), append=np.int8(0))
-    tok_start = np.flatnonzero(edge == 1)
-    tok_end = np.flatnonzero(edge == -1)      # exclusive
-    line_start = np.concatenate(([0], nl + 1))   # as text.split("\n"): a final newline ends an empty line
-    line_end = np.append(nl, buf.size)
-    first_tok = np.searchsorted(tok_start, line_start)    # index of each line's first token
-    counts = np.diff(first_tok, append=tok_start.size)    # tokens per line
-    used = np.flatnonzero(counts)
-    tag_start, tag_end = tok_start[first_tok[used]], tok_end[first_tok[used]]
-    tag_len = tag_end - tag_start
-
-    # Tags: per length, the bytes as one fixed-width string each; np.unique groups them.
-    tag_of_line: dict[str, np.ndarray] = {}
-    first_seen: dict[str, int] = {}
-    # (bincount, not np.unique: numpy's unique consults numpy.ma, which the CLI defers; see posecrb.cli)
-    for length in np.flatnonzero(np.bincount(tag_len)):
-        sel = np.flatnonzero(tag_len == length)
-        raw = buf[tag_start[sel][:, None] + np.arange(length)]
-        names, inverse = np.unique(np.ascontiguousarray(raw).view(f"S{length}").ravel(), return_inverse=True)
-        order = np.argsort(inverse, kind="stable")
-        bounds = np.searchsorted(inverse[order], np.arange(names.size + 1))
-        for u, name in enumerate(names):
-            lines = used[sel[order[bounds[u]: bounds[u + 1]]]]
-            tag = name.decode("ascii")
-            tag_of_line[tag] = lines
-            first_seen[tag] = int(lines[0])
-    groups = {tag: tag_of_line[tag] for tag in sorted(first_seen, key=first_seen.__getitem__)}
+    bounds, controls = _boundaries(buf)
+    tok_start, tok_end = bounds[0::2], bounds[1::2]       # tok_end exclusive
+    if tok_start.size == 0:
+        raise Fallback
+    first, line = _lines(buf, data, tok_start, tok_end)
+    if controls != line[-1] + data.count(b"\n", int(tok_start[first[-1]])):   # control bytes besides \n
+        returns = data.count(b"\r")
+        if data.translate(None, _FAST_BYTES) or (returns and returns != data.count(b"\r\n")):
+            raise Fallback        # other control characters, or a lone \r (a line end): split_text's rules
+    counts = np.diff(first, append=tok_start.size)          # tokens per line
+    position = np.full(int(line[-1]) + 1, -1, np.intp)      # of each line among those with tokens
+    position[line] = np.arange(line.size)
+    tags = _group_tags(buf, tok_start[first], tok_end[first] - tok_start[first])
+    groups = {tag: line[at] for tag, at in tags.items()}
 
     def numeric(path: str, rec: RecordKind, idx: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        fields, nid = rec.fields, rec.n_ids
-        if idx.size == 0 or (counts[idx] != fields + 1).any():
+        width, nid = rec.fields + 1, rec.n_ids
+        at = position[idx] if idx.size else idx
+        if idx.size == 0 or (counts[at] != width).any():
             raise Fallback
-        ftok = first_tok[idx]
-        # ids: digits only and short enough to be exact in float64
-        id_tok = (ftok[:, None] + np.arange(1, 1 + nid)).ravel()
-        id_len = tok_end[id_tok] - tok_start[id_tok]
-        if id_len.max() > _FAST_ID_DIGITS:
-            raise Fallback
-        pos = tok_start[id_tok][:, None] + np.arange(_FAST_ID_DIGITS)
-        inside = np.arange(_FAST_ID_DIGITS) < id_len[:, None]
-        chars = buf[np.minimum(pos, buf.size - 1)]
-        if (inside & ((chars < 48) | (chars > 57))).any():
-            raise Fallback
-        # The numeric part of each line: from the end of its tag to the end of the line. Runs
-        # of consecutive lines are one slice of the file with the tag removed at every line
-        # start (each line of a run starts with the tag, no leading blank).
-        starts = tok_start[ftok]
-        if (starts != line_start[idx]).any():
-            raise Fallback
-        tag = rec.tag.encode("ascii")
-        cut = np.flatnonzero(np.diff(idx) != 1) + 1
-        run_first = np.concatenate(([0], cut))
-        run_last = np.append(cut - 1, idx.size - 1)
-        if run_first.size > 64:   # interleaved tags: join the lines themselves
-            text_end = tok_end[ftok]
-            blob = b"\n".join([data[a:b] for a, b in zip(text_end.tolist(), line_end[idx].tolist())])
+        tokens = first[at]
+        if tokens[-1] - tokens[0] == width * (idx.size - 1):    # one run of lines: a slice, no gather
+            run = slice(int(tokens[0]), int(tokens[0]) + width * idx.size)
+            starts, ends = tok_start[run].reshape(-1, width), tok_end[run].reshape(-1, width)
         else:
-            parts = [data[tok_end[ftok[a]]: line_end[idx[b]]].replace(b"\n" + tag, b"\n")
-                     for a, b in zip(run_first.tolist(), run_last.tolist())]
-            blob = b"\n".join(parts)
-        if blob.translate(None, _NUMERIC_BYTES):
+            at_tokens = tokens[:, None] + np.arange(width)
+            starts, ends = tok_start[at_tokens], tok_end[at_tokens]
+        ids = integers(buf, starts[:, 1: 1 + nid], ends[:, 1: 1 + nid])
+        vals = decimals(buf, starts[:, 1 + nid:], ends[:, 1 + nid:])
+        if ids is None or vals is None:
             raise Fallback
-        try:
-            flat = np.fromstring(blob, dtype=np.float64, sep=" ")
-        except ValueError:
-            raise Fallback from None
-        if flat.size != idx.size * fields:
-            raise Fallback
-        block = flat.reshape(idx.size, fields)
-        ids = block[:, :nid].astype(np.int64)
-        vals = np.ascontiguousarray(block[:, nid:])
         _check_finite(path, rec, idx + 1, vals)
         return ids, vals
 

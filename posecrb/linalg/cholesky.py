@@ -192,8 +192,8 @@ def solve_tail(factor: Factor | PermutedFactor, first: int, W: np.ndarray) -> np
     block matrices whose last block is the one of interest (``posecrb.solver.problem``).
 
     The result equals ``factor(b)[first:]`` with ``b`` zero above row ``first``, bit for bit; it only
-    skips the full-size copies and layout conversions around CHOLMOD's solve (on the 2D grid of
-    100,489 poses, about a sixth of a 0.1 s solve with 3 right-hand sides).
+    skips the full-size copies and layout conversions around CHOLMOD's solve, a sizeable part of a
+    preconditioner solve of a large graph (docs/decisions/solver-preconditioners.md).
     """
     W = np.asarray(W, dtype=float)
     if isinstance(factor, PermutedFactor):

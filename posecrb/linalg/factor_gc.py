@@ -19,7 +19,7 @@ The repair: the slot is emptied. The garbage collector then breaks such cycles a
 objects, and the Factor is deallocated by reference count with its Common intact. The slot's
 address is checked against ``PyType_GetSlot`` before anything is written; on an interpreter whose
 type layout differs nothing is changed (and a scikit-sparse built with ``no_gc_clear`` has no
-slot to empty: nothing is written either). tests/test_linalg.py reproduces the corruption without
+slot to empty: nothing is written either). tests/linalg/test_cholesky.py reproduces the corruption without
 this module and checks it does not occur with it.
 """
 from __future__ import annotations

@@ -3,8 +3,8 @@
 docs/design.md#linear-algebra. The solver's certificate estimates lambda_min(Q - Lambda) as
 1 / mu - s from the largest eigenvalue mu of (Q - Lambda + s I)^{-1}, applied through a Cholesky
 factor that the certificate test already computed. ARPACK (``scipy.sparse.linalg.eigsh``) does the
-same, but importing it loads ``scipy.linalg`` and costs ~45 ms per process, as much as the whole
-certified solve of a 10^3-pose dataset; this module needs only numpy.
+same, but importing it loads ``scipy.linalg``, in every process as much as the whole certified
+solve of a 10^3-pose dataset (docs/decisions/fixed-costs.md); this module needs only numpy.
 
 Method: Lanczos with full reorthogonalisation (every new vector is orthogonalised twice against the
 whole basis, so the Ritz values cannot repeat as in plain Lanczos), convergence tested after every

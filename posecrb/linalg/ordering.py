@@ -18,18 +18,19 @@ the flops) and the rounding, never the value beyond rounding. The choices:
   ``ub`` matrix, q = d + d_r in the FIM): the partitioner sees n_p vertices instead of q n_p,
   and the separators cut whole poses. For the Laplacians of ``lb`` (one row per pose) this is
   CHOLMOD's ordering of the matrix itself.
-* ``auto``: ``auto_ordering``, measured with benchmarks/orderings.py and CHOLMOD's flop counts
-  (benchmarks/factor_candidates.py): AMD, except METIS's nested dissection of the pose graph for
+* ``auto``: ``auto_ordering``, chosen by CHOLMOD's flop counts and by timing every ordering
+  (docs/decisions/orderings.md): AMD, except METIS's nested dissection of the pose graph for
   the block matrices (FIM, ``ub``, CRLB, the solver's M_red) of 3D graphs with at least
   ``AUTO_ND_MIN_POSES`` poses and 2D graphs with at least ``AUTO_ND_MIN_POSES_2D``. AMD's fill
-  grows faster than nested dissection's on large graphs (3D grid of 21,952 poses: the FIM factor
-  669 Gflop with AMD, 387 with ``nesdis`` and 341 with ``metis`` on the pose graph, 331 with
-  CHOLMOD's nesdis of the scalar matrix, whose analysis costs 1.5 s instead of 0.2 s; 2D grid of
-  100,489 poses: 18.1 Gflop and 31.6M nonzeros with AMD, 10.5 Gflop and 24.0M with ``metis``,
-  the solver's M_red 15.9 against 10.5 Gflop), while on the 2D datasets (up to 15,115 poses) and
-  3D graphs up to a few thousand poses AMD is as good and its analysis is cheaper. The Laplacians
-  of ``lb`` always use AMD (their factors are cheap whatever the ordering; nested dissection's
-  analysis costs more than it saves).
+  grows faster than nested dissection's on large graphs (3D grid of 21,952 poses, the FIM in
+  its pose-major layout: 895 Gflop with AMD, 387 with ``nesdis`` and 341 with ``metis`` on the
+  pose graph, 373 with CHOLMOD's nesdis of the scalar matrix, whose analysis orders the
+  131,706-row matrix instead of the 21,952-node pose graph; 2D grid of 100,489 poses: 18.1 Gflop
+  and 31.6M nonzeros with AMD, 10.5 Gflop and 24.0M with ``metis``, the solver's M_red 15.9
+  against 10.5 Gflop), while on the 2D datasets (up to 15,115 poses) and 3D graphs up to a few
+  thousand poses AMD is as good and its analysis is cheaper. The Laplacians of ``lb`` always use
+  AMD (their factors are cheap whatever the ordering; nested dissection's analysis costs more
+  than it saves).
 """
 from __future__ import annotations
 
@@ -46,14 +47,14 @@ from .cholesky import Factor, PermutedFactor, SymbolicCholesky
 
 POSE_LEVEL = ("metis", "nesdis")
 MATRICES = ("lb", "ub", "fim", "crlb", "solver")
-# 3D graphs from this many poses on get nested dissection under ``auto`` (benchmarks/orderings.py
-# --options): on the SE-Sync 3D datasets (1,661-5,750 poses) and a 3D grid of 5,832 poses AMD's
-# factorization is as fast or faster once nested dissection's extra ordering work is counted
-# (nested dissection 0.94-1.3x of AMD's time), on 3D grids of 10,648 and 21,952 poses nested
-# dissection takes 0.74x and 0.65x of it.
+# 3D graphs from this many poses on get nested dissection under ``auto``: on the SE-Sync 3D
+# datasets (1,661-5,750 poses) and a 3D grid of 5,832 poses AMD's factorization is as fast or
+# faster once nested dissection's extra ordering work is counted, on 3D grids of 10,648 and
+# 21,952 poses nested dissection is clearly faster (docs/decisions/orderings.md).
 AUTO_ND_MIN_POSES = 10000
-# 2D graphs from this many poses on (2D grids: 30,276 poses M_red 2.0 Gflop AMD against 1.7
-# metis, 100,489 poses 15.9 against 10.5; the 2D datasets, up to 15,115 poses, gain nothing).
+# 2D graphs from this many poses on (2D grids: 30,276 poses M_red 2.0 Gflop AMD against 1.5
+# metis, 100,489 poses 15.9 against 10.5; the 2D datasets, up to 15,115 poses, gain nothing;
+# docs/decisions/orderings.md).
 AUTO_ND_MIN_POSES_2D = 50000
 # The nested dissection ``auto`` uses: METIS on the pose graph (fewest flops on the 3D grids, the
 # same as nesdis on 2D grids and on M_red; both are deterministic).
@@ -98,8 +99,7 @@ def threaded_matrix(dim: int, poses: int, matrix: str) -> bool:
     cores no other process keeps busy, posecrb.linalg.threads): the block matrices of the graphs
     ``auto_ordering`` takes as large (3D from ``AUTO_ND_MIN_POSES`` poses, 2D from
     ``AUTO_ND_MIN_POSES_2D``), whose nested-dissection separators are dense blocks of a thousand
-    rows and more (2D grid of 100,489 poses, M_red: 1.55-1.65 s with one thread, 1.1-1.35 s with
-    two; its solve 35.4-37.5 s against 32.5-33.0 s)."""
+    rows and more, where a second thread pays (docs/decisions/blas-threads.md)."""
     if matrix not in MATRICES:
         raise UsageError(f"matrix must be one of {MATRICES}, got {matrix!r}")
     return matrix != "lb" and poses >= (AUTO_ND_MIN_POSES if dim == 3 else AUTO_ND_MIN_POSES_2D)
@@ -238,9 +238,9 @@ def solver_symbolic(pattern: sp.spmatrix, dim: int, n: int, mode: str = "auto",
     initialisation's connection Laplacian); ``pose_order``: the pose graph's ordering, when the
     caller computed it once for several matrices (``ordered_symbolic``).
     Under ``auto``'s rule for large graphs (``auto_ordering``): nested dissection of the
-    pose graph expanded to each pose's rows (benchmarks/orderings.py: M_red's factorization about
-    0.75x of CHOLMOD's default choice on a 3D grid of 21,952 poses; 10.5 instead of 15.9 Gflop
-    and 23.8M instead of 29.8M nonzeros on a 2D grid of 100,489 poses); otherwise CHOLMOD's
+    pose graph expanded to each pose's rows (docs/decisions/orderings.md: M_red's factorization
+    faster than with CHOLMOD's default choice on a 3D grid of 21,952 poses; 10.5 instead of 15.9
+    Gflop and 24.0M instead of 29.8M nonzeros on a 2D grid of 100,489 poses); otherwise CHOLMOD's
     default ordering, as before. ``mode``: CHOLMOD's factorization kind
     (auto | simplicial | supernodal; the solver picks it, posecrb.solver.problem)."""
 

@@ -96,8 +96,9 @@ def _backward(indptr, indices, lval, y):  # pragma: no cover - compiled
 def _backward1(indptr, indices, lval, y, lo, hi):  # pragma: no cover - compiled
     """``_backward`` for one column (n,), columns ``hi - 1`` down to ``lo`` (0 and n: all of them).
     Kept apart: this pass over the whole factor is the scalar greedy's hottest loop, and the
-    r-column kernel with r = 1 made ``select --objective tree`` on city10000 about 1.8x slower
-    (measured; the forward pass, along the reach only, showed no difference and is shared). A range
+    r-column kernel with r = 1 made ``select --objective tree`` on city10000 clearly slower
+    (docs/decisions/selection-at-scale.md; the forward pass, along the reach only, showed no
+    difference and is shared). A range
     of columns reads ``y`` only on its own columns and their ancestors', so once the columns above
     two disjoint subtrees of the elimination tree are done, the two subtrees can run at once."""
     for j in range(hi - 1, lo - 1, -1):

@@ -81,7 +81,7 @@ def supernode_bounds(indptr: np.ndarray, indices: np.ndarray) -> np.ndarray:
 # symmetric product), one call each; narrower ones run inside one compiled loop. On nested-
 # dissection orderings of pose graphs the wide ones are the few hundred separators near the root
 # that carry nearly all the flops (3D grid of 21,952 poses: 344 of 11,239 supernodes, 99% of the
-# Z_SS Y products), so the Python loop over them costs milliseconds.
+# Z_SS Y products), so the Python loop over them is small next to their BLAS calls.
 _WIDE = 32
 
 # Wide supernodes whose inversion takes at least this many flops (``_supernode_flops``) run
@@ -95,12 +95,12 @@ _THREADED_FLOPS = 1e9
 # ``_ENTRIES_PER_STEP`` entries of the ``Z_SS`` blocks it gathers by fancy indexing. Both are counts
 # of interpreter work, so the threshold is a ratio of costs on one interpreter, not seconds on one
 # machine: on the shared datasets' FIMs a step cost as much CPU as 400-450 gathered entries, and a
-# fresh process's numba import and first compiled call as much as 7,600-9,500 steps (`python
-# benchmarks/selinv_paths.py`, docs/decisions/logdet-accuracy-tiers.md). The flops are the same on
-# both paths (LAPACK/BLAS for every wide supernode) and do not enter. A caller that inverts many
-# factors in one process (a selection's iterations) shares numba's one-time cost and takes the
-# compiled kernels (``repeated``): with the block kernels, `select --method relax` on intel took
-# 1.63 s in-process instead of 0.20 s (docs/performance.md).
+# fresh process's numba import and first compiled call as much as 7,600-9,500 steps
+# (docs/decisions/logdet-accuracy-tiers.md). The flops are the same on both paths (LAPACK/BLAS for
+# every wide supernode) and do not enter. A caller that inverts many factors in one process (a
+# selection's iterations) shares numba's one-time cost and takes the compiled kernels
+# (``repeated``): with the block kernels at every iteration, `select --method relax` on intel took
+# several times longer in-process (docs/decisions/selected-inversion-kernels.md).
 _ENTRIES_PER_STEP = 400
 _BLOCK_MAX_STEPS = 8_000.0
 
@@ -217,10 +217,9 @@ def _takahashi_inplace(indptr: np.ndarray, indices: np.ndarray, val: np.ndarray,
     threaded = set(big.tolist()) if threads > 1 else set()
     # Otherwise one BLAS thread (numpy's/scipy's own OpenBLAS): the calls are many and mostly small, where
     # OpenBLAS threads only add synchronisation, and its threads collapse when another process
-    # holds a core (2D grid of 10^4 poses on a loaded 2-core machine: the wide supernodes' calls
-    # take 0.66 s with two threads, 0.03 s with one; 2D grid of 30,276 poses, load average 7: the
-    # whole inversion 4.0-15.1 s with two threads, 0.87-0.94 s with one). The factorization before
-    # it (CHOLMOD's BLAS) keeps every core.
+    # holds a core (on a loaded 2-core machine, 2D grids' inversions took an order of magnitude
+    # longer with two threads than with one: docs/decisions/blas-threads.md). The factorization
+    # before it runs CHOLMOD's BLAS under its own policy (posecrb.linalg.threads).
     blas = python_blas()
     with blas.limit(limits=1):
         for sn in [*wide[::-1].tolist(), -1]:

@@ -1,4 +1,4 @@
-"""Which BLAS runs with how many threads (docs/performance.md, "Threads").
+"""Which BLAS runs with how many threads (docs/decisions/blas-threads.md).
 
 Two BLAS libraries are usually loaded: the one CHOLMOD links (the system's ``libblas.so.3``,
 the threaded OpenBLAS that ``make install`` installs), which does the supernodal factorizations'
@@ -14,9 +14,9 @@ directory), which does posecrb's own small dense products.
   (``load_aware_threads``): OpenBLAS's threads spin-wait for each other, so one sharing its core
   stalls the others, and two threads next to one busy process were slower than one.
 * Every other factorization runs CHOLMOD's BLAS at one thread: small supernodes, where threads
-  only add synchronisation and collapse when another process holds a core (FIM of the 2D grid of
-  30,276 poses at load average 7: 0.64-1.01 s with one thread, 2.5-3.8 s with two;
-  benchmarks/threads.py).
+  only add synchronisation and collapse when another process holds a core: on a loaded machine
+  the FIM log-det of a mid-size 2D grid took several times longer with two threads than with one
+  (docs/decisions/blas-threads.md).
 * The solver runs every BLAS at one thread (many small products and triangular solves), except
   CHOLMOD's in the M_red factorizations of those large graphs (``solver_threads``,
   ``factorization_threads``) and in the triangular solves with those factors of 3D graphs
@@ -64,8 +64,9 @@ _FACTOR_THREADS: contextvars.ContextVar[int | None] = contextvars.ContextVar("fa
 # The usable count of ``solve_threads`` and when it was taken (time.monotonic()): one list per
 # ``solver_threads`` block, so a solve re-counts the busy cores at most every SOLVE_LOAD_SECONDS.
 _SOLVE_LOAD: contextvars.ContextVar[list[float] | None] = contextvars.ContextVar("solve_load", default=None)
-# A preconditioner solve of a large graph takes about 0.1 s, a count of the busy cores a few
-# milliseconds (busy_cores' three samples): once a second costs under 1% of the solves.
+# A count of the busy cores (busy_cores' three samples) is small next to a preconditioner solve
+# of a large graph, the only solves that take threads: re-counting at most once a second keeps
+# its share of the solves' time under a percent (docs/decisions/blas-threads.md).
 SOLVE_LOAD_SECONDS = 1.0
 
 # Modules that load a BLAS or OpenMP library: the controller is rebuilt when one more is imported.
@@ -73,8 +74,9 @@ _LOADERS = ("numpy", "scipy.linalg", "sksparse.cholmod", "numba")
 
 
 def controller() -> Any:
-    """threadpoolctl's controller of the libraries loaded now; scanning them costs ~1.5 ms, a
-    tenth of a small problem's solve, so it is rebuilt only after a module that loads a BLAS."""
+    """threadpoolctl's controller of the libraries loaded now; scanning them costs a noticeable
+    part of a small problem's solve, so it is rebuilt only after a module that loads a BLAS
+    (docs/decisions/fixed-costs.md)."""
     return _controller(tuple(m in sys.modules for m in _LOADERS))
 
 
@@ -161,10 +163,9 @@ def busy_cores(samples: int = 3, interval: float = 0.002) -> int:
 def usable_threads(threads: int, cores: int, busy: int) -> int:
     """Threads for a factorization that ``threads`` would run: at most the cores not kept busy by
     other processes, at least 1. OpenBLAS's threads wait for each other by spinning, so one that
-    shares its core with another process stalls every other thread: on the 2-core machine of
-    docs/performance.md, the 3D 21,952-pose grid's M_red factorization takes 2.2-2.5 s with two
-    threads and 3.7-3.9 s with one when quiet, but 6.2-6.8 s with two against 3.5-3.6 s with one
-    next to one busy process (benchmarks/threads.py --what load)."""
+    shares its core with another process stalls every other thread: on 2 cores, a large 3D
+    factorization that two threads make faster on a quiet machine became slower with two than
+    with one next to one busy process (docs/decisions/blas-threads.md)."""
     return max(1, min(threads, cores - busy))
 
 
@@ -229,10 +230,9 @@ def cholmod_openmp_serial() -> Iterator[None]:
     CHOLMOD 3's supernodal factorization opens an OpenMP team of a compile-time size (Debian's
     SuiteSparse 5: ``num_threads(4)``, which ``OMP_NUM_THREADS`` and threadpoolctl cannot lower)
     for loops over the rows of large supernodes. On a 2-core machine those 4 threads wake and
-    sleep at every such supernode: the solve of the 3D grid of 21,952 poses made 150,000 voluntary
-    context switches, the M_red factorization of the 2D grid of 100,489 poses (CHOLMOD's BLAS on
-    two threads) took 1.6-1.8 s against 0.9 s without the team, that of the grid of 30,276 poses
-    (one thread) 0.34-0.41 s against 0.23-0.32 s (docs/performance.md, "CHOLMOD's OpenMP team").
+    sleep at every such supernode: a solve of a large grid made over a hundred thousand voluntary
+    context switches, and the team made the M_red factorizations of large 2D grids slower, both
+    with CHOLMOD's BLAS on two threads and on one (docs/decisions/blas-threads.md).
     Small factorizations never open the team. ``max-active-levels = 0`` makes every parallel
     region inactive, i.e. run by the thread that meets it; the previous value is restored on exit.
     In GCC's libgomp the setting is process-wide, so another thread's OpenMP regions run on one

@@ -9,7 +9,7 @@ from __future__ import annotations
 import os
 from collections.abc import Iterable, Sequence
 from pathlib import Path
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Any
 
 import matplotlib
 
@@ -24,6 +24,7 @@ from ..evaluation.published import paper_row
 from .figures import FIGURE_EXTENSIONS, save_figure
 
 if TYPE_CHECKING:
+    from matplotlib.axes import Axes
 
     from ..experiments.crlb_sweep import CrlbSweepResult
     from ..experiments.octagon import OctagonResult
@@ -33,6 +34,9 @@ if TYPE_CHECKING:
 
 DPI = 100
 FIGURE_FORMATS = FIGURE_EXTENSIONS
+# The legends of the wide figures (tables, sparsify), which the documentation shows scaled down to
+# its column: at this size they stay readable there.
+LEGEND_FONTSIZE = 10
 
 
 def check_figure_path(path: str | os.PathLike) -> Path:
@@ -129,6 +133,27 @@ _TIMES = (  # (our column, paper key, label, marker, colour)
 )
 
 
+def _legend_row(fig: Any, cell: Any) -> Axes:
+    """An axes with no axis of its own in the grid ``cell`` under a figure's panels, for
+    ``_legends_below``: the figure's tight layout (``save_figure``) keeps it clear of the panels'
+    tick labels, and it is as wide as the panels together."""
+    row = fig.add_subplot(cell)
+    row.axis("off")
+    return row
+
+
+def _legends_below(row: Axes, legends: Sequence[tuple[list, list, dict]]) -> None:
+    """Legends in ``row`` (``_legend_row``), where they hide no point and are as wide as the figure.
+    ``legends``: (handles, labels, placement) each, the placement's ``bbox_to_anchor`` in ``row``'s
+    axes coordinates."""
+    from matplotlib.legend import Legend  # noqa: PLC0415 -- with matplotlib, already loaded
+
+    for handles, labels, where in legends:
+        legend = Legend(row, handles, labels, fontsize=LEGEND_FONTSIZE, title_fontsize=LEGEND_FONTSIZE,
+                        frameon=False, **where)
+        row.add_artist(legend).set_clip_on(False)    # may overhang the row: not clipped, and in the layout
+
+
 def _plottable(rows: Iterable[dict]) -> list[dict]:
     return [r for r in rows if all(isinstance(r.get(k), (int, float)) for k in ("lb", "ub", "fim_logdet"))
             and r["lb"] > 0]
@@ -153,17 +178,19 @@ def plot_tables(rows: Sequence[dict], path: str | os.PathLike, note: str | None 
     gap_fim = (np.array([r["fim_logdet"] for r in data], dtype=float) - lb) / lb
     gap_ub = (np.array([r["ub"] for r in data], dtype=float) - lb) / lb
 
-    fig, (top, bottom) = plt.subplots(2, 1, sharex=True, figsize=(max(8.5, 0.42 * len(data) + 5.0), 6.6),
-                                      gridspec_kw={"height_ratios": [1, 1]})
+    fig = plt.figure(figsize=(max(8.5, 0.42 * len(data) + 5.0), 8.0))
+    # the two panels close together in one cell, the legends in a row of their own below
+    outer = fig.add_gridspec(2, 1, height_ratios=[1, 0.14])
+    panels = outer[0].subgridspec(2, 1, hspace=0.06)
+    top = fig.add_subplot(panels[0])
+    bottom = fig.add_subplot(panels[1], sharex=top)
+    top.tick_params(labelbottom=False)
     top.vlines(x, np.minimum(gap_fim, gap_ub), np.maximum(gap_fim, gap_ub), color="0.75", lw=1.5, zorder=1)
     top.scatter(x, gap_fim, marker="o", color=_COLOURS["fim"], zorder=3,
                 label="FIM log-det\n(certified optimum)")
     top.scatter(x, gap_ub, marker="^", color=_COLOURS["ub"], zorder=3, label="upper bound ub (eq. 75)")
     top.set_yscale("log")
     top.set_ylabel("(x − lb) / lb\n(log; lb, eq. 75, is the floor)")
-    # Legends outside the axes: they never hide a point.
-    top.legend(fontsize=8, loc="upper left", bbox_to_anchor=(1.01, 1.0), title="above the lower bound lb",
-               title_fontsize=8, frameon=False)
 
     shown = 0
     for col, key, label, marker, colour in _TIMES:
@@ -181,9 +208,14 @@ def plot_tables(rows: Sequence[dict], path: str | os.PathLike, note: str | None 
     bottom.axhline(1.0, color="k", lw=0.8)
     bottom.set_yscale("log")
     bottom.set_ylabel("our time / paper's time\n(log; below 1: faster)")
+    # the legends in a row below the panels, where they hide no point
+    legends: list[tuple[list, list, dict[str, Any]]] = [
+        (*top.get_legend_handles_labels(),
+         {"bbox_to_anchor": (0, 1), "loc": "upper left", "title": "above the lower bound lb"})]
     if shown:
-        bottom.legend(fontsize=8, loc="upper left", bbox_to_anchor=(1.01, 1.0), frameon=False,
-                      title="time of ... vs the paper's\n(its machine, not this one)", title_fontsize=8)
+        legends.append((*bottom.get_legend_handles_labels(),
+                        {"bbox_to_anchor": (1, 1), "loc": "upper right", "ncols": 2,
+                         "title": "time of ... vs the paper's (its machine, not this one)"}))
     else:
         bottom.text(0.5, 0.5, "no dataset of the paper among these rows", ha="center", va="center",
                     transform=bottom.transAxes, color="0.4")
@@ -207,6 +239,7 @@ def plot_tables(rows: Sequence[dict], path: str | os.PathLike, note: str | None 
     footer = "* not in the paper" if any(paper_row(r["dataset"]) is None for r in data) else ""
     if note:
         footer = f"{note}   {footer}".strip()
+    _legends_below(_legend_row(fig, outer[1]), legends)
     if footer:
         fig.text(0.01, 0.005, footer, fontsize=7, color="0.35", ha="left", va="bottom")
     return save_figure(fig, path)
@@ -274,7 +307,9 @@ def plot_sparsify(result: SparsifyResult, path: str | os.PathLike) -> str:
     """Share of the full graph's gain in the objective (``(f(S) - f(F)) / (f(all) - f(F))``),
     lambda_2 and ATE against the budget, one line per method; written atomically through the output
     layer (``save_figure``: format by the extension, .png, .svg or .pdf)."""
-    fig, axes = plt.subplots(1, 3, figsize=(13.0, 3.8))
+    fig = plt.figure(figsize=(13.0, 4.4))
+    grid = fig.add_gridspec(2, 3, height_ratios=[1, 0.06])
+    axes = [fig.add_subplot(grid[0, k]) for k in range(3)]
     names = {"tree": "tree bound (eq. 75)", "fim": "logdet FIM", "fiedler": "$\\lambda_2$"}
     key = "fim_logdet" if result.objective == "fim" else result.objective
     top, bottom = result.reference[key], result.reference["fixed_only"][key]
@@ -291,6 +326,7 @@ def plot_sparsify(result: SparsifyResult, path: str | os.PathLike) -> str:
     for ax in axes:
         ax.set_xlabel("% of loop closures kept")
         ax.grid(True, alpha=0.3)
-    axes[0].legend(fontsize=8)
+    _legends_below(_legend_row(fig, grid[1, :]), [(*axes[0].get_legend_handles_labels(),
+                   {"bbox_to_anchor": (0.5, 1), "loc": "upper center", "ncols": len(result.methods)})])
     fig.suptitle(f"{result.dataset}: {result.candidates} candidate loop closures, {result.fixed} fixed edges")
     return os.fspath(save_figure(fig, path))

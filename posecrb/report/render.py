@@ -96,8 +96,8 @@ def to_json(rows: Sequence[dict[str, Any]] | dict[str, Any], single: bool = Fals
 def to_json_long(obj: dict[str, Any], long_keys: Sequence[str]) -> str:
     """``obj`` (plain JSON values) as ``to_json`` prints it, except that the lists under
     ``long_keys`` hold one element per line, each written compactly: the same JSON value, and
-    json's C encoder for the bulk (an indented dump of 10^4 rows runs json's pure-Python encoder,
-    about half a second)."""
+    json's C encoder for the bulk (an indented dump runs json's pure-Python encoder, several times
+    slower on a timeline's 10^4 rows: docs/decisions/fixed-costs.md)."""
     encode = json.JSONEncoder(allow_nan=False).encode      # one encoder for every element
     parts = []
     for key, value in obj.items():

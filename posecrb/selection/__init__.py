@@ -10,6 +10,8 @@ those of docs/design.md#glossary-selection):
 * ``objectives``: ``tree`` (eq. 75), ``fim`` (logdet of the anchored FIM) and ``fiedler``
   (lambda_2, MAC's objective) as functions of edge weights;
 * ``greedy``: the incremental and lazy greedy (log-dets), MAC's GreedyEig (fiedler);
+* ``rounds``: the round greedy (log-dets, large budgets on large graphs): exact gains once per round,
+  local corrections within it;
 * ``relaxation``: Frank-Wolfe on the concave relaxation, top-K and Madow rounding, the swap polish;
 * ``certificate``: the ratio certificate (upper bounds, certified ratio);
 * ``select``: the driver ``select_edges``; ``result``: ``SelectResult`` and the pruned graph.

@@ -16,6 +16,24 @@ from ..linalg.pathchol import _backward1, _forward, _rank_one_path, _reach, njit
 
 
 @njit(cache=True, nogil=True)
+def sandwich_subtract(h, c, inv, tmp):  # pragma: no cover - compiled
+    """``h <- h - c inv c^T`` for r x r matrices (``tmp`` r x r work): one Woodbury term."""
+    r = h.shape[0]
+    for a in range(r):
+        for b in range(r):
+            v = 0.0
+            for t in range(r):
+                v += c[a, t] * inv[t, b]
+            tmp[a, b] = v
+    for a in range(r):
+        for b in range(r):
+            v = 0.0
+            for t in range(r):
+                v += tmp[a, t] * c[b, t]
+            h[a, b] -= v
+
+
+@njit(cache=True, nogil=True)
 def woodbury_downdate(h, u, rows, valid, alive, z, inv):  # pragma: no cover - compiled
     """``H_f <- H_f - C_f inv C_f^T`` with ``C_f = U_f^T Z[rows_f]`` for every alive f.
 
@@ -37,18 +55,7 @@ def woodbury_downdate(h, u, rows, valid, alive, z, inv):  # pragma: no cover - c
                     if ua != 0.0:
                         for b in range(r):
                             cf[a, b] += ua * z[row, b]
-        for a in range(r):
-            for b in range(r):
-                v = 0.0
-                for t in range(r):
-                    v += cf[a, t] * inv[t, b]
-                tmp[a, b] = v
-        for a in range(r):
-            for b in range(r):
-                v = 0.0
-                for t in range(r):
-                    v += tmp[a, t] * cf[b, t]
-                h[f, a, b] -= v
+        sandwich_subtract(h[f], cf, inv, tmp)
 
 
 @njit(cache=True, nogil=True)

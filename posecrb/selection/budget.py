@@ -106,7 +106,8 @@ def _connecting_edges(graph: PoseGraph, fixed_mask: np.ndarray, weight: np.ndarr
     nc, labels = connected_components(graph.n, graph.src[fixed_mask], graph.dst[fixed_mask])
     if nc == 1:
         return np.zeros(0, dtype=np.int64)
-    # scipy.sparse.csgraph loads scipy.sparse.linalg and scipy.linalg (~0.1 s): only a broken chain pays
+    # scipy.sparse.csgraph loads scipy.sparse.linalg and scipy.linalg, a large part of a small
+    # command's start-up (docs/decisions/fixed-costs.md): only a broken chain pays
     from scipy.sparse.csgraph import minimum_spanning_tree  # noqa: PLC0415 -- lazy: start-up time
 
     cand = np.flatnonzero(~fixed_mask)

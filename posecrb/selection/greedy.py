@@ -26,17 +26,19 @@ import numpy as np
 
 from ..core.errors import NumericalError, UsageError
 from .objectives import FiedlerObjective, LogDetObjective, logdet_eye_plus
+from .rounds import ROUNDS_FROM_POSES, ROUNDS_FROM_STEPS
 
 if TYPE_CHECKING:
     from ..linalg.pathchol import PathFactor
 
 GAINS = ("auto", "exact", "jl")
-STRATEGIES = ("auto", "incremental", "lazy")
+STRATEGIES = ("auto", "incremental", "lazy", "rounds")
 ENGINES = ("auto", "path", "cholmod")
 # ``auto`` takes the CHOLMOD engine, which loads no numba, when the whole greedy is a few thousand
 # whole-factor solves of small blocks at most: at most this many entries of M^{-1} U touched over
 # the first gains and the steps (block rows x columns x (candidates + steps)). Above it the path
-# engine's compiled kernels pay for numba's import and first call (0.7-0.9 s in a fresh process).
+# engine's compiled kernels pay for numba's import and first call in a fresh process
+# (docs/decisions/selection-at-scale.md).
 CHOLMOD_ENGINE_ENTRIES = 5_000_000
 # Greedy refreshes every gain by one selected inversion when one step needs more re-evaluations
 # than max(REFRESH_AFTER, remaining candidates / REFRESH_FRACTION) (deterministic: a count, not a
@@ -52,15 +54,16 @@ JL_FROM_CANDIDATES = 50_000
 JL_PROJECTIONS = 64
 # The one-Laplacian incremental greedy runs each step on two threads (when two cores are free) from
 # this many entries of its factor on, if the elimination tree splits into two subtrees of at least
-# SPLIT_SHARE of them each (nested dissection). Below, one step takes too little for the threads'
-# hand-offs (tens of microseconds) and runs fused in one compiled call.
+# SPLIT_SHARE of them each (nested dissection). Below, one step is too short to pay for the
+# threads' hand-offs and runs fused in one compiled call (docs/decisions/selection-at-scale.md).
 THREADED_FACTOR_ENTRIES = 500_000
 SPLIT_SHARE = 0.25
 
 
 def _compiled() -> tuple[ModuleType, ModuleType]:
     """``posecrb.linalg.pathchol`` and ``posecrb.selection._kernels``, imported on first use: they
-    load numba (0.2-0.5 s of start-up), which the fiedler objective never needs."""
+    load numba, a large part of a small command's start-up (docs/decisions/fixed-costs.md), which
+    the fiedler objective never needs."""
     from ..linalg import pathchol  # noqa: PLC0415 -- lazy: start-up time (numba)
     from . import _kernels  # noqa: PLC0415 -- lazy: start-up time (numba)
 
@@ -311,8 +314,8 @@ def _steps_two_threads(kernels: ModuleType, pool: ThreadPoolExecutor, pf: PathFa
     of the work vector once the trunk is done) and the two halves of the candidates' downdate.
     Every entry is computed by the same operations in the same order as in the fused kernel, so
     the choices and gains are the same bit for bit. Python runs once per step here, a few compiled
-    calls that each take milliseconds on the factors this is used for (THREADED_FACTOR_ENTRIES);
-    the kernels release the GIL."""
+    calls that each pass over the whole factor, long next to Python's own work on the factors this
+    is used for (THREADED_FACTOR_ENTRIES); the kernels release the GIL."""
     from ..linalg.pathchol import _backward1  # noqa: PLC0415 -- lazy, like the kernels
 
     top, mid = split
@@ -339,18 +342,22 @@ def _steps_two_threads(kernels: ModuleType, pool: ThreadPoolExecutor, pf: PathFa
     return chosen, gains
 
 
-def pick_strategy(strategy: str, gains: str) -> str:
-    """The greedy strategy ``auto`` stands for: the lazy greedy when its queue is to be seeded by
-    random projections (``gains="jl"``), otherwise the incremental greedy, whose step costs one solve with
+def pick_strategy(strategy: str, gains: str, k: int, poses: int) -> str:
+    """The greedy strategy ``auto`` stands for on K steps over a graph of ``poses`` poses: the lazy
+    greedy when its queue is to be seeded by random projections (``gains="jl"``); the round greedy
+    (``posecrb.selection.rounds``) above ROUNDS_FROM_STEPS steps on ROUNDS_FROM_POSES poses or more;
+    otherwise the incremental greedy, whose step costs one solve with
     the whole factor and one pass over the candidates, whatever the graph; the lazy greedy's costs
     as many path solves as stale gains it re-evaluates, 30-90 per step on the shared datasets, whose
     loop closures cluster, and about 200 on a regular grid, whose gains are nearly all equal: it was
-    the slower of the two on every graph measured (docs/performance.md, "Selection at scale")."""
+    the slower of the two on every graph measured (docs/decisions/selection-at-scale.md)."""
     if strategy not in STRATEGIES:
         raise UsageError(f"unknown greedy strategy {strategy!r}; choose from {', '.join(STRATEGIES)}")
     if strategy != "auto":
         return strategy
-    return "lazy" if gains == "jl" else "incremental"
+    if gains == "jl":
+        return "lazy"
+    return "rounds" if k > ROUNDS_FROM_STEPS and poses >= ROUNDS_FROM_POSES else "incremental"
 
 
 def lazy_greedy(obj: LogDetObjective, x: np.ndarray, cand: np.ndarray, k: int, gains: str,

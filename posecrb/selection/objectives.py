@@ -53,8 +53,9 @@ _EIG_TOL = 1e-10
 _EIG_RESTARTS = 250
 # H_e of many edges by whole-factor solves (``LogDetBlock.h_solve``) instead of a selected inversion
 # when the block's rows times the edges' columns stay within this many entries: a solve with those
-# right-hand sides then costs milliseconds, and selected inversion's compiled kernels would load
-# numba (0.7-0.9 s in a fresh process, posecrb.linalg.selinv). Solved in batches of this many entries.
+# right-hand sides then costs less than loading numba in a fresh process, which the selected
+# inversion's compiled kernels would (posecrb.linalg.selinv, docs/decisions/selection-at-scale.md).
+# Solved in batches of this many entries.
 H_SOLVE_ENTRIES = 4_000_000
 
 
@@ -199,8 +200,13 @@ class LogDetObjective:
 
     kind: Literal["logdet"] = "logdet"
 
-    def __init__(self, name: str, blocks: list[LogDetBlock], m: int):
+    def __init__(self, name: str, blocks: list[LogDetBlock], m: int, src: np.ndarray | None = None,
+                 dst: np.ndarray | None = None, n: int | None = None):
         self.name, self.blocks, self.m = name, blocks, m
+        # the edges' end poses (indices) and the pose count: the round greedy's local model walks the graph
+        self.src = None if src is None else np.asarray(src, dtype=np.int64)
+        self.dst = None if dst is None else np.asarray(dst, dtype=np.int64)
+        self.n = n
 
     def evaluate(self, x: np.ndarray) -> ObjectiveState:
         facs = [b.factor(x) for b in self.blocks]
@@ -257,7 +263,7 @@ def tree_objective(graph: PoseGraph, anchor: int = 0, rotation_weight: str = "eq
     else:
         blocks = [block("reduced translation Laplacian L_tau", tau, d),
                   block("reduced rotation Laplacian L_w", w, dr)]
-    return LogDetObjective("tree", blocks, graph.m)
+    return LogDetObjective("tree", blocks, graph.m, graph.src, graph.dst, graph.n)
 
 
 def edge_information_factors(graph: PoseGraph, rot: np.ndarray, trans: np.ndarray, anchor: int = 0,
@@ -305,7 +311,7 @@ def fim_objective(graph: PoseGraph, rot: np.ndarray, trans: np.ndarray, anchor: 
     """``logdet F`` of the anchored FIM at the estimate ``(rot, trans)`` (eq. 42 / 64, frame-consistent)."""
     rows, valid, u = edge_information_factors(graph, rot, trans, anchor, variant)
     return LogDetObjective("fim", [LogDetBlock("anchored FIM", (graph.n - 1) * graph.q, 1.0, 0.0, rows, valid, u)],
-                           graph.m)
+                           graph.m, graph.src, graph.dst, graph.n)
 
 
 class FiedlerObjective:

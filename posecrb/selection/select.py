@@ -44,6 +44,7 @@ from .relaxation import (
     round_relaxation,
 )
 from .result import SelectResult, pruned_graph, selection_result
+from .rounds import round_greedy
 
 __all__ = ["METHODS", "SelectResult", "pruned_graph", "select_edges"]
 
@@ -91,7 +92,8 @@ class _Choice:
     online_bound: float | None = None      # the greedy's smallest Minoux bound (log-det objectives)
 
 
-def _check_options(objective: str, method: str, gains: str, tol: float, max_iter: int | None) -> None:
+def _check_options(objective: str, method: str, gains: str, tol: float, max_iter: int | None,
+                   rounds: int | None) -> None:
     for value, allowed, what in ((objective, OBJECTIVES, "objective"), (method, METHODS, "method"),
                                  (gains, GAINS, "gains mode")):
         if value not in allowed:
@@ -101,6 +103,8 @@ def _check_options(objective: str, method: str, gains: str, tol: float, max_iter
     if max_iter is not None and (isinstance(max_iter, bool) or not (isinstance(max_iter, numbers.Integral)
                                                                      and max_iter >= 1)):
         raise UsageError(f"max_iter must be an integer >= 1, not {max_iter!r}")
+    if rounds is not None and (isinstance(rounds, bool) or not (isinstance(rounds, numbers.Integral) and rounds >= 1)):
+        raise UsageError(f"rounds must be an integer >= 1, not {rounds!r}")
 
 
 def _prepare(graph: PoseGraph, budget: str | int | float, objective: str, fixed: str, anchor: int | None,
@@ -146,16 +150,20 @@ def _prepare(graph: PoseGraph, budget: str | int | float, objective: str, fixed:
     return problem
 
 
-def _greedy_logdet(p: _Problem, gains: str, strategy: str, engine: str, rng: np.random.Generator) -> _Choice:
+def _greedy_logdet(p: _Problem, gains: str, strategy: str, engine: str, rng: np.random.Generator,
+                   rounds: int | None) -> _Choice:
     obj = p.obj
     assert isinstance(obj, LogDetObjective)
-    strategy = pick_strategy(strategy, gains)
+    strategy = pick_strategy(strategy, gains, p.k, p.graph.n)
     mode = gains
     if mode == "auto":
         mode = "jl" if strategy == "lazy" and p.cand.size > JL_FROM_CANDIDATES else "exact"
-    elif mode == "jl" and strategy == "incremental":
-        raise UsageError("random-projection gains (--jl) only seed the lazy greedy's queue; "
-                         "the incremental greedy keeps every gain exact")
+    elif mode == "jl" and strategy != "lazy":
+        raise UsageError(f"random-projection gains (--jl) only seed the lazy greedy's queue; "
+                         f"the {strategy} greedy takes every gain exactly")
+    if strategy == "rounds":
+        order, rstats = round_greedy(obj, p.base.copy(), p.cand, p.k, rounds)
+        return _Choice(np.sort(order), order=order, stats=rstats.to_dict(), online_bound=rstats.online_bound)
     engine = pick_engine(engine, obj, p.cand.size, p.k)
     if strategy == "incremental":
         order, gstats = incremental_greedy(obj, p.base.copy(), p.cand, p.k, engine)
@@ -176,7 +184,7 @@ def _greedy_fiedler(p: _Problem) -> _Choice:
 
 
 def _relax_logdet(p: _Problem, tol: float, gains: str, strategy: str, engine: str,
-                  rng: np.random.Generator) -> _Choice:
+                  rng: np.random.Generator, rounds: int | None) -> _Choice:
     """The relaxation by projected gradient from the uniform point (its bound), rounded by top-K and
     Madow; the greedy selection competes with the roundings and is kept when it is at least as good.
 
@@ -184,7 +192,7 @@ def _relax_logdet(p: _Problem, tol: float, gains: str, strategy: str, engine: st
     fewer than 2% at 0), so its roundings lose to the greedy (by 31 and 378 in the tree objective);
     what the relaxation adds is its bound, within ``tol`` of the relaxation's optimum."""
     assert p.base_state is not None and isinstance(p.obj, LogDetObjective)
-    greedy = _greedy_logdet(p, gains, strategy, engine, rng)
+    greedy = _greedy_logdet(p, gains, strategy, engine, rng, rounds)
     relax = projected_gradient(p.obj, p.base, p.cand, p.k, np.full(p.cand.size, p.k / p.cand.size),
                                max_iter=p.max_iter, tol=tol, base_value=p.base_state.value)
     rounding, pick, values = round_relaxation(p.obj, p.base, p.cand, p.k, relax.weights, p.w_rot[p.cand], rng)
@@ -220,7 +228,7 @@ def _relax(p: _Problem, tol: float, polish: int | None, rng: np.random.Generator
 
 
 def _choose(p: _Problem, method: str, *, gains: str, strategy: str, engine: str, tol: float, polish: int | None,
-            rng: np.random.Generator) -> _Choice:
+            rng: np.random.Generator, rounds: int | None) -> _Choice:
     """The K candidates chosen by ``method`` (every candidate when K is all of them)."""
     if p.k == p.cand.size:
         return _Choice(p.cand.copy())
@@ -229,9 +237,9 @@ def _choose(p: _Problem, method: str, *, gains: str, strategy: str, engine: str,
     if method == "naive":
         return _Choice(np.sort(p.cand[heaviest(p.w_rot[p.cand], p.k, rng)]))
     if method == "greedy":
-        return _greedy_logdet(p, gains, strategy, engine, rng) if p.obj.kind == "logdet" else _greedy_fiedler(p)
+        return _greedy_logdet(p, gains, strategy, engine, rng, rounds) if p.obj.kind == "logdet" else _greedy_fiedler(p)
     if p.obj.kind == "logdet":
-        return _relax_logdet(p, tol, gains, strategy, engine, rng)
+        return _relax_logdet(p, tol, gains, strategy, engine, rng, rounds)
     return _relax(p, tol, polish, rng)
 
 
@@ -276,7 +284,7 @@ def select_edges(graph: PoseGraph, budget: str | int | float, *, objective: str 
                  estimate: str = "solve", gains: str = "auto", max_iter: int | None = None,
                  tol: float = 1e-3, fiedler_weight: str = "w", split: EdgeSplit | None = None,
                  reference: Estimate | None = None, engine: str = "auto", strategy: str = "auto",
-                 polish: int | None = None) -> SelectResult:
+                 polish: int | None = None, rounds: int | None = None) -> SelectResult:
     """Choose ``budget`` candidate edges maximising ``objective`` (``posecrb.selection``).
 
     ``budget``: K, a fraction of the candidates in (0, 1], or the text "K" / "P%". ``method``:
@@ -289,9 +297,13 @@ def select_edges(graph: PoseGraph, budget: str | int | float, *, objective: str 
     report the submodular bound.
     ``estimate`` (fim only): "solve" (certified optimum of the full graph), "vertices" or a
     file; ``reference`` an already computed ``posecrb.solver.estimate.Estimate``. ``strategy`` (log-det
-    greedy): "incremental" (every gain exact at every step), "lazy" (priority queue) or "auto"
-    (incremental; lazy with ``gains="jl"``). ``gains`` (lazy only): "exact" (selected
-    inversion), "jl" (random projections seed the queue) or "auto" (jl above 50000 candidates).
+    greedy): "incremental" (every gain exact at every step), "lazy" (priority queue), "rounds" (the
+    round greedy, ``posecrb.selection.rounds``: exact gains at the start of each of ``rounds``
+    rounds, default ROUNDS, locally corrected choices within them; the set may differ from the exact
+    greedy's, the value and bounds are exact) or "auto" (rounds above ROUNDS_FROM_STEPS steps on
+    graphs of ROUNDS_FROM_POSES poses or more, lazy with ``gains="jl"``, incremental otherwise).
+    ``gains`` (lazy only): "exact" (selected inversion), "jl" (random projections seed the queue)
+    or "auto" (jl above 50000 candidates).
     ``engine`` (log-det greedy): "path" (posecrb.linalg.pathchol's compiled kernels), "cholmod" (CHOLMOD
     update_inplace and whole-factor solves, numpy for the rest: no numba to
     load) or "auto" (cholmod on small problems, ``posecrb.selection.greedy.pick_engine``; path
@@ -302,10 +314,10 @@ def select_edges(graph: PoseGraph, budget: str | int | float, *, objective: str 
 
     BLAS runs single-threaded inside, as in the solver: the work is many small products (vectors
     of the graph's size, selected inversions of Laplacians), for which OpenBLAS's threads cost more
-    than they save and collapse when another process holds the other core (city10000, fiedler
-    relax on a loaded 2-core machine: about 3x the time with two threads). threadpoolctl scans the
-    libraries loaded at the call; a library loaded later (scipy's BLAS, on the first selected
-    inversion) is limited by that inversion's own call (posecrb.linalg.selinv). The tree objective's
+    than they save and collapse when another process holds the other core
+    (docs/decisions/blas-threads.md). threadpoolctl scans the libraries loaded at the call; a
+    library loaded later (scipy's BLAS, on the first selected inversion) is limited by that
+    inversion's own call (posecrb.linalg.selinv). The tree objective's
     incremental greedy on a large factor runs each step on two threads of its own when two cores
     are free (``posecrb.selection.greedy``), with the same choices bit for bit.
     """
@@ -313,21 +325,22 @@ def select_edges(graph: PoseGraph, budget: str | int | float, *, objective: str 
         return _select_edges(graph, budget, objective=objective, method=method, fixed=fixed, certify=certify,
                              seed=seed, anchor=anchor, estimate=estimate, gains=gains, max_iter=max_iter, tol=tol,
                              fiedler_weight=fiedler_weight, split=split, reference=reference, engine=engine,
-                             strategy=strategy, polish=polish)
+                             strategy=strategy, polish=polish, rounds=rounds)
 
 
 def _select_edges(graph: PoseGraph, budget: str | int | float, *, objective: str, method: str, fixed: str,
                   certify: bool, seed: int, anchor: int | None, estimate: str, gains: str, max_iter: int | None,
                   tol: float, fiedler_weight: str, split: EdgeSplit | None, reference: Estimate | None, engine: str,
-                  strategy: str, polish: int | None) -> SelectResult:
+                  strategy: str, polish: int | None, rounds: int | None) -> SelectResult:
     t_total = time.perf_counter()
-    _check_options(objective, method, gains, tol, max_iter)
+    _check_options(objective, method, gains, tol, max_iter, rounds)
     p = _prepare(graph, budget, objective, fixed, anchor, estimate, fiedler_weight, split, reference, max_iter)
     times = p.times
     rng = np.random.default_rng(seed)
 
     t0 = time.perf_counter()
-    choice = _choose(p, method, gains=gains, strategy=strategy, engine=engine, tol=tol, polish=polish, rng=rng)
+    choice = _choose(p, method, gains=gains, strategy=strategy, engine=engine, tol=tol, polish=polish, rng=rng,
+                     rounds=rounds)
     times["select"] = time.perf_counter() - t0
 
     t0 = time.perf_counter()

@@ -60,6 +60,9 @@ class Certificate:
     proven_shift: float | None = None
     # When not: the factor of Q - Lambda + sigma I the shift search found, and sigma
     shifted_factor: tuple[Factor, float] | None = None
+    # When certified: the factor of Q - Lambda + s I that proved it, and s (for a Newton decrement at
+    # the point, posecrb.verification.judge)
+    proven_factor: tuple[Factor, float] | None = None
 
 
 # Relative residual tolerances of the shift-invert Lanczos runs in verify() (||A x - theta x|| <=
@@ -118,7 +121,7 @@ def verify(problem: Problem, lam: np.ndarray, tol: float, rng: np.random.Generat
             mu, _, solves = _largest_inverse_eig(problem, fac, dn, rng, maxiter=50, tol=CERTIFIED_LANCZOS_TOL)
             lm = 1.0 / mu - shift if mu > 0 else -shift
             lm = max(lm, -shift)   # the factorization proved lambda_min > -shift >= -tol
-        return Certificate(True, lm, None, facs, solves, proven_shift=float(shift))
+        return Certificate(True, lm, None, facs, solves, proven_shift=float(shift), proven_factor=(fac, float(shift)))
     # Not PSD within tol: find a positive-definite shift, then shift-invert at it.
     scale = problem.gershgorin_max() + float(np.max(np.abs(lam)))
     if not math.isfinite(scale):

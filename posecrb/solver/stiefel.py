@@ -31,7 +31,8 @@ def from_components(a: np.ndarray) -> np.ndarray:
 # overhead that made them half of an HVP-heavy solve; instead they transpose once to the
 # component-major layout (d, r, n) and loop over the d^2 block entries, each a contiguous
 # length-n vector operation (several times faster than the batched matmul on large graphs, and as
-# fast as a compiled numba kernel without numba's import and cache-load cost in every process).
+# fast as a compiled numba kernel without numba's import and cache-load cost in every process:
+# docs/decisions/fixed-costs.md).
 def _sym_products(At: np.ndarray, Bt: np.ndarray) -> np.ndarray:
     """(d, d, n) entries of sym(A_i B_i^T) from component-major A, B (d, r, n)."""
     d = At.shape[0]
@@ -94,7 +95,8 @@ def _cofactors3(X: np.ndarray) -> np.ndarray:
 
 def nearest_rotations(m: np.ndarray) -> np.ndarray:
     """The rotation nearest (Frobenius) to each (n, d, d) block: ``lie.so.so_project`` up to rounding,
-    without a batched LAPACK SVD (~2 us per block, the bulk of chordal initialisation and rounding).
+    without a batched LAPACK SVD (whose per-block cost was the bulk of chordal initialisation and
+    rounding: docs/decisions/fixed-costs.md).
 
     d = 2: the maximiser of tr(R^T M) over SO(2) in closed form, the angle atan2(M_10 - M_01,
     M_00 + M_11). d = 3: the orthogonal polar factor by Newton's iteration

@@ -85,6 +85,17 @@ class VerifyResult(GraphKeys):
         and the estimate's NEES against the CRLB at the truth.
     times : dict of str to float
         Seconds per step.
+
+    Examples
+    --------
+    >>> import posecrb
+    >>> res = posecrb.verify("intel", posecrb.solve("intel"), solve=False)
+    >>> res.verdict, res.certificate["certified"], res.optimum_objective is None
+    ('certified-optimal', True, True)
+    >>> res.at_least("global-basin")
+    True
+    >>> sorted(res.statuses())
+    ['optimum']
     """
 
     anchor: int

@@ -1,1 +1,1 @@
-"""Hostile pose-graph inputs (generated; see corpus.py) for tests/test_hostile.py."""
+"""Hostile pose-graph inputs (generated; see corpus.py) for tests/hostile/test_hostile_input.py."""

@@ -20,8 +20,8 @@ from posecrb.core.errors import UsageError
 from posecrb.core.result import Result
 from posecrb.io import write_g2o
 
+from ..helpers import PUBLIC_RESULT_TYPES as RESULT_TYPES
 from ..helpers import random_pose_graph
-from .test_protocol import RESULT_TYPES, results  # noqa: F401 -- the fixture of one result per type
 
 DATA = Path(__file__).resolve().parents[1] / "data" / "cli_json"
 HUGE = 10 ** 5000          # Python refuses to print it: 'Exceeds the limit (4300 digits)'
@@ -115,7 +115,7 @@ def test_hostile_arguments_give_posecrb_errors_and_the_command_lines_refusals(na
 
 
 @pytest.mark.parametrize("name", RESULT_TYPES)
-def test_hostile_from_dict_payloads_are_argument_errors(results, name):  # noqa: F811 -- the fixture
+def test_hostile_from_dict_payloads_are_argument_errors(results, name):
     """Each key dropped, each value replaced by one of another type, statuses tampered with, keys
     added: an ArgumentError, or (a value the type admits) a result that gives the dict back."""
     cls = type(results[name])
@@ -140,7 +140,7 @@ def test_hostile_from_dict_payloads_are_argument_errors(results, name):  # noqa:
     assert accepted < len(payloads) / 2
 
 
-def test_wrongly_typed_values_are_not_accepted_silently(results):  # noqa: F811 -- the fixture
+def test_wrongly_typed_values_are_not_accepted_silently(results):
     """`lb="zzz"` was accepted by BoundsResult.from_dict, a tampered status raised InternalError."""
     d = results["BoundsResult"].to_dict()
     for bad in ({**d, "lb": "zzz"}, {**d, "poses": 3.5}, {**d, "ordering": "amd"}, {**d, "times": {"lb": "x"}},
@@ -158,7 +158,7 @@ def _npz(**arrays) -> bytes:
 
 
 @pytest.mark.parametrize("name", RESULT_TYPES)
-def test_hostile_load_payloads_are_parse_errors(results, name, tmp_path):  # noqa: F811 -- the fixture
+def test_hostile_load_payloads_are_parse_errors(results, name, tmp_path):
     cls = type(results[name])
     good = Path(results[name].save(tmp_path / "good"))
     d = results[name].to_dict()

@@ -13,17 +13,10 @@ import pytest
 import scipy.sparse as sp
 
 import posecrb
-from posecrb.core.result import Result
+
+from ..helpers import PUBLIC_RESULT_TYPES as RESULT_TYPES
 
 DATA = Path(__file__).resolve().parents[1] / "data" / "cli_json"
-RESULT_TYPES = sorted(n for n in posecrb.__all__ if isinstance(getattr(posecrb, n), type)
-                      and issubclass(getattr(posecrb, n), Result))
-
-
-@pytest.fixture(scope="module")
-def results(public_results) -> dict[str, Result]:
-    return public_results
-
 
 def test_every_public_result_type_is_covered(results):
     assert sorted(results) == RESULT_TYPES

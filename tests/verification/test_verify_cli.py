@@ -13,8 +13,7 @@ from posecrb.cli import main
 from posecrb.io import write_g2o
 from posecrb.verification.result import VerifyResult
 
-from ..helpers import run_cli
-from .test_verify_core import ring
+from ..helpers import ring, run_cli
 
 
 @pytest.fixture(scope="module")

@@ -2,13 +2,14 @@
 from __future__ import annotations
 
 import logging
+import warnings
 from collections.abc import Callable
 from dataclasses import replace
 
 import click
 
 from ...api.select import select
-from ...core.choices import ESTIMATE_SOURCES, FIXED_RULES, METHODS, OBJECTIVES, Gains
+from ...core.choices import ESTIMATE_SOURCES, FIXED_RULES, GAINS, METHODS, OBJECTIVES, Gains
 from ...core.errors import ArgumentError, UsageError
 from ...core.status import log_statuses
 from ...report.render import print_rows
@@ -84,14 +85,16 @@ def _summary(d: dict) -> list[dict]:
               help="Relaxation iterations (default 100; fiedler: Frank-Wolfe, 20 as MAC).")
 @click.option("--tol", type=FiniteFloat(min=0, min_open=True, max=1), default=1e-3, show_default=True,
               help="Stop the relaxation when its duality gap is below TOL x (bound - base value).")
-@click.option("--lazy", is_flag=True,
-              help="Lazy greedy with a priority queue instead of the incremental greedy: the same choice "
-                   "except between exactly equal gains (regular grids with equal information have many, "
-                   "and rounding breaks them differently), a different cost profile.")
-@click.option("--jl", is_flag=True,
-              help="Seed the lazy greedy's queue with random-projection estimates of the gains (implies --lazy; "
-                   "the lazy greedy's default above 50000 candidates).")
-@click.option("--exact", is_flag=True, help="Never use random projections.")
+@click.option("--gains", type=click.Choice(GAINS), default=None,
+              help="How the log-det greedy evaluates gains: auto (the incremental greedy, every gain exact at every "
+                   "step; above 4096 steps on graphs of 20,000 poses or more the round greedy, which the JSON's "
+                   "stats.strategy names), exact (the incremental greedy whatever the size), rounds (the round "
+                   "greedy: exact gains once per round, local corrections within it), lazy (a priority queue, "
+                   "seeded by random projections above 50000 candidates), lazy-exact (never random projections), "
+                   "jl (always seeded by random projections).  [default: auto]")
+@click.option("--lazy", is_flag=True, help="Deprecated: --gains lazy.")
+@click.option("--jl", is_flag=True, help="Deprecated: --gains jl.")
+@click.option("--exact", is_flag=True, help="Deprecated: --gains exact (with --lazy: --gains lazy-exact).")
 @click.option("--estimate", default="solve", show_default=True, type=InputFile(ESTIMATE_SOURCES),
               metavar="solve|vertices|FILE",
               help="fim objective: the estimate at which the FIM is evaluated (default the certified optimum "
@@ -103,7 +106,7 @@ def _summary(d: dict) -> list[dict]:
 @anchor_option
 @data_dir_option
 @format_option()
-def command(file, budget, objective, method, fixed, certify, max_iter, tol, lazy, jl, exact, estimate, seed,
+def command(file, budget, objective, method, fixed, certify, max_iter, tol, gains, lazy, jl, exact, estimate, seed,
             out_path, anchor, data_dir, fmt):
     """Keep K of FILE's candidate edges maximising a D-optimality objective, with an upper bound
     on the best K-subset (certified ratio = (value - base) / (upper_bound - base)).
@@ -114,13 +117,14 @@ def command(file, budget, objective, method, fixed, certify, max_iter, tol, lazy
 
     if jl and exact:
         raise UsageError("--jl and --exact exclude each other")
+    how = gains_of(gains, lazy, jl, exact)
     from ...selection.budget import budget_value  # noqa: PLC0415 -- lazy: start-up time
 
     amount = _budget(budget, budget_value)
     graph, _ = load_dataset(file, data_dir)
     try:
         res = select(graph, budget=amount, objective=objective, method=method, fixed=fixed, certify=certify,
-                     max_iter=max_iter, tol=tol, gains=gains_of(lazy, jl, exact), estimate=estimate, seed=seed,
+                     max_iter=max_iter, tol=tol, gains=how, estimate=estimate, seed=seed,
                      anchor=anchor)
     except ArgumentError as exc:
         if exc.parameter == "budget":    # the budget as the user wrote it (20%, not 0.2)
@@ -153,11 +157,17 @@ def _budget(text: str, budget_value: Callable[[str], int | float]) -> int | floa
         raise ArgumentError("budget", text, exc.reason, sep=exc.sep) from None
 
 
-def gains_of(lazy: bool, jl: bool, exact: bool) -> Gains:
-    """The library's ``gains=`` of the flags ``--lazy``, ``--jl`` and ``--exact`` (``--jl`` implies
-    the lazy greedy; ``--exact`` alone is the default, which never uses random projections)."""
-    if jl:
-        return "jl"
-    if lazy:
-        return "lazy-exact" if exact else "lazy"
-    return "auto"
+def gains_of(gains: Gains | None, lazy: bool, jl: bool, exact: bool) -> Gains:
+    """The library's ``gains=``: ``--gains``, or the flags of 0.2 that it replaces (``--jl`` implies
+    the lazy greedy; ``--exact``, never random projections, now also the exact greedy on graphs where
+    ``auto`` takes the round greedy), each with a deprecation warning naming the new form."""
+    flags = [name for name, on in (("--lazy", lazy), ("--jl", jl), ("--exact", exact)) if on]
+    if gains is not None:
+        if flags:
+            raise UsageError(f"{' and '.join(flags)} and --gains exclude each other: give --gains alone")
+        return gains
+    if not flags:
+        return "auto"
+    new: Gains = "jl" if jl else ("lazy-exact" if lazy and exact else "lazy" if lazy else "exact")
+    warnings.warn(f"{' '.join(flags)} is deprecated: use --gains {new}", DeprecationWarning, stacklevel=2)
+    return new

@@ -13,7 +13,7 @@ from ...core.errors import PosecrbError
 from ...core.status import log_statuses
 from ...report.render import print_rows
 from ..options import POSE_ID, FiniteFloat, data_dir_option, format_option, load_dataset
-from ..paths import Command, DatasetArg, InputFile
+from ..paths import Command, DatasetArg
 
 log = logging.getLogger("posecrb")
 
@@ -31,9 +31,10 @@ def _number(value: Any, digits: int = 9) -> str:
 def _summary(d: dict[str, Any]) -> list[dict[str, Any]]:
     """The result as (quantity, value) rows for the terminal table, the verdict first."""
     c, m = d["certificate"], d.get("mahalanobis")
+    why = d["verdict_reason"].split("; ")
     rows: list[tuple[str, Any]] = [
         ("verdict", d["verdict"]),
-        ("why", d["verdict_reason"]),
+        *(("why" if k == 0 else "", part) for k, part in enumerate(why)),
         ("graph", f"{d['dataset']} ({d['dim']}D, {d['poses']} poses, {d['edges']} edges)"),
         ("estimate", f"{d['estimate'].get('path') or d['estimate'].get('source')} "
                      f"({d['estimate'].get('format', 'in memory')})"),
@@ -68,17 +69,18 @@ def _summary(d: dict[str, Any]) -> list[dict[str, Any]]:
 @click.command("verify", cls=Command, short_help="Is an estimate another program computed the global optimum? "
                "Certificate, basin and distances to the certified optimum.")
 @click.argument("file", type=DatasetArg())
-@click.option("--estimate", "estimate", required=True, type=InputFile(),
-              help="The estimate to judge: g2o or TORO VERTEX lines (g2o, GTSAM's writeG2o, posecrb solve --out; "
-                   "FILE itself judges its own vertices), Ceres' 'id x y yaw' / 'id x y z qx qy qz qw' lines, "
-                   "TUM 'timestamp x y z qx qy qz qw' lines or KITTI's 12 numbers per line.")
+@click.option("--estimate", "estimate", required=True, type=DatasetArg(),
+              help="The estimate to judge, a path or a dataset name: g2o or TORO VERTEX lines (g2o, GTSAM's "
+                   "writeG2o, posecrb solve --out; FILE itself judges its own vertices), Ceres' 'id x y yaw' / "
+                   "'id x y z qx qy qz qw' lines, TUM 'timestamp x y z qx qy qz qw' lines or KITTI's 12 numbers "
+                   "per line.")
 @click.option("--estimate-format", type=click.Choice(ESTIMATE_FORMATS), default="auto", show_default=True,
               help="The estimate file's format; auto reads it from the content (8-column lines are Ceres' when "
                    "the first column is the graph's ids, TUM's otherwise).")
 @click.option("--tum-ids", type=click.Choice(ROW_ORDERS), default="order", show_default=True,
               help="TUM and KITTI rows carry no ids: row k is the pose with the k-th smallest id (order), or "
                    "the TUM timestamp is the pose id (timestamps).")
-@click.option("--truth", type=InputFile(), default=None,
+@click.option("--truth", type=DatasetArg(), default=None,
               help="Ground truth of a synthetic graph (any estimate format; posecrb datasets synth writes it as "
                    "the vertices): also the errors of the estimate and of the optimum against it, and the "
                    "estimate's NEES.")
