@@ -91,14 +91,35 @@ _S12, _S01 = _power_series_differences(8)
 _S12_DESCENDING, _S01_DESCENDING = _S12[::-1].copy(), _S01[::-1].copy()
 
 
+# Terms of the continued fraction of ``_bessel_ratios``: at x < 30 its tail below the first 40
+# terms no longer changes a double, so 64 leave a wide margin.
+_FRACTION_TERMS = 64
+
+
+def _bessel_ratios(x: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """``(I_1 / I_0, I_2 / I_1)`` at ``x > 0`` by Gauss' continued fraction ``r_v = 1 / (2 (v + 1) / x
+    + r_{v+1})``, evaluated backwards from ``r = 0`` (Abramowitz-Stegun 9.1.73; stable, every term
+    positive). numpy only: scipy.special's Bessel functions cost a tenth of a second of a 3D
+    command's start-up to import, and agree with it to within their own error (1e-14 relative in
+    omega, against mpmath)."""
+    r = np.zeros_like(x)
+    r1 = r
+    for j in range(_FRACTION_TERMS, 0, -1):
+        r = 1.0 / (2.0 * j / x + r)
+        if j == 2:
+            r1 = r
+    return r, r1
+
+
 def omega(kappa: np.ndarray | float) -> np.ndarray:
     """omega(kappa) of eq. (59), evaluated stably.
 
     Eq. (59) is ``kappa^2 (2I0 - I1 - 2I2 + I3) / (2I0 - 2I1)`` at ``x = 2 kappa``.
     With the recurrences ``I0 - I2 = (2/x) I1`` and ``I1 - I3 = (4/x) I2`` it
     simplifies exactly to ``kappa (I1 - I2) / (I0 - I1)``. kappa below 0.05: the
-    power series of both differences. Up to x = 30: exponentially scaled Bessel
-    functions (``ive``; the scale cancels in the ratio). Large x:
+    power series of both differences. Up to x = 30: the ratios ``r_v = I_{v+1} / I_v``
+    by their continued fraction (``_bessel_ratios``), ``omega = kappa r_0 (1 - r_1) /
+    (1 - r_0)``. Large x:
     the asymptotic series of both differences, whose leading terms cancel
     analytically, so omega is accurate to ~1 ulp from kappa = 1e-8 to 1e8 and
     ``omega / 3 -> kappa`` as kappa grows.
@@ -113,11 +134,8 @@ def omega(kappa: np.ndarray | float) -> np.ndarray:
         ks = k[series]
         out[series] = ks * np.polyval(_S12_DESCENDING, ks) / np.polyval(_S01_DESCENDING, ks)
     if bessel.any():
-        from scipy.special import ive  # noqa: PLC0415 -- lazy: start-up time (only 3D rotation weights use it)
-
-        xs = x[bessel]
-        i0, i1, i2 = ive(0, xs), ive(1, xs), ive(2, xs)
-        out[bessel] = k[bessel] * (i1 - i2) / (i0 - i1)
+        r0, r1 = _bessel_ratios(x[bessel])
+        out[bessel] = k[bessel] * r0 * (1.0 - r1) / (1.0 - r0)
     if asymptotic.any():
         powers = x[asymptotic][:, None] ** -np.arange(_TERMS)[None, :]
         out[asymptotic] = k[asymptotic] * (powers @ _D12) / (powers @ _D01)

@@ -101,10 +101,10 @@ def evaluate(graph: PoseGraph, settings: EvaluationSettings, *, step: Callable[[
 
         m_ld = measure(logdet, settings.repeat)
         ld = m_ld.value
-        # how many digits of it to trust, with the last run's factor: a stage of its own (a selected
-        # inversion, about twice the factorization's flops)
+        # how many digits of it to trust, with the last run's factor and the matrix it factors: a
+        # stage of its own (posecrb.linalg.accuracy's tiers)
         t0 = time.perf_counter()
-        accuracy = logdet_accuracy(factor[0], ld, "paper FIM")
+        accuracy = logdet_accuracy(factor[0], ld, "paper FIM", matrix=fim.matrix, overwrite_factor=True)
         accuracy_seconds = time.perf_counter() - t0
     except PosecrbError as exc:
         if errors != "keep":

@@ -34,20 +34,22 @@ EPS = float(np.finfo(float).eps)
 # iterations and the second factorization of the lambda_min tier, and gives the exact sum.
 EXACT_FIRST_STEPS = 500
 
-# The lambda_min tier's Lanczos runs: relative residuals and restarts. A first run to 1e-2 decides
-# whether the tier can prove the digits at all (its Ritz value is a lower bound of the largest
-# eigenvalue, so a bound from it that fails the threshold fails it with any later value too): where
-# it cannot (the 3D grid of 21,952 poses), the selected inversion follows after a few solves only.
-# Otherwise a second run, from the first one's vector, goes on to 1e-4. The largest eigenvalues of
-# the scaled inverse are the anchored graph's global modes, often a cluster within a percent of each
-# other (the SE(d) FIM of a 3D grid: 31,950 and 31,769), and a run may stop on the second of them
-# at any tolerance: ``_MU_MARGIN`` covers such clusters, and the retry below what it does not.
-_LANCZOS_FIRST_TOL = 1e-2
-_LANCZOS_TOL = 1e-4
+# The lambda_min tier's Lanczos run: relative residual and restarts. A run to 0.1 takes 2-4 solves
+# on the SE-Sync files, and its mu (below theta + 2 r, within 20% of the Ritz value) gives bounds
+# 1-8% above a run to 1e-2 (one to three solves more), far inside the margin to the printed digits
+# wherever the tier proves them at all. Its Ritz value also decides whether the tier can prove them
+# (a Ritz value is a lower bound of the largest eigenvalue, so a bound from it that fails the
+# threshold fails it with any later value too): where it cannot (the 3D grid of 21,952 poses), the
+# selected inversion follows after a few solves only. The largest eigenvalues of the scaled inverse
+# are the anchored graph's global modes, often a cluster within a percent of each other (the SE(d)
+# FIM of a 3D grid: 31,950 and 31,769), and a run may stop on the second of them: ``_MU_MARGIN``
+# covers such clusters, and the retry below what it does not.
+_LANCZOS_TOL = 0.1
 _LANCZOS_RESTARTS = 4
-# mu is taken this much below the Lanczos estimate, and once more this many times lower after a
-# failed inertia check (a top eigenvalue the Krylov space had not yet seen): a looser bound, which
-# may still prove the digits, for one more factorization in that rare case only.
+# mu is taken this much below the Lanczos estimate; after a failed inertia check (a top eigenvalue
+# the Krylov space had not yet seen) once more, this many times lower, but under ``tier="auto"``
+# no lower than where the bound just proves the printed digits: a looser bound, which may still
+# prove them, for one more factorization in that rare case only.
 _MU_MARGIN = 1.05
 _MU_RETRY = 8.0
 
@@ -116,7 +118,7 @@ class LogdetAccuracy:
 
 
 def logdet_accuracy(factor: Any, logdet: float, name: str = "matrix", *, matrix: Any = None,
-                    tier: str = "auto") -> LogdetAccuracy:
+                    tier: str = "auto", overwrite_factor: bool = False) -> LogdetAccuracy:
     """``LogdetAccuracy`` of ``logdet`` computed from ``factor`` (a Cholesky factor of ``matrix``;
     None for an empty matrix).
 
@@ -130,7 +132,9 @@ def logdet_accuracy(factor: Any, logdet: float, name: str = "matrix", *, matrix:
     supernode by supernode, about twice the flops of the factorization. A status other than ok
     therefore always comes from the exact sum, with the same bound and message as that tier alone.
     ``tier="lambda_min"`` or ``"selected_inversion"`` takes that tier only (a lambda_min bound that
-    cannot be certified is infinite, and unavailable with that reason).
+    cannot be certified is infinite, and unavailable with that reason). ``overwrite_factor``: the
+    caller has no further use for ``factor``'s values, so the inertia check refactors it in place
+    (its ordering stays) instead of a copy.
 
     Examples
     --------
@@ -164,7 +168,7 @@ def logdet_accuracy(factor: Any, logdet: float, name: str = "matrix", *, matrix:
         # every BLAS at one thread: solves and vector products too small for threads to pay, which
         # only spin and stall under load (posecrb.linalg.threads)
         with controller().limit(limits=1, user_api="blas"):
-            cheap = _lambda_min_tier(factor, lower, matrix, logdet, name, tier == "auto")
+            cheap = _lambda_min_tier(factor, lower, matrix, logdet, name, tier == "auto", overwrite_factor)
         if cheap is not None:
             return cheap
     return _selected_inversion_tier(factor, lower, logdet, name)
@@ -222,7 +226,7 @@ def _selected_inversion_tier(factor: Any, lower: Any, logdet: float, name: str) 
 
 
 def _lambda_min_tier(factor: Any, lower: Any, matrix: Any, logdet: float, name: str,
-                     only_if_ok: bool) -> LogdetAccuracy | None:
+                     only_if_ok: bool, in_place: bool = False) -> LogdetAccuracy | None:
     """The bound from a certified lower bound ``lam`` of ``lambda_min(D^{-1/2} A D^{-1/2})``.
 
     With ``Z = A^{-1}`` (both in the factor's ordering), ``|Z_ij| <= sqrt(Z_ii Z_jj)`` (Z is positive
@@ -232,15 +236,17 @@ def _lambda_min_tier(factor: Any, lower: Any, matrix: Any, logdet: float, name: 
 
     ``lam``: the largest eigenvalue ``theta`` of ``D^{1/2} A^{-1} D^{1/2}`` by Lanczos (solves with
     the factor) gives ``mu = 1 / ((theta + 2 r) _MU_MARGIN)``, r the Ritz pair's residual (once
-    ``_MU_RETRY`` times lower when the check below fails); the factorization of
-    ``A - mu D`` with the factor's symbolic analysis then succeeds only if no eigenvalue of the
-    scaled matrix lies below mu, up to that factorization's own backward error (``|E| <= gamma
-    |L'| |L'^T|``, whose scaled 2-norm is at most ``gamma (1 + gamma)`` times the longest row of
-    the pattern, plus the rounding of ``A_ii - mu A_ii``), so ``lam = mu - delta``.
+    lower when the check below fails, ``_MU_RETRY``); the factorization of ``A - mu D`` with the
+    factor's symbolic analysis then succeeds only if no eigenvalue of the scaled matrix lies below
+    mu, up to that factorization's own backward error (``|E| <= gamma |L'| |L'^T|``, whose scaled
+    2-norm is at most ``gamma (1 + gamma)`` times the longest row of the pattern, plus the rounding
+    of ``A_ii - mu A_ii``), so ``lam = mu - delta``.
 
     ``only_if_ok``: return None instead of a bound that does not prove ``LOGDET_WARN`` (and skip the
     factorization when the Lanczos estimate alone shows it would not). None too when the inertia
-    check fails with ``only_if_ok``; without it that is an infinite bound, unavailable."""
+    check fails with ``only_if_ok``; without it that is an infinite bound, unavailable.
+    ``in_place``: the inertia check overwrites the factor's values (``lower`` and the ordering stay,
+    which is all the selected inversion reads)."""
     import scipy.sparse as sp  # noqa: PLC0415 -- the factor's module has loaded it already
 
     from ..core.errors import NotPositiveDefinite  # noqa: PLC0415
@@ -258,18 +264,20 @@ def _lambda_min_tier(factor: Any, lower: Any, matrix: Any, logdet: float, name: 
     scaled_sum = float(col @ col)
     limit = LOGDET_WARN * max(1.0, abs(logdet))
     root = np.sqrt(d)
+
     def scaled_inverse(v: np.ndarray) -> np.ndarray:
         return root * factor.solve_A(root * v)
 
-    ritz = largest_eigenpair(scaled_inverse, np.ones(d.size), tol=_LANCZOS_FIRST_TOL, max_restarts=_LANCZOS_RESTARTS)
+    ritz = largest_eigenpair(scaled_inverse, np.ones(d.size), tol=_LANCZOS_TOL, max_restarts=_LANCZOS_RESTARTS)
     if only_if_ok and not gamma * scaled_sum * ritz.value <= limit:
         return None      # even lambda_min = 1 / theta would not prove the printed digits
-    ritz = largest_eigenpair(scaled_inverse, ritz.vector, tol=_LANCZOS_TOL, max_restarts=_LANCZOS_RESTARTS)
-    if only_if_ok and not gamma * scaled_sum * ritz.value <= limit:
-        return None
     rows = np.bincount(lower.indices, minlength=d.size) + np.diff(lower.indptr) - 1   # pattern of L + L^T
     delta = gamma * (1.0 + gamma) * float(rows.max()) + 2.0 * EPS
     mu = 1.0 / ((ritz.value + 2.0 * ritz.residual) * _MU_MARGIN)
+    # the smallest mu whose bound still proves the digits (only_if_ok's retry goes no lower than
+    # needed: from mu / _MU_RETRY up to it)
+    proving = gamma * scaled_sum / limit + delta if only_if_ok else 0.0
+    shift = _diagonal_shift(matrix)
     for attempt in range(2):
         lam = mu - delta
         if not (np.isfinite(lam) and lam > 0 and gamma * scaled_sum / lam <= (limit if only_if_ok else np.inf)):
@@ -277,18 +285,38 @@ def _lambda_min_tier(factor: Any, lower: Any, matrix: Any, logdet: float, name: 
             return None if only_if_ok else _not_certified(name, f"its estimate {mu:.3g} is below the rounding level")
         try:
             # (a pattern within the analysed one: CHOLMOD takes any subset, so a pruned zero is harmless)
-            refactor(factor, matrix - sp.diags(mu * d, format="csc"), name)
+            refactor(factor, shift(mu * d), name, in_place=in_place)
             break
         except NotPositiveDefinite:
             if attempt:
                 return None if only_if_ok else _not_certified(name, f"the inertia check at {mu:.3g} failed")
-            mu /= _MU_RETRY
+            mu = max(mu / _MU_RETRY, min(mu, proving * (1.0 + 1e-9)))
     condition = scaled_sum / lam
     bound = gamma * condition
     if only_if_ok and not bound <= limit:
         return None
     return LogdetAccuracy(condition, bound, _status(bound, logdet, name), tier="lambda_min",
                           condition_kind="upper bound")
+
+
+def _diagonal_shift(matrix: Any) -> Callable[[np.ndarray], Any]:
+    """``shift(v)``: ``matrix - diag(v)`` as CSC; for a matrix in canonical CSC form the result keeps
+    its index arrays (the factor's analysis then permutes it by one gather of the data,
+    ``posecrb.linalg.cholesky.PermutedFactor.permuted``), else through scipy's subtraction."""
+    import scipy.sparse as sp  # noqa: PLC0415 -- the factor's module has loaded it already
+
+    if not (sp.isspmatrix_csc(matrix) and matrix.has_canonical_format and matrix.dtype == np.float64):
+        return lambda v: sp.csc_matrix(matrix - sp.diags(v, format="csc"))
+    n = matrix.shape[0]
+    cols = np.repeat(np.arange(n), np.diff(matrix.indptr))
+    diagonal = np.flatnonzero(matrix.indices == cols)   # one entry per column: canonical, all diagonal > 0
+
+    def shift(v: np.ndarray) -> Any:
+        data = matrix.data.copy()
+        data[diagonal] -= v
+        return sp.csc_matrix((data, matrix.indices, matrix.indptr), shape=matrix.shape)
+
+    return shift
 
 
 def _not_certified(name: str, why: str) -> LogdetAccuracy:

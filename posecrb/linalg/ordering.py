@@ -226,7 +226,7 @@ def anchored_logdet_accuracy(matrix: sp.spmatrix, q: int, anchors: list[int], na
     sym, _ = ordered_symbolic(a, ordering, dim=dim or (2 if q == 3 else 3), poses=n, matrix="fim",
                               pose_of_row=np.repeat(np.arange(nb), q), n_poses=nb)
     factor, ld = sym.factor_logdet(a, name=name)
-    return ld, (logdet_accuracy(factor, ld, name, matrix=a) if accuracy else None)
+    return ld, (logdet_accuracy(factor, ld, name, matrix=a, overwrite_factor=True) if accuracy else None)
 
 
 def solver_symbolic(pattern: sp.spmatrix, dim: int, n: int, mode: str = "auto",

@@ -51,9 +51,11 @@ def graph_keys(graph: PoseGraph, model: str) -> dict[str, Any]:
             "components": graph.n_components}
 
 
-def accuracy_keys(acc: LogdetAccuracy | None) -> dict[str, float] | None:
-    """The JSON's ``logdet_accuracy``: the log-det's condition number and its rounding-error bound."""
-    return None if acc is None else {"condition": acc.condition, "error_bound": acc.error_bound}
+def accuracy_keys(acc: LogdetAccuracy | None) -> dict[str, float | str] | None:
+    """The JSON's ``logdet_accuracy``: the log-det's condition number, its rounding-error bound, the
+    tier that bounded them and whether ``condition`` is exact or an upper bound."""
+    return None if acc is None else {"condition": acc.condition, "error_bound": acc.error_bound, "tier": acc.tier,
+                                     "condition_kind": acc.condition_kind}
 
 
 def _description(res: FimResult | CrlbResult) -> str:
@@ -105,11 +107,14 @@ class FimResult(_ModelKeys):
         Rows and stored entries of the matrix.
     logdet : float or None
         log det of the anchored FIM (D-optimality); None when unavailable (``logdet_status``).
-    logdet_accuracy : dict of str to float or None
-        ``condition`` (the log-det's componentwise condition number) and ``error_bound`` (a
-        first-order bound on its rounding error, from a selected inversion of the factor;
-        ``posecrb.linalg.accuracy``). ``logdet_status`` is a warning when the bound exceeds
-        1e-6 relative and unavailable when no digit is correct.
+    logdet_accuracy : dict or None
+        ``condition`` (the log-det's componentwise condition number), ``error_bound`` (a
+        first-order bound on its rounding error; ``posecrb.linalg.accuracy``), ``tier`` (what
+        bounded them: ``"lambda_min"``, a certified smallest eigenvalue of the scaled FIM, or
+        ``"selected_inversion"``, the exact sum) and ``condition_kind`` (``"exact"`` or ``"upper
+        bound"``: the first tier's ``condition`` is an upper bound of the exact one).
+        ``logdet_status`` is a warning when the bound exceeds 1e-6 relative and unavailable when
+        no digit is correct.
     trace : float
         Its trace (T-optimality, eq. 69/70 for the paper model).
     t_opt_approx : float or None
@@ -155,7 +160,7 @@ class FimResult(_ModelKeys):
     nnz: int
     logdet: float | None
     logdet_status: Status = status_field("log det of the FIM")
-    logdet_accuracy: dict[str, float] | None = optional_field()
+    logdet_accuracy: dict[str, float | str] | None = optional_field()
     trace: float
     t_opt_approx: float | None = optional_field()
     rank: int

@@ -93,7 +93,7 @@ def small_g2o(tmp_path_factory) -> Path:
 
 @pytest.fixture(scope="module")
 def solvable_g2o(tmp_path_factory) -> Path:
-    """A connected random 3D graph (3D: the rotation weights need scipy.special; solve needs CHOLMOD)."""
+    """A connected random 3D graph (3D: the rotation weights take Bessel function ratios; solve needs CHOLMOD)."""
     path = tmp_path_factory.mktemp("lazy") / "solvable.g2o"
     write_g2o(make_random_graph(np.random.default_rng(11), n=12, extra=8, dim=3, sparse_ids=False), path)
     return path
@@ -151,6 +151,16 @@ def test_small_inversions_import_no_numba(solvable_g2o, command):
     row = json.loads(out.stdout)
     assert row["poses"] == 12
     assert _loaded(modules, "numba") == []
+
+
+def test_bounds_loads_no_graph_or_special_function_module(solvable_g2o):
+    """The graph lower bound of lambda_min(L_w) (spanning trees: scipy.sparse.csgraph, which loads
+    scipy.linalg) is computed only where it could exceed the certified one, and eq. (59)'s Bessel
+    ratios need no scipy.special: neither is imported by a 3D ``bounds``."""
+    out, modules = _run(["bounds", str(solvable_g2o), "--format", "json"], listing=True)
+    assert out.returncode == 0, out.stderr
+    assert json.loads(out.stdout)["gap_bound"] > 0
+    assert _loaded(modules, "scipy.sparse.csgraph", "scipy.special") == []
 
 
 def test_anchored_sed_logdet_of_a_large_grid_imports_no_numba(tmp_path):

@@ -54,6 +54,32 @@ def test_omega_series_branch_is_numpy_polynomials_horner_bit_for_bit():
     assert np.array_equal(got.view(np.int64), ref.view(np.int64))
 
 
+def test_bessel_ratios_converge_within_the_fraction_and_need_no_scipy_special():
+    """The continued fraction's tail beyond 40 terms changes no bit at 0.1 <= x < 30 (64 are used),
+    its ratios match scipy's scaled Bessel functions there, and omega loads no scipy.special."""
+    import subprocess
+    import sys
+
+    from scipy.special import ive
+
+    from posecrb.core import noise
+
+    x = np.geomspace(0.1, 30.0, 500, endpoint=False)
+    full = noise._bessel_ratios(x)
+    short = noise._FRACTION_TERMS
+    try:
+        noise._FRACTION_TERMS = 40
+        assert all(np.array_equal(a, b) for a, b in zip(full, noise._bessel_ratios(x)))
+    finally:
+        noise._FRACTION_TERMS = short
+    np.testing.assert_allclose(full[0], ive(1, x) / ive(0, x), rtol=1e-14)
+    np.testing.assert_allclose(full[1], ive(2, x) / ive(1, x), rtol=1e-14)
+    code = ("import sys; from posecrb.core.noise import omega; omega([0.3, 2.0, 14.0]); "
+            "print('scipy.special' in sys.modules)")
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True, timeout=120)
+    assert out.stdout.split() == ["False"]
+
+
 def test_omega_limits():
     # Small kappa: omega ~ kappa^2 (leading Bessel terms); large: omega / 3 -> kappa.
     assert omega(1e-6) == pytest.approx(1e-12, rel=1e-5)

@@ -4,6 +4,7 @@ import pytest
 
 from posecrb import load
 from posecrb.core.errors import DisconnectedGraph
+from posecrb.core.status import Status
 from posecrb.models.paper.bounds import compute_bounds
 
 from ..helpers import component_count, drop_edges, make_random_graph
@@ -118,6 +119,34 @@ def test_tree_lower_bound_of_lambda_min():
         assert 0 < tree <= 1 / np.trace(np.linalg.inv(dense)) * (1 + 1e-12)
         assert tree <= np.linalg.eigvalsh(dense)[0]
     assert tree_lambda_min_bound(g.n, g.src, g.dst, np.zeros(g.m), 0) == 0.0
+
+
+def test_the_tree_bound_is_skipped_only_where_it_cannot_exceed_the_certified_one(monkeypatch):
+    """``tree_bound_may_exceed``'s upper bound of the tree bound, ``1 / (1 / rho + (n - 1) /
+    ||L_w||_1)``, is at least ``1 / trace(L_w^{-1})`` (dense) and so at least the tree bound; where it
+    says the tree bound cannot exceed the certified lower end, computing it anyway changes nothing."""
+    from posecrb.models.paper import bounds
+    from posecrb.models.paper.bounds import EigenEstimate, tree_lambda_min_bound, weighted_laplacians
+
+    for seed in range(6):
+        g = make_random_graph(np.random.default_rng(seed), n=12 + 40 * seed, extra=9 + 30 * seed, dim=2 + seed % 2,
+                              parallel=2)
+        lap = weighted_laplacians(g, anchor=0)
+        dense = lap.l_w.toarray()
+        lam = np.linalg.eigvalsh(dense)[0]
+        upper = 1 / (1 / lam + (dense.shape[0] - 1) / np.abs(dense).sum(axis=0).max())
+        assert 1 / np.trace(np.linalg.inv(dense)) <= upper * (1 + 1e-12)
+        assert tree_lambda_min_bound(g.n, g.src, g.dst, lap.w, 0) <= upper * (1 + 1e-12)
+        # a certified lower end below that bound may be exceeded by the tree's, one above it not
+        assert bounds.tree_bound_may_exceed(EigenEstimate(lam, upper * (1 - 1e-3)), lap.l_w)
+        assert not bounds.tree_bound_may_exceed(EigenEstimate(lam, upper * (1 + 1e-3)), lap.l_w)
+        skipped = compute_bounds(g)
+        monkeypatch.setattr(bounds, "tree_bound_may_exceed", lambda eig, l_w: True)
+        computed = compute_bounds(g)
+        monkeypatch.undo()
+        assert (skipped.gap_bound, skipped.gap_bound_status, skipped.lambda_min_rot_lower) == \
+            (computed.gap_bound, computed.gap_bound_status, computed.lambda_min_rot_lower)
+    assert bounds.tree_bound_may_exceed(EigenEstimate(None, None, Status.unavailable("x")), lap.l_w)
 
 
 def _wide_weights_graph(dim: int, n: int = 300, seed: int = 10):

@@ -28,7 +28,7 @@ import scipy.sparse as sp
 
 from ...core.errors import NotPositiveDefinite
 from ...core.graph import PoseGraph
-from ...core.noise import isotropic_precisions, rotation_weights
+from ...core.noise import rotation_weights
 from ...core.result import Result, internal_field, status_field
 from ...core.status import OK, Status
 from ...core.timing import Repeat, measure
@@ -36,6 +36,7 @@ from ...linalg.cholesky import Factor, SymbolicCholesky
 from ...linalg.lanczos import largest_eigenpair
 from ...linalg.laplacian import kron_identity, reduced_index, reduced_laplacian
 from ...linalg.ordering import ordered_symbolic
+from ...linalg.threads import python_blas
 
 # lambda_min(L_w) is reported with a warning when its certified interval is wider than this
 # (relative to the estimate).
@@ -43,6 +44,9 @@ LAMBDA_INTERVAL_WARN = 1e-3
 # Rounding level of the sparse products and of the Cholesky check, in units of
 # eps ||L_w||_1 per stored entry of a column (a bound with a margin of 4).
 _ROUNDING_MARGIN = 4.0
+# tree_bound_may_exceed's relative margin: far above the rounding of the tree's path sums and of
+# the trace's lower bound (a few hundred ulps at most), far below any gap between the two bounds
+_TREE_MARGIN = 1e-6
 
 
 @dataclass(frozen=True)
@@ -57,8 +61,9 @@ class WeightedLaplacians:
 
 def weighted_laplacians(graph: PoseGraph, anchor: int = 0, rotation_weight: str = "eq59") -> WeightedLaplacians:
     """Build L_tau and L_w from the information matrices (weights computed here, vectorised)."""
-    tau, kappa = isotropic_precisions(graph.info, graph.dim)
-    w = rotation_weights(kappa, graph.dim, rotation_weight)
+    # the graph's cached precisions and eq. 59's weights (in 3D an evaluation takes Bessel functions)
+    tau, kappa = graph.tau, graph.kappa
+    w = graph.rotation_weights if rotation_weight == "eq59" else rotation_weights(kappa, graph.dim, rotation_weight)
     l_tau = reduced_laplacian(graph.n, graph.src, graph.dst, tau, anchor)
     l_w = reduced_laplacian(graph.n, graph.src, graph.dst, w, anchor)
     return WeightedLaplacians(anchor, l_tau, l_w, tau, w)
@@ -94,7 +99,8 @@ def t_optimality(graph: PoseGraph, anchor: int = 0, rotation_weight: str = "eq59
     ``sum_{i != anchor} sum_{j in V_i^+} tau_ij ||p_ij||^2`` (``trace(Psi_(i,j))`` in 3D too, Appendix D).
     """
     tau = graph.tau
-    w = rotation_weights(graph.kappa, graph.dim, rotation_weight)
+    w = graph.rotation_weights if rotation_weight == "eq59" else rotation_weights(graph.kappa, graph.dim,
+                                                                                rotation_weight)
     ends = (graph.src != anchor).astype(float) + (graph.dst != anchor)
     t_graph = float(graph.dim * np.dot(tau, ends) + graph.rot_dim * np.dot(w, ends))
     psi = tau * np.einsum("ma,ma->m", graph.trans, graph.trans) * (graph.src != anchor)
@@ -139,6 +145,24 @@ def tree_lambda_min_bound(n: int, src: np.ndarray, dst: np.ndarray, w: np.ndarra
     return 1.0 / total if np.isfinite(total) and total > 0 else 0.0
 
 
+def tree_bound_may_exceed(eig: EigenEstimate, l_w: sp.spmatrix) -> bool:
+    """Whether ``tree_lambda_min_bound`` could exceed the certified ``eig.lower``; where it cannot,
+    it changes neither the gap bound nor its status, and is not computed (a spanning tree, and
+    scipy.sparse.csgraph's import with scipy.linalg's, about 0.15 s of a process).
+
+    The tree bound is at most ``1 / trace(L_w^{-1})`` (each tree path's resistance is at least the
+    effective resistance, and those sum to the trace), and ``trace(L_w^{-1}) >= 1 / rho + (n - 1) /
+    ||L_w||_1`` (``rho = eig.value >= lambda_min``, every other eigenvalue at most ``lambda_max <=
+    ||L_w||_1``); the margin covers the rounding of both sides."""
+    if eig.lower is None or eig.value is None or not eig.status.available:
+        return True
+    n = l_w.shape[0]
+    norm = float(abs(l_w).sum(axis=0).max())
+    if not (np.isfinite(norm) and norm > 0 and eig.value > 0):
+        return True
+    return 1.0 / (1.0 / eig.value + (n - 1) / norm) > eig.lower * (1.0 - _TREE_MARGIN)
+
+
 def rotation_lambda_min(lap: WeightedLaplacians, graph: PoseGraph, symbolic: SymbolicCholesky,
                         factor: Factor | None = None, name: str = "reduced rotation Laplacian L_w") -> EigenEstimate:
     """Smallest eigenvalue of the reduced L_w with a certified interval, or a status.
@@ -160,7 +184,10 @@ def rotation_lambda_min(lap: WeightedLaplacians, graph: PoseGraph, symbolic: Sym
     eps = float(np.finfo(float).eps)
     try:
         if n <= 200:
-            _, vecs = np.linalg.eigh(a.toarray())
+            # numpy's BLAS at one thread: its threads spin against each other on so small a matrix
+            # (tenths of a second under load instead of a millisecond)
+            with python_blas().limit(limits=1):
+                _, vecs = np.linalg.eigh(a.toarray())
             v = vecs[:, 0]
         else:
             if factor is None:
@@ -344,7 +371,8 @@ def compute_bounds(graph: PoseGraph, anchor: int | None = None, rotation_weight:
     lam_inf, ld_w_lam = m_ubl.value
 
     eig = rotation_lambda_min(lap, graph, sym, f_w)
-    tree = tree_lambda_min_bound(graph.n, graph.src, graph.dst, lap.w, anchor)
+    tree = tree_lambda_min_bound(graph.n, graph.src, graph.dst, lap.w, anchor) \
+        if tree_bound_may_exceed(eig, lap.l_w) else 0.0
     lower = max(eig.lower or 0.0, tree)
     if eig.status.available and eig.lower is not None and eig.lower >= tree:
         gap_status = eig.status if not eig.status.ok else OK

@@ -202,10 +202,13 @@ def paper_fim(graph: PoseGraph, rot: np.ndarray, trans: np.ndarray, anchor: int 
     ri, rj = red[graph.src], red[graph.dst]
     _, dmat = rotation_jacobians(graph, rot, trans)
 
-    # Jacobian rows of r_ij (d per edge) in "blocks" column numbering; anchored columns -1.
-    # Column blocks: x_i (d), x_j (d), theta_i (d_r).
+    size = npf * (d + dr)
+    # Jacobian rows of r_ij (d per edge) in "blocks" column numbering, int32; the anchor's columns go
+    # to a dummy row and column ``size``, dropped after the assembly (a slice of the summed matrix
+    # instead of a mask over every entry: this assembly's memory is most of its time on a fresh
+    # process). Column blocks: x_i (d), x_j (d), theta_i (d_r).
     def cols(base, r, k):
-        return np.where(r[:, None] >= 0, base + r[:, None] * k + np.arange(k)[None, :], -1)
+        return np.where(r[:, None] >= 0, base + r[:, None] * k + np.arange(k)[None, :], size).astype(np.int32)
 
     cxi, cxj, cth = cols(0, ri, d), cols(0, rj, d), cols(npf * d, ri, dr)
     ctr = np.concatenate([cxi, cxj, cth], axis=1)                       # (m, 2d + dr)
@@ -213,34 +216,29 @@ def paper_fim(graph: PoseGraph, rot: np.ndarray, trans: np.ndarray, anchor: int 
                           np.transpose(rot[graph.src], (0, 2, 1)), dmat], axis=2)   # (m, d, 2d+dr)
     local = tau[:, None, None] * np.einsum("mka,mkb->mab", jac, jac)      # J^T tau J per edge
     k = ctr.shape[1]
-    rows = np.repeat(ctr, k, axis=1).ravel()
-    cols_ = np.tile(ctr, (1, k)).ravel()
-    vals = local.ravel()
 
     # rotation Laplacian (eq. 41 / 58-63): diagonal blocks sum w I
     ci, cj = cols(npf * d, ri, dr), cols(npf * d, rj, dr)
     wr = np.repeat(w, dr)
     if variant == "eq64" or d == 2:
         # off-diagonal blocks -w I (eq. 61-62); in 2D also the consistent coupling
-        lrows = np.concatenate([ci.ravel(), cj.ravel(), ci.ravel(), cj.ravel()])
-        lcols = np.concatenate([ci.ravel(), cj.ravel(), cj.ravel(), ci.ravel()])
-        lvals = np.concatenate([wr, wr, -wr, -wr])
+        lrows = [ci.ravel(), cj.ravel(), ci.ravel(), cj.ravel()]
+        lcols = [ci.ravel(), cj.ravel(), cj.ravel(), ci.ravel()]
+        lvals = [wr, wr, -wr, -wr]
     else:
         # body-frame coupling: block (i, j) = -w R_i^T R_j, block (j, i) its transpose
         rel = -w[:, None, None] * (np.transpose(rot[graph.src], (0, 2, 1)) @ rot[graph.dst])
-        lrows = np.concatenate([ci.ravel(), cj.ravel(), np.repeat(ci, dr, axis=1).ravel(),
-                                np.repeat(cj, dr, axis=1).ravel()])
-        lcols = np.concatenate([ci.ravel(), cj.ravel(), np.tile(cj, (1, dr)).ravel(),
-                                np.tile(ci, (1, dr)).ravel()])
-        lvals = np.concatenate([wr, wr, rel.ravel(), np.transpose(rel, (0, 2, 1)).ravel()])
+        lrows = [ci.ravel(), cj.ravel(), np.repeat(ci, dr, axis=1).ravel(), np.repeat(cj, dr, axis=1).ravel()]
+        lcols = [ci.ravel(), cj.ravel(), np.tile(cj, (1, dr)).ravel(), np.tile(ci, (1, dr)).ravel()]
+        lvals = [wr, wr, rel.ravel(), np.transpose(rel, (0, 2, 1)).ravel()]
 
-    rows = np.concatenate([rows, lrows])
-    cols_ = np.concatenate([cols_, lcols])
-    vals = np.concatenate([vals, lvals])
-    keep = (rows >= 0) & (cols_ >= 0)
-    size = npf * (d + dr)
-    mat = sp.csc_matrix((vals[keep], (rows[keep], cols_[keep])), shape=(size, size))
-    mat.sum_duplicates()
+    rows = np.concatenate([np.repeat(ctr, k, axis=1).ravel(), *lrows])
+    cols_ = np.concatenate([np.tile(ctr, (1, k)).ravel(), *lcols])
+    vals = np.concatenate([local.ravel(), *lvals])
+    padded = sp.csc_matrix((vals, (rows, cols_)), shape=(size + 1, size + 1))
+    padded.sum_duplicates()
+    mat = sp.csc_matrix(padded[:size, :size])
+    mat.sort_indices()
     pose_ids = np.delete(graph.ids, anchor)
     fim = PaperFim(matrix=mat, dim=d, anchor=int(anchor), anchor_id=int(graph.ids[anchor]), pose_ids=pose_ids,
                    layout="blocks", rotation_weight=rotation_weight, variant=variant,

@@ -58,7 +58,7 @@ class PaperModel:
         factor, logdet = sym.factor_logdet(fim.matrix, name="paper FIM")
         times["fim_logdet"] = time.perf_counter() - t0
         t0 = time.perf_counter()
-        acc = logdet_accuracy(factor, logdet, "paper FIM")
+        acc = logdet_accuracy(factor, logdet, "paper FIM", matrix=fim.matrix, overwrite_factor=True)
         times["logdet_accuracy"] = time.perf_counter() - t0
         ids, coord = fim.index_map()
         return FimResult(**graph_keys(graph, self.name), anchors=[fim.anchor_id], layout=fim.layout, size=fim.size,

@@ -115,6 +115,7 @@ class SedFim:
     max_residual_angle: float      # max rotation angle of r_ij: the linearisation point's quality
     times: dict[str, float]
     factor: Any = field(default=None, repr=False)  # CHOLMOD factor of F on the free poses
+    free_matrix: Any = field(default=None, repr=False)  # F on the free poses (what ``factor`` factors)
     logdet_status: Status = OK     # unavailable when F on the free poses is numerically singular
 
     @property
@@ -343,7 +344,7 @@ def sed_fim(graph: PoseGraph, rot: np.ndarray, trans: np.ndarray, *, indefinite:
         components=c, component_labels=labels, anchors=anchors, logdet_anchored=logdet,
         rank_method=method, indefinite_edges=n_bad, indefinite_policy=indefinite,
         max_residual_angle=float(ang.max()) if ang.size else 0.0,
-        times={"fim_build": t1 - t0, "fim_rank": t2 - t1}, factor=fac, logdet_status=status)
+        times={"fim_build": t1 - t0, "fim_rank": t2 - t1}, factor=fac, free_matrix=ff, logdet_status=status)
 
 
 def _singular_status(graph: PoseGraph, nullity: int, expected: int) -> Status:

@@ -72,7 +72,8 @@ class SedModel:
             anchors, ld, status = list(sfim.anchors), sfim.logdet_anchored, sfim.logdet_status
             if ld is not None and sfim.factor is not None:
                 t0 = time.perf_counter()
-                acc = logdet_accuracy(sfim.factor, ld, "SE(d) FIM on the free poses")
+                acc = logdet_accuracy(sfim.factor, ld, "SE(d) FIM on the free poses", matrix=sfim.free_matrix,
+                                      overwrite_factor=True)
                 times["logdet_accuracy"] = time.perf_counter() - t0
                 status = acc.status
         names = coordinate_names(graph.dim, opts.frame)
