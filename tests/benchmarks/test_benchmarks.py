@@ -382,3 +382,24 @@ def test_report_baseline_judges_the_cost_goals(tmp_path):
     assert "| 1.10 |" in exponent and exponent.endswith("| yes |")
     assert goals["parsing the 2D grid at least 4x faster"] == "yes"
     assert goals["certified ratio at least the earlier greedy's minus 0.01"] == "yes"
+
+
+def test_select_leaves_out_exactly_the_datasets_too_small_for_its_budget():
+    """Select's budget of 20% selects at least one candidate edge of every SE-Sync dataset it runs
+    on, and every dataset it leaves out is one where 20% rounds down to none (which select refuses)."""
+    from posecrb import load
+    from posecrb.selection.budget import split_edges
+
+    inputs, bench_select = _module("suite.inputs"), _module("suite.bench_select")
+    checked = 0
+    for name in inputs.SESYNC_DATASETS:
+        try:
+            path = inputs.path(name)
+        except NotImplementedError:
+            continue
+        candidates = split_edges(load(path)).candidates.size
+        too_few = math.floor(0.2 * candidates) < 1   # a fraction rounds down
+        assert too_few == (name in bench_select.TOO_FEW_CANDIDATES), (name, candidates)
+        checked += 1
+    if checked == 0:
+        pytest.skip("no SE-Sync dataset here (POSECRB_DATA)")
