@@ -186,9 +186,10 @@ bench: install
 bench-quick: install
 	@$(PY) benchmarks/run.py --quick
 
-# The performance page's tables and scaling figure from the suite's last results (.bench), into .bench/report.
+# The performance page's tables and scaling figure from the suite's last results (.bench), into .bench/report,
+# and the page itself: docs/performance.md and docs/figures/scaling.png.
 bench-report: install
-	@$(PY) benchmarks/report.py
+	@$(PY) benchmarks/report.py --page docs/performance.md
 
 # The documentation site into docs/_build/html: Sphinx with warnings as errors, offline (no
 # intersphinx, nothing fetched at build time). Its packages are the `docs` extra, installed here

@@ -221,7 +221,19 @@ def child_env() -> dict[str, str]:
     suite measures the same one), bytecode writing allowed (an installed package has it)."""
     env = inputs.posecrb_env()
     env.pop("PYTHONDONTWRITEBYTECODE", None)
+    # ``python -m`` puts the working directory ahead of PYTHONPATH: run from a checkout, a program
+    # given another checkout's PYTHONPATH (the baseline) would import this one.
+    env["PYTHONSAFEPATH"] = "1"
     return env
+
+
+def imported_posecrb(extra_env: dict[str, str]) -> Path:
+    """The package directory a measured ``posecrb`` command imports with ``extra_env`` over the
+    measured programs' environment (from the checkout as working directory, as they run)."""
+    code = "import posecrb, pathlib; print(pathlib.Path(posecrb.__file__).resolve().parent)"
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True, cwd=REPO,
+                         env={**child_env(), **extra_env}).stdout
+    return Path(out.strip())
 
 
 def posecrb_cli(*args: str) -> tuple[str, ...]:

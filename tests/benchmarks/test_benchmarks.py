@@ -247,6 +247,25 @@ def test_report_tables_from_records_made_here(tmp_path):
     assert tables["gtsam"].startswith("No results") and "gtsam_marginals.py" in tables["gtsam"]
     assert "commit 0123456" in tables["provenance"]
 
+    text = report.page(tables, report.TEMPLATE.read_text())
+    assert "<!-- table:" not in text
+    for name, table in tables.items():
+        assert table.replace("](scaling.png)", "](figures/scaling.png)") in text, name
+    assert "](figures/scaling.png)" in text and "](scaling.png)" not in text
+
+
+def test_report_page_needs_a_marker_for_every_table_and_no_other():
+    """The performance page is written only from a template whose markers are exactly the report's
+    tables: a table without its marker would vanish from the page, a stray marker would stay in it."""
+    report = _module("report")
+    tables = {"goals": "| a |", "sesync": "| b |"}
+    assert report.page(tables, "# P\n<!-- table: goals -->\ntext\n<!-- table: sesync -->") == \
+        "# P\n| a |\ntext\n| b |\n"
+    with pytest.raises(ValueError, match="sesync"):
+        report.page(tables, "<!-- table: goals -->")
+    with pytest.raises(ValueError, match="mac"):
+        report.page(tables, "<!-- table: goals -->\n<!-- table: sesync -->\n<!-- table: mac -->")
+
 
 def test_report_fit_exponent_against_closed_forms():
     report = _module("report")
@@ -403,3 +422,14 @@ def test_select_leaves_out_exactly_the_datasets_too_small_for_its_budget():
         checked += 1
     if checked == 0:
         pytest.skip("no SE-Sync dataset here (POSECRB_DATA)")
+
+
+def test_a_baseline_command_imports_the_earlier_checkout_from_this_one(tmp_path):
+    """The baseline group runs the earlier checkout by PYTHONPATH while the working directory is this
+    checkout; ``python -m`` and ``-c`` put the working directory first, so without the harness's
+    safe-path setting the "before" program would be this checkout again (both sides the same code)."""
+    harness = _module("harness")
+    (tmp_path / "posecrb").mkdir()
+    (tmp_path / "posecrb" / "__init__.py").write_text("")
+    assert harness.imported_posecrb({"PYTHONPATH": str(tmp_path)}) == (tmp_path / "posecrb").resolve()
+    assert harness.imported_posecrb({}) == BENCHMARKS.parent / "posecrb"
