@@ -196,11 +196,28 @@ def provenance(run: AsvRun, groups: dict[str, dict]) -> str:
         env = group.get("environment", {})
         versions = ", ".join(f"{k} {v}" for k, v in env.get("versions", {}).items())
         tool = "hyperfine " + env["hyperfine"].split()[-1] if env.get("hyperfine") else "hyperfine"
-        lines.append(f"* Whole process, `{name}` ({tool}, median of {env.get('runs')} runs after "
-                     f"{env.get('warmup')} warm-up): {env.get('date', '?')[:16]} UTC, "
+        warmup = "without warm-up" if env.get("warmup") == 0 else f"after {env.get('warmup')} warm-up"
+        lines.append(f"* Whole process, `{name}` ({tool}, median of {env.get('runs')} runs {warmup}): {env.get('date', '?')[:16]} UTC, "
                      f"commit {env.get('commit', '?')[:7]}, {env.get('cpu', '?')}, {env.get('cores', '?')} cores, load "
                      f"average {' '.join(f'{x:.2f}' for x in env.get('load_average', []))} at the end; {versions}.")
+    commits = sorted({c[:7] for c in [run.data.get("commit_hash", "") if run else "",
+                                       *(g.get("environment", {}).get("commit", "") for g in groups.values())] if c})
+    if len(commits) > 1:
+        lines.append(library_identity(commits))
     return "\n".join(lines) if lines else absent("neither suite has run", "make bench")
+
+
+def library_identity(commits: list[str]) -> str:
+    """Whether the measured library (``posecrb/``) is the same at every commit of the run's parts:
+    a run can span commits that change only the benchmarks or the documentation."""
+    import subprocess
+
+    changed = [c for c in commits[1:] if subprocess.run(
+        ["git", "-C", str(REPO), "diff", "--quiet", commits[0], c, "--", "posecrb"], check=False).returncode != 0]
+    names = ", ".join(commits)
+    if not changed:
+        return f"* The library (`posecrb/`) is the same at commits {names}: they differ only outside it."
+    return f"* **The library (`posecrb/`) differs between commits {names}**: the parts measured different code."
 
 
 def _goal(ok: bool | None) -> str:

@@ -488,3 +488,16 @@ def test_a_baseline_command_imports_the_earlier_checkout_from_this_one(tmp_path)
     (tmp_path / "posecrb" / "__init__.py").write_text("")
     assert harness.imported_posecrb({"PYTHONPATH": str(tmp_path)}) == (tmp_path / "posecrb").resolve()
     assert harness.imported_posecrb({}) == BENCHMARKS.parent / "posecrb"
+
+
+def test_report_says_whether_the_library_is_the_same_at_every_commit_of_a_run():
+    """A run spanning commits is labelled by whether posecrb/ differs between them (git's own diff)."""
+    report = _module("report")
+    head = subprocess.run(["git", "-C", str(BENCHMARKS.parent), "rev-parse", "--short=7", "HEAD"],
+                          capture_output=True, text=True, check=False).stdout.strip()
+    first = subprocess.run(["git", "-C", str(BENCHMARKS.parent), "rev-list", "--max-parents=0", "--abbrev-commit",
+                            "--abbrev=7", "HEAD"], capture_output=True, text=True, check=False).stdout.split()
+    if not head or not first:
+        pytest.skip("not a git checkout with its history")
+    assert "is the same" in report.library_identity([head, head])
+    assert "differs" in report.library_identity([first[0], head])
