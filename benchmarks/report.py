@@ -184,27 +184,39 @@ def grid_poses(name: str) -> tuple[int, int] | None:
 # ---- the tables ---------------------------------------------------------------------------------
 
 def provenance(run: AsvRun, groups: dict[str, dict]) -> str:
-    lines = []
+    """When, at which commit and on what each part of the run was measured: the machine and the
+    versions once (per part where they differ), then a row per part."""
+    lines, rows = [], []
     if run:
         start, end = (datetime.datetime.fromtimestamp(t / 1000, datetime.UTC)
                       for t in (min(run.started, default=0), max(run.ended, default=0)))
         m = run.machine
-        lines.append(f"* In-process suite (asv): {start:%Y-%m-%d %H:%M} to {end:%H:%M} UTC, commit "
-                     f"{run.data.get('commit_hash', '?')[:7]}, machine {m.get('machine', '?')} ({m.get('cpu') or '?'}, "
-                     f"{m.get('num_cpu') or '?'} cores), interpreter {run.data.get('python', '?')}.")
+        lines.append(f"* Machine: {m.get('machine', '?')}, {m.get('cpu') or '?'}, {m.get('num_cpu') or '?'} cores; "
+                     f"interpreter {run.data.get('python', '?')}.")
+        rows.append(["in-process suite (asv)", f"{start:%Y-%m-%d %H:%M}-{end:%H:%M}",
+                     run.data.get("commit_hash", "?")[:7], "asv's samples", ""])
+    versions = {name: ", ".join(f"{k} {v}" for k, v in g.get("environment", {}).get("versions", {}).items())
+                for name, g in groups.items()}
+    if len(set(versions.values())) == 1:
+        env = next(iter(groups.values()))["environment"]
+        tool = "hyperfine " + env["hyperfine"].split()[-1] if env.get("hyperfine") else "hyperfine"
+        lines.append(f"* Whole process: {tool} on {env.get('cpu', '?')}, {env.get('cores', '?')} cores; "
+                     f"{next(iter(versions.values()))}.")
     for name, group in groups.items():
         env = group.get("environment", {})
-        versions = ", ".join(f"{k} {v}" for k, v in env.get("versions", {}).items())
-        tool = "hyperfine " + env["hyperfine"].split()[-1] if env.get("hyperfine") else "hyperfine"
-        warmup = "without warm-up" if env.get("warmup") == 0 else f"after {env.get('warmup')} warm-up"
-        lines.append(f"* Whole process, `{name}` ({tool}, median of {env.get('runs')} runs {warmup}): {env.get('date', '?')[:16]} UTC, "
-                     f"commit {env.get('commit', '?')[:7]}, {env.get('cpu', '?')}, {env.get('cores', '?')} cores, load "
-                     f"average {' '.join(f'{x:.2f}' for x in env.get('load_average', []))} at the end; {versions}.")
+        warmup = "no warm-up" if env.get("warmup") == 0 else f"{env.get('warmup')} warm-up"
+        own = f"; {versions[name]}" if len(set(versions.values())) > 1 else ""
+        rows.append([f"`{name}`", env.get("date", "?")[:16].replace("T", " "), env.get("commit", "?")[:7],
+                     f"median of {env.get('runs')}, {warmup}{own}",
+                     " ".join(f"{x:.2f}" for x in env.get("load_average", []))])
     commits = sorted({c[:7] for c in [run.data.get("commit_hash", "") if run else "",
                                        *(g.get("environment", {}).get("commit", "") for g in groups.values())] if c})
     if len(commits) > 1:
         lines.append(library_identity(commits))
-    return "\n".join(lines) if lines else absent("neither suite has run", "make bench")
+    if not rows:
+        return absent("neither suite has run", "make bench")
+    header = ["part", "UTC", "commit", "runs", "load average at the end (1, 5, 15 min)"]
+    return "\n".join(lines) + "\n\n" + table(header, rows)
 
 
 def library_identity(commits: list[str]) -> str:
@@ -355,14 +367,14 @@ def sesync(groups: dict[str, dict]) -> str:
         s, p = checks.get("sesync", {}), checks.get("posecrb", {})
         rows.append([c["label"], str(checks.get("dim", "")), f"{checks.get('poses', 0):,}", seconds(theirs),
                      seconds(ours), ratio(ours, theirs), memories(c, "SE-Sync", "posecrb"),
-                     f"{s.get('objective', math.nan):.6g}",
-                     f"{p.get('objective', math.nan):.10g}", "yes" if checks.get("agree") else "**no**",
+                     f"{s.get('objective', math.nan):.6g} / {p.get('objective', math.nan):.10g}",
+                     "yes" if checks.get("agree") else "**no**",
                      f"{s.get('status', '?')} / {'certified' if p.get('certified') else 'NOT certified'}",
                      sesync_goal(c, floor)])
     rows.append(["**sum**", "", "", seconds(totals[0]), seconds(totals[1]), f"**{ratio(totals[1], totals[0])}**",
-                 "", "", "", "", "", ""])
+                 "", "", "", "", ""])
     return table(["file", "d", "poses", "SE-Sync s", "posecrb s", "ratio", "peak RSS (SE-Sync / posecrb)",
-                  "F SE-Sync", "F posecrb", "agree", "status", "goal"], rows)
+                  "F (SE-Sync / posecrb)", "agree", "status (SE-Sync / posecrb)", "goal"], rows)
 
 
 def gtsam(groups: dict[str, dict]) -> str:

@@ -245,7 +245,7 @@ def test_report_tables_from_records_made_here(tmp_path):
     assert "| grid3d-20000 | 2.000 | 5.000 | - | auto |" in tables["orderings"]
     assert "| intel | - | 0.100 |" in tables["inprocess"]
     assert tables["gtsam"].startswith("No results") and "gtsam_marginals.py" in tables["gtsam"]
-    assert "commit 0123456" in tables["provenance"]
+    assert "| in-process suite (asv) |" in tables["provenance"] and "| 0123456 |" in tables["provenance"]
 
     text = report.page(tables, report.TEMPLATE.read_text())
     assert "<!-- table:" not in text
@@ -501,3 +501,18 @@ def test_report_says_whether_the_library_is_the_same_at_every_commit_of_a_run():
         pytest.skip("not a git checkout with its history")
     assert "is the same" in report.library_identity([head, head])
     assert "differs" in report.library_identity([first[0], head])
+
+
+def test_the_performance_page_is_the_reports_and_fits_300_lines():
+    """docs/performance.md is the report's page of the present template (every prose line of
+    benchmarks/performance.md.in in it, in order, no marker left) and at most 300 lines."""
+    report = _module("report")
+    page = (BENCHMARKS.parent / "docs" / "performance.md").read_text().splitlines()
+    assert len(page) <= 300
+    assert not any(line.startswith("<!-- table: ") for line in page)
+    position = 0
+    for line in report.TEMPLATE.read_text().splitlines():
+        if line.startswith("<!-- table: "):
+            continue
+        assert line in page[position:], f"the page lacks the template's line {line!r}: run make bench-report"
+        position = page.index(line, position) + 1

@@ -148,7 +148,8 @@ def tree_lambda_min_bound(n: int, src: np.ndarray, dst: np.ndarray, w: np.ndarra
 def tree_bound_may_exceed(eig: EigenEstimate, l_w: sp.spmatrix) -> bool:
     """Whether ``tree_lambda_min_bound`` could exceed the certified ``eig.lower``; where it cannot,
     it changes neither the gap bound nor its status, and is not computed (a spanning tree, and
-    scipy.sparse.csgraph's import with scipy.linalg's, about 0.15 s of a process).
+    scipy.sparse.csgraph's import with scipy.linalg's: a large part of a small file's process,
+    docs/decisions/fixed-costs.md).
 
     The tree bound is at most ``1 / trace(L_w^{-1})`` (each tree path's resistance is at least the
     effective resistance, and those sum to the trace), and ``trace(L_w^{-1}) >= 1 / rho + (n - 1) /
