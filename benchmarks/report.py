@@ -657,7 +657,13 @@ def main(argv: list[str] | None = None) -> int:
                                                  "figures/ beside it)")
     args = ap.parse_args(argv)
     out = Path(args.out)
-    tables = build(find_asv(Path(args.asv), args.commit), read_groups(Path(args.hyperfine)), out)
+    run, groups = find_asv(Path(args.asv), args.commit), read_groups(Path(args.hyperfine))
+    if args.page and not (run and groups):
+        # A page of "No results" lines would replace the figures of the last run.
+        print(f"report: no {'in-process' if not run else 'whole-process'} results to write the page from "
+              f"({args.asv if not run else args.hyperfine}): run make bench first", file=sys.stderr)
+        return 1
+    tables = build(run, groups, out)
     out.mkdir(parents=True, exist_ok=True)
     for name, text in tables.items():
         target = out / f"{name}.md"

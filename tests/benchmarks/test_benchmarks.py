@@ -516,3 +516,15 @@ def test_the_performance_page_is_the_reports_and_fits_300_lines():
             continue
         assert line in page[position:], f"the page lacks the template's line {line!r}: run make bench-report"
         position = page.index(line, position) + 1
+
+
+def test_report_writes_no_page_without_results(tmp_path):
+    """`make bench-report` on a machine without the suite's results fails and leaves the page as it
+    was: a page of "No results" lines would replace the last run's figures."""
+    page = tmp_path / "performance.md"
+    page.write_text("the last run's page\n")
+    proc = subprocess.run([sys.executable, str(BENCHMARKS / "report.py"), "--asv", str(tmp_path / "none"),
+                           "--hyperfine", str(tmp_path / "none"), "--out", str(tmp_path / "out"), "--page", str(page)],
+                          capture_output=True, text=True, check=False)
+    assert proc.returncode == 1 and "run make bench first" in proc.stderr
+    assert page.read_text() == "the last run's page\n"
