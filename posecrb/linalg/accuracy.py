@@ -305,11 +305,16 @@ def _diagonal_shift(matrix: Any) -> Callable[[np.ndarray], Any]:
     ``posecrb.linalg.cholesky.PermutedFactor.permuted``), else through scipy's subtraction."""
     import scipy.sparse as sp  # noqa: PLC0415 -- the factor's module has loaded it already
 
+    def subtract(v: np.ndarray) -> Any:
+        return sp.csc_matrix(matrix - sp.diags(v, format="csc"))
+
     if not (sp.isspmatrix_csc(matrix) and matrix.has_canonical_format and matrix.dtype == np.float64):
-        return lambda v: sp.csc_matrix(matrix - sp.diags(v, format="csc"))
+        return subtract
     n = matrix.shape[0]
     cols = np.repeat(np.arange(n), np.diff(matrix.indptr))
-    diagonal = np.flatnonzero(matrix.indices == cols)   # one entry per column: canonical, all diagonal > 0
+    diagonal = np.flatnonzero(matrix.indices == cols)   # canonical: at most one entry per column
+    if diagonal.size != n:                              # a diagonal entry not stored
+        return subtract
 
     def shift(v: np.ndarray) -> Any:
         data = matrix.data.copy()

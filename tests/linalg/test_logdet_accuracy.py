@@ -248,6 +248,11 @@ def test_the_shifted_matrix_keeps_the_analysed_pattern():
     messy = sp.csc_matrix(a, copy=True)
     messy.has_canonical_format = False               # (as after an unsorted construction)
     assert np.allclose(accuracy._diagonal_shift(messy)(v).toarray(), reference, rtol=1e-15, atol=0)
+    gap = sp.lil_matrix(a)
+    gap[3, 3] = 0.0
+    gap = sp.csc_matrix(gap)
+    gap.eliminate_zeros()                            # a column without its diagonal entry
+    assert np.array_equal(accuracy._diagonal_shift(gap)(v).toarray(), gap.toarray() - np.diag(v))
     perm = np.random.default_rng(1).permutation(a.shape[0])
     factor = SymbolicCholesky(a, permutation=perm).factor(a)
     assert isinstance(factor, PermutedFactor)
