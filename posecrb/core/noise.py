@@ -99,8 +99,8 @@ _FRACTION_TERMS = 64
 def _bessel_ratios(x: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """``(I_1 / I_0, I_2 / I_1)`` at ``x > 0`` by Gauss' continued fraction ``r_v = 1 / (2 (v + 1) / x
     + r_{v+1})``, evaluated backwards from ``r = 0`` (Abramowitz-Stegun 9.1.73; stable, every term
-    positive). numpy only: scipy.special's Bessel functions cost a tenth of a second of a 3D
-    command's start-up to import, and agree with it to within their own error (1e-14 relative in
+    positive). numpy only: scipy.special's import is a sizeable part of a 3D command's start-up
+    (docs/decisions/fixed-costs.md); the two agree to within their own error (1e-14 relative in
     omega, against mpmath)."""
     r = np.zeros_like(x)
     r1 = r

@@ -256,8 +256,8 @@ def refactor(factor: Factor | PermutedFactor, a: sp.spmatrix, name: str = "matri
     thread. Raises NotPositiveDefinite when ``a`` is not positive definite: a successful call is an
     inertia check (``posecrb.linalg.accuracy``'s certified lower bound of an eigenvalue).
     ``in_place``: overwrite ``factor``'s values (its ordering stays) instead of a copy of it, for a
-    caller that has no further use for them: no copy of the factor (a fifth of the call's time on
-    the 3D SE-Sync files), and ``factor`` itself is returned."""
+    caller that has no further use for them: no copy of the factor (a sizeable part of the call,
+    docs/decisions/logdet-accuracy-tiers.md), and ``factor`` itself is returned."""
     a = _as_csc(a)
     inner = factor._inner if isinstance(factor, PermutedFactor) else factor
     if isinstance(factor, PermutedFactor):

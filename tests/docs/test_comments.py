@@ -34,6 +34,9 @@ _TIME = re.compile(
     r"(?!\.\w|\s*(?:\^|\*|I\b|\())")
 _RATIO = re.compile(
     rf"(?<![\w.])~?{_NUMBER}\s*(?:x|times)\s+(?:faster|slower|quicker|cheaper|longer|as long|the time)\b")
+# ... and a time in words: "a tenth of a second", "tenths of a second", "half a second".
+_WORDED_TIME = re.compile(r"\b(?:(?:a|one|two|three|a few)\s+)?(?:tenths?|hundredths?|quarters?|thirds?|halfs?|half)"
+                          r"\s+(?:of\s+)?an?\s+(?:second|millisecond|minute)\b", re.IGNORECASE)
 _LOGBOOK = re.compile(r"performance\.md")
 _BENCHMARK_PATH = re.compile(r"\bbenchmarks/[\w./-]*\w")
 
@@ -84,6 +87,7 @@ def offences(path: Path, source: str, root: Path = REPOSITORY) -> list[str]:
             if (name, phrase) not in ALLOWED_TIMES and not _after_operator(flat[:m.start()]):
                 found.append(f"{where(m)}: a measured time, {m[0]!r}")
         found += [f"{where(m)}: a measured speed ratio, {m[0]!r}" for m in _RATIO.finditer(flat)]
+        found += [f"{where(m)}: a measured time, {m[0]!r}" for m in _WORDED_TIME.finditer(flat)]
         found += [f"{where(m)}: points into the performance logbook" for m in _LOGBOOK.finditer(flat)]
         found += [f"{where(m)}: names {m[0]}, which is not in the tree"
                   for m in _BENCHMARK_PATH.finditer(flat) if not (root / m[0]).exists()]
@@ -104,6 +108,8 @@ def test_no_comment_quotes_a_measured_time_the_logbook_or_a_missing_script():
     "# about 1.8x slower on city10000",
     "# about 3x the time with two threads",
     "# a call of 20 seconds",
+    "# its import costs a tenth of a second",
+    "# (tenths of a second under load)",
     "# docs/performance.md, \"Threads\"",
     "# measured with benchmarks/orderings.py --options",
     '"""Measured by `python benchmarks/selinv_paths.py`."""',

@@ -185,8 +185,8 @@ def rotation_lambda_min(lap: WeightedLaplacians, graph: PoseGraph, symbolic: Sym
     eps = float(np.finfo(float).eps)
     try:
         if n <= 200:
-            # numpy's BLAS at one thread: its threads spin against each other on so small a matrix
-            # (tenths of a second under load instead of a millisecond)
+            # numpy's BLAS at one thread: its threads spin against each other on so small a matrix,
+            # worst under load (docs/decisions/fixed-costs.md)
             with python_blas().limit(limits=1):
                 _, vecs = np.linalg.eigh(a.toarray())
             v = vecs[:, 0]
