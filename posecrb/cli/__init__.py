@@ -16,13 +16,14 @@ loads neither numpy/scipy nor numba.
 from __future__ import annotations
 
 import contextlib
+import gc
 import importlib
 import logging
 import os
 import sys
 import warnings
 from collections.abc import Iterator
-from typing import TextIO
+from typing import NoReturn, TextIO
 
 import click
 
@@ -205,6 +206,21 @@ def main(argv: list[str] | None = None) -> int:
             return _main(argv)
         finally:
             remove_temporaries()
+
+
+def run() -> NoReturn:
+    """The program's entry point (the ``posecrb`` command, ``python -m posecrb``): ``main`` on the
+    command line, then the process exits with its code.
+
+    Before the exit every object still alive moves to the collector's permanent generation
+    (``gc.freeze``): the interpreter's shutdown runs full collections over all of them, and after a
+    command that used the compiled kernels (numba) those are numba's typing and lowering registries,
+    hundreds of thousands of objects walked several times over for nothing. Frozen objects are still
+    freed by reference counting; the output was written and flushed by then, and nothing of posecrb's
+    waits for a collection at exit (docs/decisions/fixed-costs.md)."""
+    code = main()
+    gc.freeze()
+    sys.exit(code)
 
 
 def _main(argv: list[str] | None) -> int:

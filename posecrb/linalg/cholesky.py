@@ -69,10 +69,14 @@ class SymbolicCholesky:
         # Gather map of the permuted CSC data: any matrix stored with exactly this pattern is
         # permuted by one fancy index of its data instead of scipy's two-sided slicing.
         self._pattern_indptr, self._pattern_indices = pat.indptr.copy(), pat.indices.copy()
-        marker = sp.csc_matrix((np.arange(1, pat.nnz + 1, dtype=float), pat.indices, pat.indptr), shape=pat.shape)
-        marker = marker[perm][:, perm].tocsc()
+        # (column j of the permuted matrix is column perm[j] with its rows renumbered, then sorted)
+        counts = np.diff(pat.indptr)[perm]
+        indptr = np.zeros(perm.size + 1, dtype=np.int64)
+        np.cumsum(counts, out=indptr[1:])
+        source = np.repeat(pat.indptr[perm] - indptr[:-1], counts) + np.arange(pat.nnz, dtype=np.int64)
+        marker = sp.csc_matrix((source, self._inverse_perm[pat.indices[source]], indptr), shape=pat.shape)
         marker.sort_indices()
-        self._gather = marker.data.astype(np.int64) - 1
+        self._gather = marker.data
         self._permuted_indptr, self._permuted_indices = marker.indptr, marker.indices
         self._symbolic = analyze(sp.csc_matrix((np.ones(marker.nnz), marker.indices, marker.indptr),
                                                shape=pat.shape), mode=mode, ordering_method="natural")

@@ -152,10 +152,18 @@ def pose_block_permutation(pose_adjacency: sp.spmatrix, block_size: int, method:
 
 def pose_adjacency_of(a: sp.spmatrix, pose_of_row: np.ndarray, n_poses: int) -> sp.csc_matrix:
     """Pattern of the pose graph of a matrix whose rows belong to poses (``pose_of_row``):
-    poses i and j are adjacent when some entry couples a row of i with a row of j."""
-    coo = sp.coo_matrix(a)
+    poses i and j are adjacent when some entry couples a row of i with a row of j.
+
+    Read from the compressed columns directly: an entry whose (row pose, column pose) repeats the
+    entry before it (the rows of one pose lie next to each other in a column of a pose-major
+    matrix) is left out before the pairs are sorted, so the sort sees a fraction of the entries."""
+    a = sp.csc_matrix(a) if not sp.isspmatrix_csc(a) else a
     pr = np.asarray(pose_of_row, dtype=np.int64)
-    m = sp.csc_matrix((np.ones(coo.nnz), (pr[coo.row], pr[coo.col])), shape=(n_poses, n_poses))
+    rows = pr[a.indices]
+    cols = np.repeat(pr, np.diff(a.indptr))
+    new = np.ones(rows.size, dtype=bool)
+    new[1:] = (rows[1:] != rows[:-1]) | (cols[1:] != cols[:-1])
+    m = sp.csc_matrix((np.ones(int(new.sum())), (rows[new], cols[new])), shape=(n_poses, n_poses))
     m.sum_duplicates()
     return m
 

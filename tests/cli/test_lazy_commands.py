@@ -308,3 +308,33 @@ def test_solve_of_weak_rotations_imports_no_bessel_functions(tmp_path):
     kappa = 3 / (2 * np.trace(np.linalg.inv(info[0, 3:, 3:])))
     assert kappa < 1e-3
     assert "scipy.sparse" in modules and _loaded(modules, "scipy.special") == []
+
+
+def test_program_entry_freezes_the_heap_after_the_command_and_exits_with_its_code(monkeypatch):
+    """``posecrb.cli.run`` (the ``posecrb`` command and ``python -m posecrb``): the command runs first,
+    then every live object moves to the collector's permanent generation (the interpreter's shutdown
+    collections skip them), then the process exits with the command's code."""
+    import posecrb.cli as cli
+
+    calls: list[str] = []
+    monkeypatch.setattr(cli, "main", lambda: calls.append("main") or 3)
+    monkeypatch.setattr(cli.gc, "freeze", lambda: calls.append("freeze"))
+    with pytest.raises(SystemExit) as exc:
+        cli.run()
+    assert exc.value.code == 3
+    assert calls == ["main", "freeze"]
+
+
+def test_python_dash_m_and_the_console_script_run_the_program_entry():
+    """Both ways a user starts posecrb go through ``run`` (a usage error is still exit 2)."""
+    import tomllib
+
+    pyproject = tomllib.loads((Path(__file__).parents[2] / "pyproject.toml").read_text())
+    assert pyproject["project"]["scripts"]["posecrb"] == "posecrb.cli:run"
+    out, _ = _run(["--no-such-option"])
+    assert out.returncode == 2
+    marked = subprocess.run(
+        [sys.executable, "-c", "import gc, runpy, sys; gc.freeze = lambda: print('FROZEN', file=sys.stderr); "
+         "sys.argv = ['posecrb', '--version']; runpy.run_module('posecrb', run_name='__main__')"],
+        capture_output=True, text=True, check=False, timeout=300)
+    assert marked.returncode == 0 and marked.stderr.strip().endswith("FROZEN"), marked.stderr

@@ -123,6 +123,49 @@ def test_permuted_factor_solves_and_reports_its_permutation():
     assert sym.factor_logdet(a)[1] == pytest.approx(ld_ref, abs=logdet_atol(dense))
 
 
+def test_permuted_pattern_is_the_two_sided_permutation_of_the_matrix():
+    """The analysis' gather map permutes a matrix stored with the analysed pattern exactly as
+    ``a[perm][:, perm]`` does, also when the CSC rows are unsorted and a column holds its diagonal alone."""
+    rng = np.random.default_rng(5)
+    n = 40
+    dense = sp.random(n, n, density=0.15, random_state=np.random.RandomState(5)).toarray()
+    dense = dense + dense.T
+    dense[:, 7] = dense[7, :] = 0.0
+    dense += np.diag(np.where(np.arange(n) == 7, 1.0, n))
+    a = sp.csc_matrix(dense)
+    order = np.concatenate([rng.permutation(np.arange(a.indptr[j], a.indptr[j + 1])) for j in range(n)])
+    shuffled = sp.csc_matrix((a.data[order], a.indices[order], a.indptr), shape=a.shape)
+    perm = rng.permutation(n)
+    sym = SymbolicCholesky(shuffled, permutation=perm)
+    permuted = sym._permuted(shuffled)
+    assert permuted.has_sorted_indices
+    np.testing.assert_array_equal(permuted.toarray(), dense[np.ix_(perm, perm)])
+
+
+@pytest.mark.parametrize("layout", ["poses", "blocks"])
+def test_pose_adjacency_is_the_dense_block_pattern(layout):
+    """Poses i and j are adjacent exactly when some stored entry couples a row of i with a row of j,
+    against a dense test over every pair of poses, for pose-major and split row layouts and unsorted
+    rows."""
+    from posecrb.linalg.ordering import pose_adjacency_of
+
+    rng = np.random.default_rng(8)
+    n_poses, q = 30, 3
+    pose_of_row = (np.repeat(np.arange(n_poses), q) if layout == "poses"
+                   else np.tile(np.arange(n_poses), q))
+    rows = n_poses * q
+    a = sp.random(rows, rows, density=0.02, random_state=np.random.RandomState(8), format="csc")
+    a = sp.csc_matrix(a + a.T + sp.identity(rows))
+    order = np.concatenate([rng.permutation(np.arange(a.indptr[j], a.indptr[j + 1])) for j in range(rows)])
+    a = sp.csc_matrix((a.data[order], a.indices[order], a.indptr), shape=a.shape)
+    stored = a.toarray() != 0
+    expected = np.array([[stored[np.ix_(pose_of_row == i, pose_of_row == j)].any() for j in range(n_poses)]
+                         for i in range(n_poses)])
+    got = pose_adjacency_of(a, pose_of_row, n_poses)
+    np.testing.assert_array_equal(got.toarray() != 0, expected)
+    assert got.has_canonical_format
+
+
 def test_bad_permutation_is_a_usage_error():
     from posecrb.core.errors import UsageError
 
