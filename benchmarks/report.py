@@ -666,10 +666,7 @@ def main(argv: list[str] | None = None) -> int:
     tables = build(run, groups, out)
     out.mkdir(parents=True, exist_ok=True)
     for name, text in tables.items():
-        target = out / f"{name}.md"
-        tmp = target.with_name(f".{target.name}.tmp")
-        tmp.write_text(text + "\n")
-        os.replace(tmp, target)
+        _replace(out / f"{name}.md", (text + "\n").encode())
         print(f"<!-- {name}.md -->\n{text}\n")
     if args.page:
         target = Path(args.page)
