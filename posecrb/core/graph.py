@@ -218,6 +218,11 @@ class PoseGraph(PoseDimensions):
         """Edge weight of the rotation Laplacian in the paper's coordinates (eq. 39-41, 59), read-only."""
         return _read_only(rotation_weights(self.kappa, self.dim))
 
+    def rotation_weights_by(self, rule: str) -> np.ndarray:
+        """Edge weights of the rotation Laplacian under ``rule`` (``posecrb.core.noise.rotation_weights``):
+        the cached ``rotation_weights`` for ``"eq59"``."""
+        return self.rotation_weights if rule == "eq59" else rotation_weights(self.kappa, self.dim, rule)
+
     # ---- topology ----------------------------------------------------------
     @cached_property
     def _components(self) -> tuple[int, np.ndarray]:

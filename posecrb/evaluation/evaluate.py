@@ -15,10 +15,9 @@ from typing import Any
 from ..core.errors import PosecrbError
 from ..core.graph import PoseGraph
 from ..core.timing import Repeat, measure
-from ..linalg.accuracy import logdet_accuracy
 from ..models.inputs import input_files
 from ..models.paper.bounds import compute_bounds
-from ..models.paper.fim import PaperFim, fim_symbolic_choice, paper_fim, trace_fim
+from ..models.paper.fim import PaperFim, fim_logdet_accuracy, fim_symbolic_choice, paper_fim, trace_fim
 from ..models.paper.result import BoundsResult, FimAtEstimate
 from ..solver.estimate import Estimate, get_estimate
 
@@ -104,7 +103,7 @@ def evaluate(graph: PoseGraph, settings: EvaluationSettings, *, step: Callable[[
         # how many digits of it to trust, with the last run's factor and the matrix it factors: a
         # stage of its own (posecrb.linalg.accuracy's tiers)
         t0 = time.perf_counter()
-        accuracy = logdet_accuracy(factor[0], ld, "paper FIM", matrix=fim.matrix, overwrite_factor=True)
+        accuracy = fim_logdet_accuracy(fim, factor[0], ld, graph, est.rot, est.trans)
         accuracy_seconds = time.perf_counter() - t0
     except PosecrbError as exc:
         if errors != "keep":

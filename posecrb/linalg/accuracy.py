@@ -2,10 +2,12 @@
 
 ``logdet_accuracy``: a first-order bound on the rounding error of a Cholesky log-determinant,
 from the componentwise backward error of the assembly and of the factorization and the entries of
-the inverse on the factor's pattern, in two tiers (docs/decisions/logdet-accuracy-tiers.md): an
-upper bound of those entries from a certified lower bound of the smallest eigenvalue of the
-diagonally scaled matrix (Lanczos and one inertia check: ``"lambda_min"``), and their exact values
-(selected inversion: ``"selected_inversion"``) where the first cannot prove the printed digits.
+the inverse on the factor's pattern, in three tiers (docs/decisions/logdet-accuracy-tiers.md): an
+upper bound of those entries from an upper bound of the inverse's diagonal that the caller knows
+(the covariance of a spanning tree's FIM: ``"spanning_tree"``), one from a certified lower bound of
+the smallest eigenvalue of the diagonally scaled matrix (Lanczos and one inertia check:
+``"lambda_min"``), and their exact values (selected inversion: ``"selected_inversion"``) where
+neither proves the printed digits.
 ``onenorm_inverse``: Hager's and Higham's estimate of ``||A^{-1}||_1`` (LAPACK's xLACON), used
 for condition estimates.
 """
@@ -25,7 +27,7 @@ from ..core.status import OK, Status
 LOGDET_WARN = 1e-6
 
 # The tiers of ``logdet_accuracy`` ("auto": the first that proves the printed digits).
-TIERS = ("auto", "lambda_min", "selected_inversion")
+TIERS = ("auto", "spanning_tree", "lambda_min", "selected_inversion")
 
 EPS = float(np.finfo(float).eps)
 
@@ -33,6 +35,13 @@ EPS = float(np.finfo(float).eps)
 # Python loop (``posecrb.linalg.selinv.inversion_steps``): then it costs no more than the Lanczos
 # iterations and the second factorization of the lambda_min tier, and gives the exact sum.
 EXACT_FIRST_STEPS = 500
+
+# "auto" tries the spanning_tree tier before the lambda_min tier when the log-det's factorization
+# takes at least this many flops: the lambda_min tier's cost is about one more factorization, the
+# spanning tree's a fixed one (its shortest paths load scipy's graph routines) plus a pass over the
+# edges, and at this size a factorization of small supernodes costs about that load. Below it the
+# lambda_min tier runs first, and the spanning tree only where it cannot prove the digits.
+TREE_FIRST_FLOPS = 1e8
 
 # The lambda_min tier's Lanczos run: relative residual and restarts. A run to 0.1 takes 2-4 solves
 # on the SE-Sync files, and its mu (below theta + 2 r, within 20% of the Ritz value) gives bounds
@@ -98,9 +107,11 @@ class LogdetAccuracy:
     (the digits lost there are lost when A is assembled, before any factorization).
 
     ``tier`` names how the sum was bounded: ``"selected_inversion"`` takes the entries of
-    ``A^{-1}`` on the pattern exactly (``condition_kind`` ``"exact"``); ``"lambda_min"`` bounds
+    ``A^{-1}`` on the pattern exactly (``condition_kind`` ``"exact"``); ``"spanning_tree"`` bounds
+    them by ``|(A^{-1})_ij| <= sqrt(z_i z_j)``, ``z`` an upper bound of ``diag(A^{-1})`` (the
+    inverse of a spanning tree's FIM, which is below A in the Loewner order); ``"lambda_min"`` bounds
     them by ``|(A^{-1})_ij| <= 1 / (lambda sqrt(A_ii A_jj))``, ``lambda`` a certified lower bound of
-    the smallest eigenvalue of ``D^{-1/2} A D^{-1/2}`` (``D = diag A``), so that ``condition`` is an
+    the smallest eigenvalue of ``D^{-1/2} A D^{-1/2}`` (``D = diag A``); in both, ``condition`` is an
     upper bound of the exact sum (``condition_kind`` ``"upper bound"``) and ``error_bound`` stays an
     upper bound of the error. ``status``: a warning above ``LOGDET_WARN * max(1, |log det|)``,
     unavailable when the bound reaches ``max(1, |log det|)`` (no correct digit).
@@ -118,23 +129,37 @@ class LogdetAccuracy:
 
 
 def logdet_accuracy(factor: Any, logdet: float, name: str = "matrix", *, matrix: Any = None,
-                    tier: str = "auto", overwrite_factor: bool = False) -> LogdetAccuracy:
+                    tier: str = "auto", overwrite_factor: bool = False,
+                    inverse_diagonal: np.ndarray | Callable[[], np.ndarray | None] | None = None,
+                    ) -> LogdetAccuracy:
     """``LogdetAccuracy`` of ``logdet`` computed from ``factor`` (a Cholesky factor of ``matrix``;
     None for an empty matrix).
 
-    ``tier="auto"``: with ``matrix`` (the sparse matrix ``factor`` factors, in the caller's
-    ordering), the ``"lambda_min"`` tier first: a Lanczos run on the scaled inverse (a few dozen
-    solves with ``factor``), one pass over the factor and one more factorization with its symbolic
-    analysis (``posecrb.linalg.cholesky.refactor``: the inertia check that certifies the
-    eigenvalue); it is kept when it proves ``LOGDET_WARN``, and skipped before the factorization when
-    even the eigenvalue's estimate could not. Otherwise, and without ``matrix``, the
-    ``"selected_inversion"`` tier: one selected inversion that also sums ``|Z| (|L| |L^T|)``
-    supernode by supernode, about twice the flops of the factorization. A status other than ok
-    therefore always comes from the exact sum, with the same bound and message as that tier alone.
-    ``tier="lambda_min"`` or ``"selected_inversion"`` takes that tier only (a lambda_min bound that
-    cannot be certified is infinite, and unavailable with that reason). ``overwrite_factor``: the
-    caller has no further use for ``factor``'s values, so the inertia check refactors it in place
-    (its ordering stays) instead of a copy.
+    ``inverse_diagonal``: an upper bound of ``diag(A^{-1})`` in the caller's ordering, such as the
+    diagonal of ``B^{-1}`` for a matrix ``B <= A`` in the Loewner order
+    (``posecrb.models.paper.tree_inverse``: a spanning tree's FIM), or a function that computes it
+    (None where it has none), called only when the tier runs; it gives the ``"spanning_tree"``
+    tier, ``|| |L|^T sqrt(z) ||^2`` (z permuted to the factor's order): one pass over L, no solve
+    and no factorization.
+
+    ``tier="auto"``: the ``"selected_inversion"`` tier when the inversion takes at most
+    ``EXACT_FIRST_STEPS`` steps (then it costs no more than the others and gives the exact sum).
+    Otherwise the ``"spanning_tree"`` tier first when the factorization takes at least
+    ``TREE_FIRST_FLOPS`` (below that the ``"lambda_min"`` tier costs less than loading the tree's
+    shortest paths), kept when it proves ``LOGDET_WARN``. Then, with ``matrix`` (the sparse matrix
+    ``factor`` factors, in the caller's ordering), the ``"lambda_min"`` tier: a Lanczos run on the
+    scaled inverse (a few dozen solves with ``factor``), one pass over the factor and one more
+    factorization with its symbolic analysis (``posecrb.linalg.cholesky.refactor``: the inertia
+    check that certifies the eigenvalue); it is kept when it proves ``LOGDET_WARN``, and skipped
+    before the factorization when even the eigenvalue's estimate could not. Then the
+    ``"spanning_tree"`` tier if it has not run. Otherwise the ``"selected_inversion"`` tier: one
+    selected inversion that also sums ``|Z| (|L| |L^T|)`` supernode by supernode, about twice the
+    flops of the factorization. A status other than ok therefore always comes from the exact sum,
+    with the same bound and message as that tier alone. ``tier="spanning_tree"``,
+    ``"lambda_min"`` or ``"selected_inversion"`` takes that tier only (a bound that cannot be
+    certified is infinite, and unavailable with that reason). ``overwrite_factor``: the caller has
+    no further use for ``factor``'s values, so the inertia check refactors it in place (its
+    ordering stays) instead of a copy.
 
     Examples
     --------
@@ -151,18 +176,24 @@ def logdet_accuracy(factor: Any, logdet: float, name: str = "matrix", *, matrix:
         raise UsageError(f"tier must be one of {', '.join(TIERS)}, got {tier!r}")
     if factor is None or factor.P().size == 0:
         return LogdetAccuracy(0.0, 0.0)
-    if tier != "selected_inversion" and matrix is None:
-        if tier == "lambda_min":
-            raise UsageError("the lambda_min tier needs the factored matrix (matrix=...)")
-        tier = "selected_inversion"
+    if tier == "spanning_tree" and inverse_diagonal is None:
+        raise UsageError("the spanning_tree tier needs an upper bound of the inverse's diagonal (inverse_diagonal=...)")
+    if tier == "lambda_min" and matrix is None:
+        raise UsageError("the lambda_min tier needs the factored matrix (matrix=...)")
     lower = _lower(factor)
-    if tier == "auto":
+    if tier == "auto" and (matrix is not None or inverse_diagonal is not None):
         from .selinv import inversion_steps, supernode_bounds  # noqa: PLC0415 -- import cycle: selinv builds on cholesky
 
         indptr = lower.indptr.astype(np.int64)
-        tier = ("selected_inversion" if inversion_steps(indptr, supernode_bounds(indptr, lower.indices))
-                <= EXACT_FIRST_STEPS else "auto")
-    if tier != "selected_inversion":
+        if inversion_steps(indptr, supernode_bounds(indptr, lower.indices)) <= EXACT_FIRST_STEPS:
+            tier = "selected_inversion"
+    tree_tier = inverse_diagonal is not None and tier in ("auto", "spanning_tree")
+    if tree_tier and (tier == "spanning_tree" or factorization_flops(lower) >= TREE_FIRST_FLOPS):
+        tree = _spanning_tree_tier(factor, lower, inverse_diagonal, logdet, name, tier == "auto")
+        if tree is not None:
+            return tree
+        tree_tier = False
+    if tier in ("auto", "lambda_min") and matrix is not None:
         from .threads import controller  # noqa: PLC0415 -- loaded with the factor's module
 
         # every BLAS at one thread: solves and vector products too small for threads to pay, which
@@ -171,7 +202,18 @@ def logdet_accuracy(factor: Any, logdet: float, name: str = "matrix", *, matrix:
             cheap = _lambda_min_tier(factor, lower, matrix, logdet, name, tier == "auto", overwrite_factor)
         if cheap is not None:
             return cheap
+    if tree_tier:
+        tree = _spanning_tree_tier(factor, lower, inverse_diagonal, logdet, name, True)
+        if tree is not None:
+            return tree
     return _selected_inversion_tier(factor, lower, logdet, name)
+
+
+def factorization_flops(lower: Any) -> float:
+    """The flops of the numeric factorization that produced ``lower`` (CSC): ``sum_j c_j^2`` over
+    its columns' counts (to leading order)."""
+    counts = np.diff(lower.indptr).astype(float)
+    return float(counts @ counts)
 
 
 def _lower(factor: Any) -> Any:
@@ -223,6 +265,42 @@ def _selected_inversion_tier(factor: Any, lower: Any, logdet: float, name: str) 
     assert total is not None   # requested with absolute_terms=True
     bound = _gamma(lower) * total
     return LogdetAccuracy(float(total), float(bound), _status(bound, logdet, name))
+
+
+def _spanning_tree_tier(factor: Any, lower: Any, inverse_diagonal: Any, logdet: float, name: str,
+                        only_if_ok: bool) -> LogdetAccuracy | None:
+    """The bound from ``z >= diag(A^{-1})``: with ``Z = A^{-1}`` positive definite,
+    ``|Z_ij| <= sqrt(Z_ii Z_jj) <= sqrt(z_i z_j)``, so the exact sum is at most
+    ``sum_ij sqrt(z_i z_j) (|L| |L^T|)_ij = || |L|^T sqrt(z) ||^2`` (z in the factor's order; the
+    pattern of ``|L| |L^T|`` lies in the factor's). ``only_if_ok``: None instead of a bound that
+    does not prove ``LOGDET_WARN``."""
+    import scipy.sparse as sp  # noqa: PLC0415 -- the factor's module has loaded it already
+
+    if callable(inverse_diagonal):
+        inverse_diagonal = inverse_diagonal()
+    if inverse_diagonal is None:
+        return None if only_if_ok else _not_certified(
+            name, "the caller has no bound of the inverse's diagonal", tier="spanning_tree")
+    z = np.asarray(inverse_diagonal, dtype=float)
+    perm = np.asarray(factor.P(), dtype=np.int64)
+    if z.shape != perm.shape:
+        raise UsageError(f"inverse_diagonal has {z.size} entries for a matrix of {perm.size} rows")
+    if not np.all(z > 0):     # a diagonal of a positive definite inverse is positive: not a bound
+        return None if only_if_ok else _not_certified(
+            name, "a bound of the inverse's diagonal is not positive", tier="spanning_tree")
+    if not np.all(np.isfinite(z)):
+        return None if only_if_ok else _not_certified(
+            name, "an edge of the tree carries no information", tier="spanning_tree")
+    col = sp.csr_matrix((np.abs(lower.data), lower.indices, lower.indptr), shape=lower.shape[::-1]) @ np.sqrt(z[perm])
+    with np.errstate(over="ignore"):
+        condition = float(col @ col)
+    bound = _gamma(lower) * condition
+    if not np.isfinite(bound):
+        return None if only_if_ok else _not_certified(name, "its bound overflows", tier="spanning_tree")
+    if only_if_ok and not bound <= LOGDET_WARN * max(1.0, abs(logdet)):
+        return None
+    return LogdetAccuracy(condition, bound, _status(bound, logdet, name), tier="spanning_tree",
+                          condition_kind="upper bound")
 
 
 def _lambda_min_tier(factor: Any, lower: Any, matrix: Any, logdet: float, name: str,
@@ -324,11 +402,15 @@ def _diagonal_shift(matrix: Any) -> Callable[[np.ndarray], Any]:
     return shift
 
 
-def _not_certified(name: str, why: str) -> LogdetAccuracy:
+def _not_certified(name: str, why: str, tier: str = "lambda_min") -> LogdetAccuracy:
+    what = "smallest scaled eigenvalue" if tier == "lambda_min" else "inverse's diagonal"
     return LogdetAccuracy(float("inf"), float("inf"), Status.unavailable(
-        f"the {name}'s smallest scaled eigenvalue could not be certified ({why}): its log-det's accuracy "
-        "is not bounded by the lambda_min tier", "use the selected_inversion tier"),
-        tier="lambda_min", condition_kind="upper bound")
+        f"the {name}'s {what} could not be certified ({why}): its log-det's accuracy "
+        f"is not bounded by the {tier} tier", "use the selected_inversion tier"),
+        tier=tier, condition_kind="upper bound")
 
 
-__all__ = ["LOGDET_WARN", "TIERS", "LogdetAccuracy", "logdet_accuracy", "onenorm_inverse"]
+__all__ = [
+    "LOGDET_WARN", "TIERS", "TREE_FIRST_FLOPS", "LogdetAccuracy", "factorization_flops", "logdet_accuracy",
+    "onenorm_inverse",
+]

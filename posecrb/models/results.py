@@ -110,9 +110,10 @@ class FimResult(_ModelKeys):
     logdet_accuracy : dict or None
         ``condition`` (the log-det's componentwise condition number), ``error_bound`` (a
         first-order bound on its rounding error; ``posecrb.linalg.accuracy``), ``tier`` (what
-        bounded them: ``"lambda_min"``, a certified smallest eigenvalue of the scaled FIM, or
+        bounded them: ``"spanning_tree"``, the inverse's diagonal bounded by a spanning tree's
+        covariance, ``"lambda_min"``, a certified smallest eigenvalue of the scaled FIM, or
         ``"selected_inversion"``, the exact sum) and ``condition_kind`` (``"exact"`` or ``"upper
-        bound"``: the first tier's ``condition`` is an upper bound of the exact one).
+        bound"``: the first two tiers' ``condition`` is an upper bound of the exact one).
         ``logdet_status`` is a warning when the bound exceeds 1e-6 relative and unavailable when
         no digit is correct.
     trace : float

@@ -281,7 +281,7 @@ def edge_information_factors(graph: PoseGraph, rot: np.ndarray, trans: np.ndarra
 
     d, dr, q = graph.dim, graph.rot_dim, graph.q
     tau = graph.tau
-    w = graph.rotation_weights if rotation_weight == "eq59" else rotation_weights(graph.kappa, d, rotation_weight)
+    w = graph.rotation_weights_by(rotation_weight)
     ri, dmat = rotation_jacobians(graph, rot, trans)
     m = graph.m
     u = np.zeros((m, 2 * q, q))

@@ -1,15 +1,17 @@
-"""The log-det's accuracy bound (posecrb.linalg.accuracy) in both tiers, against dense references.
+"""The log-det's accuracy bound (posecrb.linalg.accuracy) in its three tiers, against dense references.
 
 The quantity bounded is ``S = sum_ij |Z_ij| (|L| |L^T|)_ij`` (Z the inverse of ``L L^T``, the
 factor's ordering). The selected-inversion tier computes S itself; the lambda_min tier bounds it by
 ``|| |L|^T s ||^2 / lambda``, ``s = diag(A)^{-1/2}`` and ``lambda`` a certified lower bound of the
-smallest eigenvalue of ``D^{-1/2} A D^{-1/2}``. Both are compared with S and with that closed form
-computed densely (numpy's inverse and eigenvalues), on graphs whose bound stays below the warning
-threshold and on graphs that cross it (anisotropic information summed on the same poses), where
+smallest eigenvalue of ``D^{-1/2} A D^{-1/2}``; the spanning_tree tier by ``|| |L|^T sqrt(z) ||^2``
+for an upper bound z of ``diag(Z)``. All are compared with S and with those closed forms computed
+densely (numpy's inverse and eigenvalues), on graphs whose bound stays below the warning threshold
+and on graphs that cross it (anisotropic information summed on the same poses), where
 ``tier="auto"`` must give exactly the selected inversion's bound, status and message.
 """
 from __future__ import annotations
 
+import json
 import subprocess
 import sys
 
@@ -24,7 +26,7 @@ from posecrb.linalg.cholesky import cholesky
 from posecrb.models.paper.fim import paper_fim
 
 from ..helpers import random_pose_graph
-from ..numerics import inverse_entry_atol
+from ..numerics import MARGIN, inverse_entry_atol
 
 EPS = float(np.finfo(float).eps)
 
@@ -147,6 +149,64 @@ def test_auto_keeps_the_exact_status_and_message(case, monkeypatch):
         assert cheap.status.state == "warning" and auto.tier == "selected_inversion"
 
 
+@pytest.mark.parametrize("case", sorted(WELL) + sorted(CROSSING))
+@pytest.mark.parametrize("slack", [1.0, 1e3])
+def test_the_diagonal_tier_bounds_the_dense_sum_and_keeps_the_exact_status(case, slack, monkeypatch):
+    """The spanning_tree tier with ``z`` = the dense inverse's diagonal (rounded up by its own error
+    bound) times ``slack``: its condition is the closed form || |L|^T sqrt(z) ||^2, at least the
+    exact sum; under ``auto``, tried first (TREE_FIRST_FLOPS 0), it is kept only where it proves
+    LOGDET_WARN, and every status is the selected inversion's."""
+    monkeypatch.setattr(accuracy, "EXACT_FIRST_STEPS", -1)
+    monkeypatch.setattr(accuracy, "TREE_FIRST_FLOPS", 0.0)
+    a = {**WELL, **CROSSING}[case]()
+    factor = cholesky(a)
+    exact_sum, _, _ = dense_reference(factor, a)
+    dense = a.toarray()
+    z = (np.diag(np.linalg.inv(dense)) + inverse_entry_atol(dense)) * slack
+    lower = np.abs(factor.L().toarray())
+    root = np.sqrt(z[factor.P()])
+    closed = float(root @ (lower @ lower.T) @ root)
+    ld, exact, _ = both_tiers(a)
+    tree = logdet_accuracy(factor, ld, "matrix", tier="spanning_tree", inverse_diagonal=z)
+    assert (tree.tier, tree.condition_kind) == ("spanning_tree", "upper bound")
+    assert tree.condition == pytest.approx(closed, rel=MARGIN * a.shape[0] * EPS)
+    assert tree.condition >= exact_sum - exact_tolerance(factor, a, exact_sum)
+    auto = logdet_accuracy(factor, ld, "matrix", matrix=a, inverse_diagonal=z)
+    if tree.error_bound <= LOGDET_WARN * max(1.0, abs(ld)):
+        assert auto == tree and exact.status.ok
+    else:
+        assert auto.tier != "spanning_tree"
+    assert auto.status == exact.status
+
+
+def test_the_tiers_run_in_order_of_cost(monkeypatch):
+    """Below TREE_FIRST_FLOPS the lambda_min tier runs first and the spanning tree only where it
+    cannot prove the digits; at or above it the spanning tree first; the diagonal is computed only
+    when its tier runs."""
+    a = pose_graph_fim(1500, 2, 6)
+    f = cholesky(a)
+    assert accuracy.factorization_flops(f.L()) < accuracy.TREE_FIRST_FLOPS
+    z = np.diag(np.linalg.inv(a.toarray())) * 2.0
+    calls: list[str] = []
+
+    def diagonal():
+        calls.append("diagonal")
+        return z
+
+    got = logdet_accuracy(f, f.logdet(), matrix=a, inverse_diagonal=diagonal)
+    assert got.tier == "lambda_min" and calls == []
+    monkeypatch.setattr(accuracy, "_lambda_min_tier", lambda *args, **kwargs: calls.append("lambda_min"))
+    got = logdet_accuracy(f, f.logdet(), matrix=a, inverse_diagonal=diagonal)
+    assert got.tier == "spanning_tree" and calls == ["lambda_min", "diagonal"]
+    calls.clear()
+    monkeypatch.setattr(accuracy, "TREE_FIRST_FLOPS", accuracy.factorization_flops(f.L()))
+    got = logdet_accuracy(f, f.logdet(), matrix=a, inverse_diagonal=diagonal)
+    assert got.tier == "spanning_tree" and calls == ["diagonal"]
+    # flops = sum of squared column counts
+    counts = np.diff(f.L().tocsc().indptr)
+    assert accuracy.factorization_flops(f.L()) == float(np.sum(counts.astype(float) ** 2))
+
+
 def test_auto_tries_the_cheap_tier_only_on_factors_worth_it():
     """Below EXACT_FIRST_STEPS steps of the selected inversion ``auto`` takes it directly (exact
     numbers at no more cost); without the matrix it is the only tier."""
@@ -267,6 +327,12 @@ def test_arguments_and_the_empty_matrix():
         logdet_accuracy(f, f.logdet(), tier="norm")
     with pytest.raises(UsageError, match="needs the factored matrix"):
         logdet_accuracy(f, f.logdet(), tier="lambda_min")
+    with pytest.raises(UsageError, match="needs an upper bound of the inverse's diagonal"):
+        logdet_accuracy(f, f.logdet(), tier="spanning_tree")
+    with pytest.raises(UsageError, match="entries for a matrix of"):
+        logdet_accuracy(f, f.logdet(), tier="spanning_tree", inverse_diagonal=np.ones(a.shape[0] + 1))
+    negative = logdet_accuracy(f, f.logdet(), tier="spanning_tree", inverse_diagonal=-np.ones(a.shape[0]))
+    assert negative.status.state == "unavailable" and "not positive" in negative.status.reason
     empty = logdet_accuracy(None, 0.0)
     assert (empty.condition, empty.error_bound, empty.status.ok) == (0.0, 0.0, True)
     assert set(empty.as_json()) >= {"condition", "error_bound", "tier", "condition_kind"}
@@ -289,21 +355,25 @@ def test_the_cheap_tier_loads_no_numba():
 
 # The tier ``auto`` takes on each SE-Sync file's paper FIM (at its vertices, or at the certified
 # estimate for the files without any): the selected inversion where it is small (tinyGrid3D,
-# smallGrid3D: at most EXACT_FIRST_STEPS steps) or where the lambda_min bound cannot prove the
-# digits (ais2klinik, parking-garage: 5.0e4 and 1.1e4 times the exact one against thresholds 21
-# and 44 times it); the lambda_min tier everywhere else.
-SESYNC_TIERS = {**dict.fromkeys(("CSAIL", "MIT", "intel", "kitti_05", "manhattan", "kitti_02", "kitti_00", "city10000",
-                                 "sphere2500", "sphere_bignoise_vertex3", "torus3D", "cubicle"), "lambda_min"),
-                **dict.fromkeys(("ais2klinik", "parking-garage", "tinyGrid3D", "smallGrid3D"), "selected_inversion")}
+# smallGrid3D: at most EXACT_FIRST_STEPS steps); the spanning tree's bound where the factorization
+# takes at least TREE_FIRST_FLOPS, or where the lambda_min bound cannot prove the digits (ais2klinik,
+# parking-garage: 5.0e4 and 1.1e4 times the exact one against thresholds 21 and 44 times it); the
+# lambda_min tier on the other small factors.
+SESYNC_TIERS = {
+    **dict.fromkeys(("CSAIL", "MIT", "intel", "kitti_05", "manhattan", "kitti_02", "kitti_00"), "lambda_min"),
+    **dict.fromkeys(("city10000", "sphere2500", "sphere_bignoise_vertex3", "torus3D", "cubicle", "ais2klinik",
+                     "parking-garage"), "spanning_tree"),
+    **dict.fromkeys(("tinyGrid3D", "smallGrid3D"), "selected_inversion"),
+}
 
 
 @pytest.mark.slow
 @pytest.mark.parametrize("name", sorted(SESYNC_TIERS))
 def test_real_datasets_keep_their_status(shared_datasets, name):
-    """On every SE-Sync file ``auto`` gives the exact tier's status and message, and a bound at
-    least the exact one, from the expected tier."""
+    """On every SE-Sync file ``auto`` (with the paper FIM's spanning tree) gives the exact tier's
+    status and message, and a bound at least the exact one, from the expected tier."""
     import posecrb
-    from posecrb.models.paper.fim import fim_symbolic
+    from posecrb.models.paper.fim import fim_logdet_accuracy, fim_symbolic
     from posecrb.solver.estimate import get_estimate
 
     g = posecrb.load(shared_datasets / f"{name}.g2o")
@@ -311,39 +381,20 @@ def test_real_datasets_keep_their_status(shared_datasets, name):
     fim = paper_fim(g, est.rot, est.trans)
     factor, ld = fim_symbolic(fim, "auto").factor_logdet(fim.matrix, name="paper FIM")
     exact = logdet_accuracy(factor, ld, "paper FIM", tier="selected_inversion")
-    auto = logdet_accuracy(factor, ld, "paper FIM", matrix=fim.matrix, overwrite_factor=True)
+    auto = fim_logdet_accuracy(fim, factor, ld, g, est.rot, est.trans)
     assert auto.tier == SESYNC_TIERS[name] and auto.status == exact.status and auto.status.ok
     assert auto.error_bound >= exact.error_bound
+    if name in ("ais2klinik", "cubicle"):
+        assert (accuracy.factorization_flops(factor.L()) >= accuracy.TREE_FIRST_FLOPS) == (name == "cubicle")
 
 
-def test_every_log_det_status_passes_its_matrix(monkeypatch):
-    """``fim`` (paper and sed, default and given anchor) and ``bounds`` hand the matrix they factored
-    to the accuracy bound, so a factor worth it takes the lambda_min tier; the ``fim`` JSON names the
-    tier and what ``condition`` is; each status is the exact tier's."""
-    import posecrb
-    from posecrb.evaluation import evaluate
-
-    g, rot, trans = random_pose_graph(1500, 2, np.random.default_rng(9), loop_closures=500)
-    est = posecrb.Estimate(rot=rot, trans=trans)
-    for model, anchor in (("paper", None), ("sed", None), ("sed", int(g.ids[7]))):
-        res = posecrb.fim(g, model=model, estimate=est, anchor=anchor)
-        keys = res.to_dict()["logdet_accuracy"]
-        assert list(keys) == ["condition", "error_bound", "tier", "condition_kind"], model
-        assert (keys["tier"], keys["condition_kind"]) == ("lambda_min", "upper bound"), (model, anchor)
-        assert res.logdet_status.ok, model
-    seen = []
-
-    def spy(factor, logdet, name, **kwargs):
-        out = logdet_accuracy(factor, logdet, name, **kwargs)
-        seen.append((kwargs.get("matrix") is not None, out.tier))
-        return out
-
-    monkeypatch.setattr(evaluate, "logdet_accuracy", spy)
-    res = posecrb.bounds(g, estimate=est)
-    assert seen == [(True, "lambda_min")] and res.fim is not None and res.fim.logdet_status.ok
-
-
-def test_docstring_examples_run():
-    import doctest
-
-    assert doctest.testmod(accuracy, optionflags=doctest.ELLIPSIS).failed == 0
+@pytest.mark.slow
+def test_bounds_of_ais2klinik_loads_no_numba(shared_datasets):
+    """ais2klinik's digits, which the lambda_min tier cannot prove, come from the spanning tree: the
+    default ``bounds`` loads no compiled kernel."""
+    code = ("import sys, posecrb; from posecrb.cli import main; "
+            f"rc = main(['bounds', {str(shared_datasets / 'ais2klinik.g2o')!r}, '--format', 'json']); "
+            "print(rc, 'numba' in sys.modules, file=sys.stderr)")
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=False, timeout=300)
+    assert out.stderr.strip().splitlines()[-1] == "0 False", out.stderr
+    assert "fim_logdet_status" not in json.loads(out.stdout)

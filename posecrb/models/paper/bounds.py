@@ -99,8 +99,7 @@ def t_optimality(graph: PoseGraph, anchor: int = 0, rotation_weight: str = "eq59
     ``sum_{i != anchor} sum_{j in V_i^+} tau_ij ||p_ij||^2`` (``trace(Psi_(i,j))`` in 3D too, Appendix D).
     """
     tau = graph.tau
-    w = graph.rotation_weights if rotation_weight == "eq59" else rotation_weights(graph.kappa, graph.dim,
-                                                                                rotation_weight)
+    w = graph.rotation_weights_by(rotation_weight)
     ends = (graph.src != anchor).astype(float) + (graph.dst != anchor)
     t_graph = float(graph.dim * np.dot(tau, ends) + graph.rot_dim * np.dot(w, ends))
     psi = tau * np.einsum("ma,ma->m", graph.trans, graph.trans) * (graph.src != anchor)

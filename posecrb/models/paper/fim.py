@@ -54,6 +54,7 @@ from __future__ import annotations
 
 import time
 from dataclasses import dataclass, field, replace
+from typing import Any
 
 import numpy as np
 import scipy.sparse as sp
@@ -61,10 +62,11 @@ import scipy.sparse as sp
 from ...core.choices import FIM_VARIANTS
 from ...core.errors import UsageError
 from ...core.graph import PoseDimensions, PoseGraph
-from ...core.noise import rotation_weights
+from ...linalg.accuracy import LogdetAccuracy, logdet_accuracy
 from ...linalg.cholesky import SymbolicCholesky
 from ...linalg.laplacian import reduced_index
 from ...linalg.ordering import OrderingChoice, ordered_symbolic
+from .tree_inverse import tree_inverse_diagonal
 
 _E2 = np.array([[0.0, -1.0], [1.0, 0.0]])
 LAYOUTS = ("blocks", "poses")
@@ -197,7 +199,7 @@ def paper_fim(graph: PoseGraph, rot: np.ndarray, trans: np.ndarray, anchor: int 
     d, dr, n = graph.dim, graph.rot_dim, graph.n
     npf = n - 1
     tau = graph.tau
-    w = graph.rotation_weights if rotation_weight == "eq59" else rotation_weights(graph.kappa, d, rotation_weight)
+    w = graph.rotation_weights_by(rotation_weight)
     red = reduced_index(n, anchor)
     ri, rj = red[graph.src], red[graph.dst]
     _, dmat = rotation_jacobians(graph, rot, trans)
@@ -274,6 +276,24 @@ def fim_logdet(fim: PaperFim, symbolic: SymbolicCholesky | None = None, *, order
     with ``ordering``). Raises NotPositiveDefinite when F is singular or indefinite."""
     symbolic = symbolic or fim_symbolic(fim, ordering)
     return symbolic.factor_logdet(fim.matrix, name="paper FIM")[1]
+
+
+def fim_logdet_accuracy(fim: PaperFim, factor: Any, logdet: float, graph: PoseGraph, rot: np.ndarray,
+                        trans: np.ndarray) -> LogdetAccuracy:
+    """How many digits of the FIM's ``logdet`` (computed with ``factor``) to trust
+    (``posecrb.linalg.accuracy.logdet_accuracy``), with the covariance of a spanning tree's FIM at
+    the same estimate ``(rot, trans)`` as the upper bound of the inverse's diagonal of its
+    ``spanning_tree`` tier (``posecrb.models.paper.tree_inverse``), computed only when that tier
+    runs. The factor's values are overwritten when a later tier needs an inertia check."""
+
+    def inverse_diagonal() -> np.ndarray | None:
+        z = tree_inverse_diagonal(graph, rot, trans, fim.anchor, fim.rotation_weight, fim.variant)
+        if z is not None and fim.layout != "blocks":
+            z = z[_layout_permutation(fim.n_free, fim.dim, fim.rot_dim, fim.layout)]
+        return z
+
+    return logdet_accuracy(factor, logdet, "paper FIM", matrix=fim.matrix, overwrite_factor=True,
+                           inverse_diagonal=inverse_diagonal)
 
 
 def trace_fim(fim: PaperFim) -> float:

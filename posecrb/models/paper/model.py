@@ -16,14 +16,13 @@ from ...core.choices import FimVariant, Ordering, RotationWeight
 from ...core.errors import ArgumentError
 from ...core.graph import PoseGraph
 from ...core.status import OK
-from ...linalg.accuracy import logdet_accuracy
 from ...linalg.ordering import resolve_ordering
 from ...solver.estimate import Estimate
 from ..inputs import input_files
 from ..results import CrlbResult, FimResult, accuracy_keys, graph_keys
 from .bounds import t_optimality
 from .crlb import paper_crlb
-from .fim import fim_symbolic_choice, paper_fim, trace_fim
+from .fim import fim_logdet_accuracy, fim_symbolic_choice, paper_fim, trace_fim
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -58,7 +57,7 @@ class PaperModel:
         factor, logdet = sym.factor_logdet(fim.matrix, name="paper FIM")
         times["fim_logdet"] = time.perf_counter() - t0
         t0 = time.perf_counter()
-        acc = logdet_accuracy(factor, logdet, "paper FIM", matrix=fim.matrix, overwrite_factor=True)
+        acc = fim_logdet_accuracy(fim, factor, logdet, graph, estimate.rot, estimate.trans)
         times["logdet_accuracy"] = time.perf_counter() - t0
         ids, coord = fim.index_map()
         return FimResult(**graph_keys(graph, self.name), anchors=[fim.anchor_id], layout=fim.layout, size=fim.size,
