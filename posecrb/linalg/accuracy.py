@@ -38,9 +38,10 @@ EXACT_FIRST_STEPS = 500
 
 # "auto" tries the spanning_tree tier before the lambda_min tier when the log-det's factorization
 # takes at least this many flops: the lambda_min tier's cost is about one more factorization, the
-# spanning tree's a fixed one (its shortest paths load scipy's graph routines) plus a pass over the
-# edges, and at this size a factorization of small supernodes costs about that load. Below it the
-# lambda_min tier runs first, and the spanning tree only where it cannot prove the digits.
+# spanning tree's a pass over L and over the edges plus one round of a dozen numpy calls per edge
+# of its longest shortest path (thousands on a long trajectory: ais2klinik's 2,700), which at this
+# size costs less than the factorization. Below it the lambda_min tier runs first (a few solves
+# and a small factorization), and the spanning tree only where it cannot prove the digits.
 TREE_FIRST_FLOPS = 1e8
 
 # The lambda_min tier's Lanczos run: relative residual and restarts. A run to 0.1 takes 2-4 solves
@@ -145,7 +146,7 @@ def logdet_accuracy(factor: Any, logdet: float, name: str = "matrix", *, matrix:
     ``tier="auto"``: the ``"selected_inversion"`` tier when the inversion takes at most
     ``EXACT_FIRST_STEPS`` steps (then it costs no more than the others and gives the exact sum).
     Otherwise the ``"spanning_tree"`` tier first when the factorization takes at least
-    ``TREE_FIRST_FLOPS`` (below that the ``"lambda_min"`` tier costs less than loading the tree's
+    ``TREE_FIRST_FLOPS`` (below that the ``"lambda_min"`` tier can cost less than the tree's
     shortest paths), kept when it proves ``LOGDET_WARN``. Then, with ``matrix`` (the sparse matrix
     ``factor`` factors, in the caller's ordering), the ``"lambda_min"`` tier: a Lanczos run on the
     scaled inverse (a few dozen solves with ``factor``), one pass over the factor and one more
@@ -189,10 +190,13 @@ def logdet_accuracy(factor: Any, logdet: float, name: str = "matrix", *, matrix:
             tier = "selected_inversion"
     tree_tier = inverse_diagonal is not None and tier in ("auto", "spanning_tree")
     if tree_tier and (tier == "spanning_tree" or factorization_flops(lower) >= TREE_FIRST_FLOPS):
-        tree = _spanning_tree_tier(factor, lower, inverse_diagonal, logdet, name, tier == "auto")
+        # |L| in L's own array (a fresh one costs its page faults, a third of the tier on the 3D
+        # files); the next tiers take L again
+        tree = _spanning_tree_tier(factor, lower, inverse_diagonal, logdet, name, tier == "auto", in_place=True)
         if tree is not None:
             return tree
         tree_tier = False
+        lower = _lower(factor)
     if tier in ("auto", "lambda_min") and matrix is not None:
         from .threads import controller  # noqa: PLC0415 -- loaded with the factor's module
 
@@ -268,12 +272,12 @@ def _selected_inversion_tier(factor: Any, lower: Any, logdet: float, name: str) 
 
 
 def _spanning_tree_tier(factor: Any, lower: Any, inverse_diagonal: Any, logdet: float, name: str,
-                        only_if_ok: bool) -> LogdetAccuracy | None:
+                        only_if_ok: bool, in_place: bool = False) -> LogdetAccuracy | None:
     """The bound from ``z >= diag(A^{-1})``: with ``Z = A^{-1}`` positive definite,
     ``|Z_ij| <= sqrt(Z_ii Z_jj) <= sqrt(z_i z_j)``, so the exact sum is at most
     ``sum_ij sqrt(z_i z_j) (|L| |L^T|)_ij = || |L|^T sqrt(z) ||^2`` (z in the factor's order; the
     pattern of ``|L| |L^T|`` lies in the factor's). ``only_if_ok``: None instead of a bound that
-    does not prove ``LOGDET_WARN``."""
+    does not prove ``LOGDET_WARN``. ``in_place``: ``lower``'s values become their magnitudes."""
     import scipy.sparse as sp  # noqa: PLC0415 -- the factor's module has loaded it already
 
     if callable(inverse_diagonal):
@@ -291,7 +295,8 @@ def _spanning_tree_tier(factor: Any, lower: Any, inverse_diagonal: Any, logdet: 
     if not np.all(np.isfinite(z)):
         return None if only_if_ok else _not_certified(
             name, "an edge of the tree carries no information", tier="spanning_tree")
-    col = sp.csr_matrix((np.abs(lower.data), lower.indices, lower.indptr), shape=lower.shape[::-1]) @ np.sqrt(z[perm])
+    magnitudes = np.abs(lower.data, out=lower.data if in_place else None)
+    col = sp.csr_matrix((magnitudes, lower.indices, lower.indptr), shape=lower.shape[::-1]) @ np.sqrt(z[perm])
     with np.errstate(over="ignore"):
         condition = float(col @ col)
     bound = _gamma(lower) * condition

@@ -86,6 +86,39 @@ def test_tree_avoids_weak_edges_and_keeps_the_strongest_parallel_edge():
     assert edge.tolist() == [-1, 0, 1, 4]
 
 
+@pytest.mark.parametrize("rounds", [None, 1])
+@pytest.mark.parametrize(("dim", "n", "anchor", "seed"), CASES)
+def test_tree_paths_are_shortest_in_the_edges_variances(dim, n, anchor, seed, rounds, monkeypatch):
+    """Every tree path is as short as scipy's Dijkstra says the shortest path is, in the lengths
+    1 / tau + 1 / w of the strongest of parallel edges: from the vectorised relaxation and, with
+    its rounds capped at one, from the fallback on Dijkstra itself."""
+    import scipy.sparse as sp
+    from scipy.sparse.csgraph import dijkstra
+
+    from posecrb.models.paper import tree_inverse
+
+    if rounds is not None:
+        monkeypatch.setattr(tree_inverse, "_MAX_ROUNDS", rounds)
+    g, _, _ = varied_graph(n, dim, seed, loop_closures=n)
+    parent, edge = spanning_tree(g, anchor)
+    child = np.flatnonzero(parent >= 0)
+    assert child.size == n - 1 and parent[anchor] == -1
+    ends = np.sort(np.stack([g.src[edge[child]], g.dst[edge[child]]], axis=1), axis=1)
+    assert np.array_equal(ends, np.sort(np.stack([child, parent[child]], axis=1), axis=1))
+    length = 1.0 / g.tau + 1.0 / g.rotation_weights
+    terms = np.zeros((n, 1))
+    terms[child, 0] = length[edge[child]]
+    along_tree, _ = tree_inverse._path_sums(terms, parent, anchor)
+    # the strongest parallel edge is the graph's only edge between its ends
+    lo, hi = np.minimum(g.src, g.dst), np.maximum(g.src, g.dst)
+    order = np.argsort(-g.tau, kind="stable")
+    _, first = np.unique(lo[order] * n + hi[order], return_index=True)
+    kept = order[first]
+    shortest = dijkstra(sp.csr_matrix((length[kept], (lo[kept], hi[kept])), shape=(n, n)), directed=False,
+                        indices=anchor)
+    np.testing.assert_allclose(along_tree[:, 0], shortest, rtol=MARGIN * n * EPS, atol=0)
+
+
 def test_layouts_map_to_their_rows():
     """fim_logdet_accuracy permutes the bound to the FIM's layout: the spanning_tree tier's bound
     equals the dense closed form || |L|^T sqrt(z) ||^2 in either layout and bounds the exact sum."""

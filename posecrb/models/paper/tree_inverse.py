@@ -32,16 +32,24 @@ from ...core.graph import PoseGraph
 EPS = float(np.finfo(float).eps)
 
 
+# Rounds of the vectorised Bellman-Ford relaxation before the tree falls back on scipy's Dijkstra:
+# a round costs a dozen numpy calls whatever its size, so this caps its fixed cost at about the
+# load of scipy's graph routines (which import scipy.sparse.linalg and scipy.linalg). Pose graphs
+# take as many rounds as their shortest paths have edges: 45-160 on the 3D SE-Sync files,
+# city10000 and intel, 2,700 on ais2klinik's long trajectory.
+_MAX_ROUNDS = 4096
+
+
 def spanning_tree(graph: PoseGraph, root: int) -> tuple[np.ndarray, np.ndarray] | None:
     """The shortest-path tree from ``root`` with edge lengths ``1 / tau + 1 / w`` (the edge's
     translation and rotation variances): per pose its parent (-1 at ``root``) and the edge joining
     them (of parallel edges the one of largest ``tau``; -1 at ``root``). None when the graph is not
     connected. Any spanning tree gives a valid bound; paths of small variance keep the tree's
     covariances, and so the bound, close to the graph's (a breadth-first tree can run through a
-    weak edge, a maximum spanning tree through long detours)."""
-    from scipy.sparse import csr_matrix  # noqa: PLC0415 -- loaded with the FIM already
-    from scipy.sparse.csgraph import dijkstra  # noqa: PLC0415 -- lazy: start-up time
+    weak edge, a maximum spanning tree through long detours). Of equally short paths any one.
 
+    Bellman-Ford in vectorised rounds (each relaxes the edges of the poses whose distance changed
+    in the last one), or scipy's Dijkstra after ``_MAX_ROUNDS`` of them."""
     n = graph.n
     lo = np.minimum(graph.src, graph.dst).astype(np.int64)
     hi = np.maximum(graph.src, graph.dst).astype(np.int64)
@@ -51,19 +59,69 @@ def spanning_tree(graph: PoseGraph, root: int) -> tuple[np.ndarray, np.ndarray] 
     edge_of_key = strongest[first]
     with np.errstate(divide="ignore"):
         length = 1.0 / graph.tau[edge_of_key] + 1.0 / graph.rotation_weights[edge_of_key]
-    # csgraph reads an explicit zero as no edge and an infinite length as unreachable: clip both
-    length = np.clip(length, np.finfo(float).tiny, np.finfo(float).max)
-    adj = csr_matrix((length, (keys // n, keys % n)), shape=(n, n))
+    length = np.minimum(length, np.finfo(float).max)      # no information: the longest, not no edge
+    tree = _relaxed_tree(n, keys // n, keys % n, length, root)
+    if tree is None:
+        tree = _dijkstra_tree(n, keys, length, root)
+    parent, via = tree
+    if np.count_nonzero(parent >= 0) != n - 1:
+        return None
+    edge = np.where(via >= 0, edge_of_key[np.maximum(via, 0)], -1)
+    return parent, edge
+
+
+def _relaxed_tree(n: int, lo: np.ndarray, hi: np.ndarray, length: np.ndarray,
+                  root: int) -> tuple[np.ndarray, np.ndarray] | None:
+    """Bellman-Ford from ``root`` over the undirected edges ``(lo, hi)``: per vertex its parent and
+    the index of the edge to it (-1 where unreached), or None after ``_MAX_ROUNDS`` rounds."""
+    m = lo.size
+    tail = np.concatenate([lo, hi])
+    order = np.argsort(tail, kind="stable")
+    tail, head, via_of = tail[order], np.concatenate([hi, lo])[order], np.tile(np.arange(m), 2)[order]
+    indptr = np.zeros(n + 1, dtype=np.int64)
+    np.cumsum(np.bincount(tail, minlength=n), out=indptr[1:])
+    dist = np.full(n, np.inf)
+    dist[root] = 0.0
+    parent = np.full(n, -1, dtype=np.int64)
+    via = np.full(n, -1, dtype=np.int64)
+    changed = np.array([root])
+    for _ in range(_MAX_ROUNDS):
+        if changed.size == 0:
+            return parent, via
+        starts = indptr[changed]
+        counts = indptr[changed + 1] - starts
+        slots = np.repeat(starts - (np.cumsum(counts) - counts), counts) + np.arange(int(counts.sum()))
+        a, b, e = tail[slots], head[slots], via_of[slots]
+        with np.errstate(over="ignore"):      # two edges without information: unreached, no bound
+            reach = dist[a] + length[e]
+        better = reach < dist[b]
+        a, b, e, reach = a[better], b[better], e[better], reach[better]
+        best = np.lexsort((reach, b))                                   # per head, the shortest first
+        keep = np.ones(best.size, dtype=bool)
+        keep[1:] = b[best[1:]] != b[best[:-1]]
+        best = best[keep]
+        changed = b[best]
+        dist[changed] = reach[best]
+        parent[changed] = a[best]
+        via[changed] = e[best]
+    return None
+
+
+def _dijkstra_tree(n: int, keys: np.ndarray, length: np.ndarray, root: int) -> tuple[np.ndarray, np.ndarray]:
+    """``_relaxed_tree``'s result by scipy's Dijkstra (for paths of many edges)."""
+    from scipy.sparse import csr_matrix  # noqa: PLC0415 -- loaded with the FIM already
+    from scipy.sparse.csgraph import dijkstra  # noqa: PLC0415 -- lazy: start-up time
+
+    # csgraph reads an explicit zero as no edge
+    adj = csr_matrix((np.maximum(length, np.finfo(float).tiny), (keys // n, keys % n)), shape=(n, n))
     _, pred = dijkstra(adj, directed=False, indices=root, return_predecessors=True)
     parent = np.asarray(pred, dtype=np.int64)
-    parent[root] = -1
+    parent[parent < 0] = -1
     child = np.flatnonzero(parent >= 0)
-    if child.size != n - 1:
-        return None
-    edge = np.full(n, -1, dtype=np.int64)
+    via = np.full(n, -1, dtype=np.int64)
     p = parent[child]
-    edge[child] = edge_of_key[np.searchsorted(keys, np.minimum(child, p) * n + np.maximum(child, p))]
-    return parent, edge
+    via[child] = np.searchsorted(keys, np.minimum(child, p) * n + np.maximum(child, p))
+    return parent, via
 
 
 def tree_inverse_diagonal(graph: PoseGraph, rot: np.ndarray, trans: np.ndarray, anchor: int,
