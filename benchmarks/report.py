@@ -274,11 +274,14 @@ def goals(run: AsvRun, groups: dict[str, dict]) -> str:
                          f"{'certified' if certified else 'NOT certified'}",
                          _goal(wall is not None and wall <= 15 and certified)])
         elif kind == "bounds-vertices":
-            stages = sum(v for k, v in (checks.get("times") or {}).items()
+            # the work of the stages: each median time times its runs (the default protocol repeats
+            # the short stages; a record without runs counts each stage once)
+            runs = checks.get("runs") or {}
+            stages = sum(v * runs.get(k, 1) for k, v in (checks.get("times") or {}).items()
                          if isinstance(v, (int, float)) and k != "total")
             allowed = 1.5 * stages + 1.5
             rows.append([f"`bounds --estimate vertices` of the 3D grid of {poses:,} poses: wall at most 1.5x "
-                         "the sum of its stage times + 1.5 s",
+                         "the work of its stages (time x runs) + 1.5 s",
                          f"{seconds(wall)} s against stages of {seconds(stages)} s (allowed {seconds(allowed)} s), "
                          f"{memory(comparison['peak_rss'].get('bounds'))}",
                          _goal(wall is not None and wall <= allowed)])

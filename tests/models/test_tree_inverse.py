@@ -119,9 +119,13 @@ def test_tree_paths_are_shortest_in_the_edges_variances(dim, n, anchor, seed, ro
     np.testing.assert_allclose(along_tree[:, 0], shortest, rtol=MARGIN * n * EPS, atol=0)
 
 
-def test_layouts_map_to_their_rows():
+def test_layouts_map_to_their_rows(monkeypatch):
     """fim_logdet_accuracy permutes the bound to the FIM's layout: the spanning_tree tier's bound
     equals the dense closed form || |L|^T sqrt(z) ||^2 in either layout and bounds the exact sum."""
+    from posecrb.linalg import accuracy
+
+    monkeypatch.setattr(accuracy, "EXACT_FIRST_STEPS", -1)    # the tree's tier even on a small factor
+    monkeypatch.setattr(accuracy, "TREE_FIRST_FLOPS", 0.0)
     g, rot, trans = varied_graph(50, 3, 4, loop_closures=25)
     for layout in ("blocks", "poses"):
         fim = paper_fim(g, rot, trans, 0, layout=layout)
@@ -142,7 +146,12 @@ def test_layouts_map_to_their_rows():
         assert exact.condition <= got.condition
         sym, _ = fim_symbolic_choice(fim)
         f2, ld = sym.factor_logdet(fim.matrix)
-        assert fim_logdet_accuracy(fim, f2, ld, g, rot, trans).status.ok
+        lower2 = np.abs(f2.L().toarray())
+        root2 = np.sqrt(z[f2.P()])
+        through_model = fim_logdet_accuracy(fim, f2, ld, g, rot, trans)
+        assert through_model.tier == "spanning_tree" and through_model.status.ok
+        assert through_model.condition == pytest.approx(float(root2 @ (lower2 @ lower2.T) @ root2),
+                                                        rel=MARGIN * dense.shape[0] * EPS)
 
 
 def test_no_closed_form_for_eq64_in_3d_or_a_disconnected_graph():

@@ -185,7 +185,9 @@ def tree_inverse_diagonal(graph: PoseGraph, rot: np.ndarray, trans: np.ndarray, 
         if d == 2:
             axis = spread[:, ::-1]                                       # x moves with the y lever
         else:
-            axis = spread.sum(axis=1, keepdims=True) - spread            # |v|^2 - v_k^2
+            # |v|^2 - v_k^2 as the other two axes' sum: one rounding of two nonnegative terms (a
+            # difference from the full sum would cancel where axis k dominates)
+            axis = np.roll(spread, -1, axis=1) + np.roll(spread, -2, axis=1)
         grow = 1.0 + (passes + 4) * EPS
         trans_diag = (axis + t0[:, None]) * grow
         rot_diag = np.repeat(r0[:, None], 1 if d == 2 else 3, axis=1) * grow
