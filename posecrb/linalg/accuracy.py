@@ -39,7 +39,7 @@ EXACT_FIRST_STEPS = 500
 # "auto" tries the spanning_tree tier before the lambda_min tier when the log-det's factorization
 # takes at least this many flops: the lambda_min tier's cost is about one more factorization, the
 # spanning tree's a pass over L and over the edges plus one round of a dozen numpy calls per edge
-# of its longest shortest path (thousands on a long trajectory: ais2klinik's 2,700), which at this
+# of its longest shortest path (thousands on a long trajectory: ais2klinik's 2,686), which at this
 # size costs less than the factorization. Below it the lambda_min tier runs first (a few solves
 # and a small factorization), and the spanning tree only where it cannot prove the digits.
 TREE_FIRST_FLOPS = 1e8
@@ -190,13 +190,18 @@ def logdet_accuracy(factor: Any, logdet: float, name: str = "matrix", *, matrix:
             tier = "selected_inversion"
     tree_tier = inverse_diagonal is not None and tier in ("auto", "spanning_tree")
     if tree_tier and (tier == "spanning_tree" or factorization_flops(lower) >= TREE_FIRST_FLOPS):
-        # |L| in L's own array (a fresh one costs its page faults, a third of the tier on the 3D
-        # files); the next tiers take L again
-        tree = _spanning_tree_tier(factor, lower, inverse_diagonal, logdet, name, tier == "auto", in_place=True)
-        if tree is not None:
-            return tree
         tree_tier = False
-        lower = _lower(factor)
+        z, why = _diagonal_bound(inverse_diagonal, lower.shape[0])
+        if z is None:
+            if tier == "spanning_tree":
+                return _not_certified(name, why, tier="spanning_tree")
+        else:
+            # |L| in L's own array (a fresh one costs its page faults, a third of the tier on the
+            # 3D files); the next tiers take L again
+            tree = _spanning_tree_tier(factor, lower, z, logdet, name, tier == "auto", in_place=True)
+            if tree is not None:
+                return tree
+            lower = _lower(factor)
     if tier in ("auto", "lambda_min") and matrix is not None:
         from .threads import controller  # noqa: PLC0415 -- loaded with the factor's module
 
@@ -207,7 +212,8 @@ def logdet_accuracy(factor: Any, logdet: float, name: str = "matrix", *, matrix:
         if cheap is not None:
             return cheap
     if tree_tier:
-        tree = _spanning_tree_tier(factor, lower, inverse_diagonal, logdet, name, True)
+        z, _ = _diagonal_bound(inverse_diagonal, lower.shape[0])
+        tree = None if z is None else _spanning_tree_tier(factor, lower, z, logdet, name, True)
         if tree is not None:
             return tree
     return _selected_inversion_tier(factor, lower, logdet, name)
@@ -271,30 +277,34 @@ def _selected_inversion_tier(factor: Any, lower: Any, logdet: float, name: str) 
     return LogdetAccuracy(float(total), float(bound), _status(bound, logdet, name))
 
 
-def _spanning_tree_tier(factor: Any, lower: Any, inverse_diagonal: Any, logdet: float, name: str,
-                        only_if_ok: bool, in_place: bool = False) -> LogdetAccuracy | None:
-    """The bound from ``z >= diag(A^{-1})``: with ``Z = A^{-1}`` positive definite,
-    ``|Z_ij| <= sqrt(Z_ii Z_jj) <= sqrt(z_i z_j)``, so the exact sum is at most
-    ``sum_ij sqrt(z_i z_j) (|L| |L^T|)_ij = || |L|^T sqrt(z) ||^2`` (z in the factor's order; the
-    pattern of ``|L| |L^T|`` lies in the factor's). ``only_if_ok``: None instead of a bound that
-    does not prove ``LOGDET_WARN``. ``in_place``: ``lower``'s values become their magnitudes."""
-    import scipy.sparse as sp  # noqa: PLC0415 -- the factor's module has loaded it already
-
+def _diagonal_bound(inverse_diagonal: Any, n: int) -> tuple[np.ndarray | None, str]:
+    """``logdet_accuracy``'s ``inverse_diagonal`` as an array (its function called), or None and
+    why it cannot bound the diagonal of a positive definite inverse."""
     if callable(inverse_diagonal):
         inverse_diagonal = inverse_diagonal()
     if inverse_diagonal is None:
-        return None if only_if_ok else _not_certified(
-            name, "the caller has no bound of the inverse's diagonal", tier="spanning_tree")
+        return None, "the caller has no bound of the inverse's diagonal"
     z = np.asarray(inverse_diagonal, dtype=float)
-    perm = np.asarray(factor.P(), dtype=np.int64)
-    if z.shape != perm.shape:
-        raise UsageError(f"inverse_diagonal has {z.size} entries for a matrix of {perm.size} rows")
+    if z.shape != (n,):
+        raise UsageError(f"inverse_diagonal has {z.size} entries for a matrix of {n} rows")
     if not np.all(z > 0):     # a diagonal of a positive definite inverse is positive: not a bound
-        return None if only_if_ok else _not_certified(
-            name, "a bound of the inverse's diagonal is not positive", tier="spanning_tree")
+        return None, "a bound of the inverse's diagonal is not positive"
     if not np.all(np.isfinite(z)):
-        return None if only_if_ok else _not_certified(
-            name, "an edge of the tree carries no information", tier="spanning_tree")
+        return None, "an edge of the tree carries no information"
+    return z, ""
+
+
+def _spanning_tree_tier(factor: Any, lower: Any, z: np.ndarray, logdet: float, name: str,
+                        only_if_ok: bool, in_place: bool = False) -> LogdetAccuracy | None:
+    """The bound from ``z >= diag(A^{-1})`` (``_diagonal_bound``'s): with ``Z = A^{-1}`` positive
+    definite, ``|Z_ij| <= sqrt(Z_ii Z_jj) <= sqrt(z_i z_j)``, so the exact sum is at most
+    ``sum_ij sqrt(z_i z_j) (|L| |L^T|)_ij = || |L|^T sqrt(z) ||^2`` (z in the caller's order,
+    permuted to the factor's; the pattern of ``|L| |L^T|`` lies in the factor's). ``only_if_ok``:
+    None instead of a bound that does not prove ``LOGDET_WARN``. ``in_place``: ``lower``'s values
+    become their magnitudes."""
+    import scipy.sparse as sp  # noqa: PLC0415 -- the factor's module has loaded it already
+
+    perm = np.asarray(factor.P(), dtype=np.int64)
     magnitudes = np.abs(lower.data, out=lower.data if in_place else None)
     col = sp.csr_matrix((magnitudes, lower.indices, lower.indptr), shape=lower.shape[::-1]) @ np.sqrt(z[perm])
     with np.errstate(over="ignore"):

@@ -204,6 +204,17 @@ def test_the_tiers_run_in_order_of_cost(monkeypatch):
     monkeypatch.setattr(accuracy, "TREE_FIRST_FLOPS", accuracy.factorization_flops(f.L()))
     got = logdet_accuracy(f, f.logdet(), matrix=a, inverse_diagonal=diagonal)
     assert got.tier == "spanning_tree" and calls == ["diagonal"]
+    # a caller without a bound costs no second copy of L; a bound that does not prove the digits
+    # (the tier took |L| in place) one, for the tiers after it
+    copies = []
+    honest_lower = accuracy._lower
+    monkeypatch.setattr(accuracy, "_lower", lambda factor: copies.append(1) or honest_lower(factor))
+    monkeypatch.setattr(accuracy, "_lambda_min_tier", lambda *args, **kwargs: None)
+    assert logdet_accuracy(f, f.logdet(), matrix=a, inverse_diagonal=lambda: None).tier == "selected_inversion"
+    assert len(copies) == 1
+    copies.clear()
+    loose = logdet_accuracy(f, f.logdet(), matrix=a, inverse_diagonal=z * 1e30)
+    assert loose == logdet_accuracy(f, f.logdet(), tier="selected_inversion") and len(copies) == 3
     # flops = sum of squared column counts
     counts = np.diff(f.L().tocsc().indptr)
     assert accuracy.factorization_flops(f.L()) == float(np.sum(counts.astype(float) ** 2))

@@ -35,8 +35,8 @@ EPS = float(np.finfo(float).eps)
 # Rounds of the vectorised Bellman-Ford relaxation before the tree falls back on scipy's Dijkstra:
 # a round costs a dozen numpy calls whatever its size, so this caps its fixed cost at about the
 # load of scipy's graph routines (which import scipy.sparse.linalg and scipy.linalg). Pose graphs
-# take as many rounds as their shortest paths have edges: 45-160 on the 3D SE-Sync files,
-# city10000 and intel, 2,700 on ais2klinik's long trajectory.
+# take as many rounds as their shortest paths have edges: 45-162 on the 3D SE-Sync files,
+# city10000 and intel, 2,686 on ais2klinik's long trajectory.
 _MAX_ROUNDS = 4096
 
 
