@@ -350,6 +350,19 @@ def sesync_goal(comparison: dict, floor: float | None) -> str:
     return "met" if floor is not None and ours <= theirs + floor + 0.1 else "missed"
 
 
+def agreement(agree: bool | None, theirs: float | None, ours: float | None, certified: bool | None) -> str:
+    """The "agree" cell: yes, or no with the side whose objective is lower. Where posecrb's certified
+    optimum is the lower one, SE-Sync stopped above the optimum (its own stopping rule, not a
+    different problem)."""
+    if agree:
+        return "yes"
+    if theirs is None or ours is None or not (math.isfinite(theirs) and math.isfinite(ours)):
+        return "**no**"
+    if ours < theirs:
+        return "**no**: posecrb lower" + (" (certified)" if certified else "")
+    return "**no**: SE-Sync lower"
+
+
 def sesync(groups: dict[str, dict]) -> str:
     group = groups.get("sesync")
     if not group:
@@ -371,7 +384,7 @@ def sesync(groups: dict[str, dict]) -> str:
         rows.append([c["label"], str(checks.get("dim", "")), f"{checks.get('poses', 0):,}", seconds(theirs),
                      seconds(ours), ratio(ours, theirs), memories(c, "SE-Sync", "posecrb"),
                      f"{s.get('objective', math.nan):.6g} / {p.get('objective', math.nan):.10g}",
-                     "yes" if checks.get("agree") else "**no**",
+                     agreement(checks.get("agree"), s.get("objective"), p.get("objective"), p.get("certified")),
                      f"{s.get('status', '?')} / {'certified' if p.get('certified') else 'NOT certified'}",
                      sesync_goal(c, floor)])
     rows.append(["**sum**", "", "", seconds(totals[0]), seconds(totals[1]), f"**{ratio(totals[1], totals[0])}**",
@@ -593,7 +606,8 @@ def baseline(groups: dict[str, dict]) -> str:
             ch = c.get("checks", {})
             p_now, p_before = ch.get("parse"), ch.get("parse_before")
             ok = p_now is not None and p_before is not None and p_before >= 4 * p_now
-            rows.append([f"parse {name} (in-process)", seconds(p_before), seconds(p_now), ratio(p_now, p_before),
+            runs = f", median of {ch['parse_runs']}" if ch.get("parse_runs") else ""
+            rows.append([f"parse {name} (in-process{runs})", seconds(p_before), seconds(p_now), ratio(p_now, p_before),
                          _goal(ok)])
             rows.append([f"`info` {name}", seconds(median(c, "info before")), seconds(median(c, "info")),
                          ratio(median(c, "info"), median(c, "info before")), ""])

@@ -22,7 +22,10 @@ directory), which does posecrb's own small dense products.
   ``factorization_threads``) and in the triangular solves with those factors of 3D graphs
   (``solve_threads``, posecrb.solver.problem): the top separators of a 3D graph are dense
   triangles of thousands of rows, whose solves two threads share. The solves re-count the busy
-  cores at most once a second.
+  cores at most once a second. ``verify``'s certificates and refinement run inside the same
+  policy (``posecrb.solver.solve.solver_thread_policy``), and the CRLB's accuracy estimate solves
+  at one thread unless its matrix is threaded: a solve with one right-hand side through small
+  supernodes took several times longer on OpenBLAS's threads.
 * numpy's/scipy's OpenBLAS stays at one thread in the solver and the selected inversion: its
   threads collapse under load (posecrb.linalg.selinv). The exception: the selected inversion's
   supernodes of at least 10^9 flops (the top separators of large graphs, nearly all of its flops

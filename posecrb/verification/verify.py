@@ -22,7 +22,7 @@ from ..models.paper.crlb import crlb_from_fim
 from ..models.paper.fim import paper_fim
 from ..solver.problem import Problem
 from ..solver.refine import refine
-from ..solver.solve import SolveResult, solve
+from ..solver.solve import SolveResult, solve, solver_thread_policy
 from .distance import paper_delta, pose_mahalanobis, squared_mahalanobis
 from .g2o_cost import g2o_chi2
 from .judge import Judgement, Precision, judge
@@ -58,7 +58,8 @@ def verify_estimate(graph: PoseGraph, estimate: Poses, *, anchor: int = 0, run_s
     problem = Problem.from_graph(graph)
     times["problem"] = time.perf_counter() - t0
     t1 = time.perf_counter()
-    at_estimate = judge(problem, estimate.rot, estimate.trans, estimate.precision, certificate_tol=certificate_tol)
+    with solver_thread_policy(graph):
+        at_estimate = judge(problem, estimate.rot, estimate.trans, estimate.precision, certificate_tol=certificate_tol)
     times["certificate"] = time.perf_counter() - t1
     g2o_cost = g2o_chi2(graph, estimate.rot, estimate.trans)
     keys: dict[str, Any] = {
@@ -78,10 +79,13 @@ def verify_estimate(graph: PoseGraph, estimate: Poses, *, anchor: int = 0, run_s
     times["solve"] = time.perf_counter() - t1
     exact = optimum.certified and optimum.duality_gap_status.ok
     t1 = time.perf_counter()
-    refined = None if at_estimate.certified else refine(problem, estimate.rot)
+    with solver_thread_policy(graph):
+        refined = None if at_estimate.certified else refine(problem, estimate.rot)
     times["refine"] = time.perf_counter() - t1
     t1 = time.perf_counter()
-    at_optimum = judge(problem, optimum.rot, optimum.trans, Precision.exact(graph.n), certificate_tol=certificate_tol)
+    with solver_thread_policy(graph):
+        at_optimum = judge(problem, optimum.rot, optimum.trans, Precision.exact(graph.n),
+                           certificate_tol=certificate_tol)
     times["optimum_certificate"] = time.perf_counter() - t1
     lower, source = _lower_bound(at_estimate, at_optimum, optimum, problem.n * problem.d, certificate_tol)
     f_opt = optimum.objective

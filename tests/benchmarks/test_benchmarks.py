@@ -243,6 +243,11 @@ def test_report_tables_from_records_made_here(tmp_path):
     assert "intel 0.100 s against 0.200 s (0.50x)" in relax and relax.endswith("| yes |")
     assert "| **sum** |  |  | 2.700 | 2.050 | **0.76** |" in tables["sesync"]
     assert "| slow |" in tables["sesync"] and "| **no** |" in tables["sesync"]
+    assert report.agreement(True, 10.0, 10.0, True) == "yes"
+    assert report.agreement(False, 125.698, 125.693515, True) == "**no**: posecrb lower (certified)"
+    assert report.agreement(False, 125.698, 125.693515, False) == "**no**: posecrb lower"
+    assert report.agreement(False, 125.69, 125.70, True) == "**no**: SE-Sync lower"
+    assert report.agreement(False, math.nan, 1.0, True) == "**no**"
     assert "| grid3d-20000 | 2.000 | 5.000 | - | auto |" in tables["orderings"]
     assert "| intel | - | 0.100 |" in tables["inprocess"]
     assert tables["gtsam"].startswith("No results") and "gtsam_marginals.py" in tables["gtsam"]
@@ -431,6 +436,34 @@ def test_alternating_rounds_merge_one_run_per_call_in_reversed_orders(monkeypatc
     assert before["times"] == [11.0, 20.0, 31.0] and before["median"] == 20.0 and out["alternated"] == 3
 
 
+def test_stage_samples_alternate_the_commands_and_keep_every_reported_time(monkeypatch):
+    """The parse stage's samples: the check run's JSON, then one untimed run of each command per
+    round in alternating order; a failed run or one without the stage adds nothing."""
+    import json
+
+    commands_module, harness = _module("commands"), _module("harness")
+    order = []
+    replies = {"now": iter([0.3, 0.2, None]), "before": iter([1.1, "fail", 0.9])}
+
+    def fake_run(cmd, timeout=None):
+        order.append(cmd.label)
+        value = next(replies[cmd.label])
+        if value == "fail":
+            return harness.CheckRun(1, "", "boom", None)
+        times = {} if value is None else {"parse": value}
+        return harness.CheckRun(0, json.dumps({"times": times}), "", None)
+
+    monkeypatch.setattr(harness, "check_run", fake_run)
+    now, before = harness.Command("now", ("true",)), harness.Command("before", ("true",))
+    entry = {"outputs": {"now": harness.CheckRun(0, json.dumps({"times": {"parse": 0.25}}), "", None),
+                         "before": harness.CheckRun(0, "not json", "", None)}}
+    samples = commands_module.stage_samples(entry, [now, before], "parse", 3)
+    assert order == ["now", "before", "before", "now", "now", "before"]
+    assert samples == {"now": [0.25, 0.3, 0.2], "before": [1.1, 0.9]}
+    assert commands_module.median_or_none(samples["now"]) == 0.25
+    assert commands_module.median_or_none([]) is None
+
+
 def test_report_baseline_judges_the_cost_goals(tmp_path):
     """The baseline table from records made here: bounds against the allowance from solve, select's
     exponent over the grids (a closed-form power law), its certified ratios, the parse speed-up."""
@@ -447,7 +480,7 @@ def test_report_baseline_judges_the_cost_goals(tmp_path):
         comps.append({"label": f"select grid2d-{n}", "hyperfine": timed(select=1e-4 * n ** 1.1, select_before=1.0),
                       "checks": {"candidates": n, "ratio": 0.80, "ratio_before": 0.805, "method": "rounds"}})
     comps.append({"label": "parse grid2d-100000", "hyperfine": timed(info=0.5, info_before=1.2),
-                  "checks": {"parse": 0.2, "parse_before": 1.0}})
+                  "checks": {"parse": 0.2, "parse_before": 1.0, "parse_runs": 4}})
     text = report.baseline({"baseline": {"environment": {"baseline_commit": "65df671"}, "comparisons": comps}})
     assert text.startswith("Against 65df671")
     goals = {line.split("|")[1].strip(): line.split("|")[-2].strip() for line in text.splitlines()
@@ -456,6 +489,7 @@ def test_report_baseline_judges_the_cost_goals(tmp_path):
     exponent = [line for line in text.splitlines() if "exponent in the candidates" in line][0]
     assert "| 1.10 |" in exponent and exponent.endswith("| yes |")
     assert goals["parsing the 2D grid at least 4x faster"] == "yes"
+    assert "| parse grid2d-100000 (in-process, median of 4) | 1.000 | 0.200 |" in text
     assert goals["certified ratio at least the earlier greedy's minus 0.01"] == "yes"
 
 

@@ -194,6 +194,37 @@ def test_inverse_accuracy_against_dense_references():
     assert sp.issparse(f)
 
 
+def test_inverse_accuracy_solves_at_one_thread_unless_the_matrix_is_threaded(monkeypatch):
+    """The estimate's solves run CHOLMOD's BLAS at one thread for a matrix factored at one thread,
+    even where the caller left it at two, and at the load-aware count for a threaded matrix; the
+    numbers are the same either way."""
+    import posecrb.models.paper.crlb as crlb_mod
+    from posecrb.linalg import threads
+    from posecrb.linalg.cholesky import cholesky
+
+    g = make_random_graph(np.random.default_rng(3), n=9, extra=6, dim=3)
+    f = paper_fim(g, g.vertex_rot, g.vertex_trans, anchor=0).matrix
+    factor = cholesky(f)
+    seen: list[int] = []
+
+    def spied(b):
+        seen.append(threads.cholmod_threads())
+        return factor(b)
+
+    monkeypatch.setattr(threads, "busy_cores", lambda: 0)     # an idle machine: no cores to leave
+    with threads.cholmod_blas().limit(limits=2):
+        if threads.cholmod_threads() != 2:
+            pytest.skip("CHOLMOD's BLAS cannot be given two threads here")
+        single = crlb_mod.inverse_accuracy(f, spied, "paper FIM")
+        assert seen and set(seen) == {1}
+        seen.clear()
+        threaded = crlb_mod.inverse_accuracy(f, spied, "paper FIM", threaded=True)
+        assert seen and set(seen) == {2}
+        assert threads.cholmod_threads() == 2
+    assert single.condition_estimate == pytest.approx(threaded.condition_estimate, rel=1e-10)
+    assert single.status.state == threaded.status.state == "ok"
+
+
 @pytest.mark.parametrize("weak,state", [(1e-6, "warning"), (1e-13, "unavailable")])
 def test_accuracy_status_of_an_ill_conditioned_fim(weak, state):
     """A weak bridge makes F ill-conditioned; the scaled condition number (checked against a dense

@@ -122,3 +122,28 @@ def test_where_the_relaxation_is_not_exact_nothing_is_certified(tmp_path):
     assert r.lower_bound_source == "solve's certified relaxation"
     assert r.lower_bound <= sol.relaxation_value <= r.objective
     assert r.optimum_status.state == "warning"
+
+
+def test_the_certificate_and_the_refinement_run_under_the_solvers_thread_policy(monkeypatch):
+    """The judgements at the estimate and at the optimum and the refinement run the solver's linear
+    algebra as ``solve`` does: CHOLMOD's BLAS at one thread for a small graph, even where the
+    caller left it at two (outside that policy each Lanczos solve paid for the threads)."""
+    import posecrb.verification.verify as verify_mod
+    from posecrb.linalg import threads
+
+    g = ring(24, 3, closures=4)
+    sol = solve(g)
+    seen: dict[str, list[int]] = {"judge": [], "refine": []}
+    for name, real in (("judge", verify_mod.judge), ("refine", verify_mod.refine)):
+        def spy(*args, _real=real, _name=name, **kwargs):
+            seen[_name].append(threads.cholmod_threads())
+            return _real(*args, **kwargs)
+        monkeypatch.setattr(verify_mod, name, spy)
+    rng = np.random.default_rng(3)
+    rot = sol.rot @ so3_exp(1e-3 * rng.standard_normal((g.n, 3)))
+    with threads.cholmod_blas().limit(limits=2):
+        if threads.cholmod_threads() != 2:
+            pytest.skip("CHOLMOD's BLAS cannot be given two threads here")
+        judged(g, rot, sol.trans)
+        assert threads.cholmod_threads() == 2      # restored after the call
+    assert seen == {"judge": [1, 1], "refine": [1]}

@@ -50,8 +50,9 @@ from ...core.result import Result, plain
 from ...core.status import OK, Status
 from ...linalg.accuracy import onenorm_inverse
 from ...linalg.cholesky import Factor
-from ...linalg.ordering import block_cholesky
+from ...linalg.ordering import block_cholesky, threaded_matrix
 from ...linalg.selinv import _block_pattern_padded, inverse_block_diagonal
+from ...linalg.threads import cholmod_single_threaded, load_aware_threads
 from .fim import PaperFim, coordinate_names, paper_fim
 
 # eq. (68): warn when the curvature correction exceeds this fraction of the first-order term
@@ -128,9 +129,18 @@ class InverseAccuracy(Result):
 
 
 def inverse_accuracy(a: sp.spmatrix, factor: Factor, name: str = "matrix", columns: int = ACCURACY_COLUMNS,
-                     seed: int = ACCURACY_SEED) -> InverseAccuracy:
-    """Accuracy estimate of ``a^{-1}`` computed from ``factor`` (a CHOLMOD factor of ``a``)."""
+                     seed: int = ACCURACY_SEED, *, threaded: bool = False) -> InverseAccuracy:
+    """Accuracy estimate of ``a^{-1}`` computed from ``factor`` (a CHOLMOD factor of ``a``).
 
+    ``threaded``: ``a`` is a matrix whose factorization takes CHOLMOD's BLAS threads
+    (``posecrb.linalg.ordering.threaded_matrix``); its solves here do too. Otherwise they run it at
+    one thread: the estimate's dozen solves with one or a few right-hand sides went through small
+    supernodes, where OpenBLAS's threads made them several times slower (posecrb.linalg.threads)."""
+    with load_aware_threads() if threaded else cholmod_single_threaded():
+        return _inverse_accuracy(a, factor, name, columns, seed)
+
+
+def _inverse_accuracy(a: sp.spmatrix, factor: Factor, name: str, columns: int, seed: int) -> InverseAccuracy:
     a = sp.csc_matrix(a)
     n = a.shape[0]
     if n == 0:
@@ -258,7 +268,8 @@ def crlb_from_fim(fim: PaperFim, graph: PoseGraph, per_pose: bool | Sequence[int
     blocks = inverse_block_diagonal(fp.matrix, q, name="paper FIM", factor=factor)   # (n_p, q, q) of F^{-1}
     times["crlb_blocks"] = time.perf_counter() - t0
     t0 = time.perf_counter()
-    accuracy = inverse_accuracy(fp.matrix, factor, "paper FIM") if npf else None
+    accuracy = inverse_accuracy(fp.matrix, factor, "paper FIM", threaded=threaded_matrix(d, graph.n, "crlb")) \
+        if npf else None
     times["accuracy"] = time.perf_counter() - t0
     diag = np.einsum("kii->ki", blocks)
     tr_t, tr_r = float(diag[:, :d].sum()), float(diag[:, d:].sum())

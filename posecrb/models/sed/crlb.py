@@ -13,7 +13,7 @@ import numpy as np
 from ...core.errors import NotPositiveDefinite, UsageError
 from ...core.graph import PoseGraph
 from ...linalg import selinv
-from ...linalg.ordering import block_cholesky
+from ...linalg.ordering import block_cholesky, threaded_matrix
 from ..paper.crlb import inverse_accuracy
 from .fim import SedFim, _free_matrix, _resolve_anchors, sed_fim
 
@@ -108,7 +108,8 @@ def sed_crlb(graph: PoseGraph, rot: np.ndarray, trans: np.ndarray, anchors: Sequ
     times["crlb_selinv"] = time.perf_counter() - t0
     t0 = time.perf_counter()
 
-    accuracy = inverse_accuracy(ff, fac, "SE(d) FIM on the free poses") if fac is not None else None
+    accuracy = inverse_accuracy(ff, fac, "SE(d) FIM on the free poses",
+                                threaded=threaded_matrix(graph.dim, graph.n, "crlb")) if fac is not None else None
     times["accuracy"] = time.perf_counter() - t0
 
     c = fim.components
