@@ -51,14 +51,11 @@ def squared_mahalanobis(fim: PaperFim, graph: PoseGraph, delta: np.ndarray) -> f
     return float(v @ (fim.matrix @ v))
 
 
-def pose_mahalanobis(blocks: dict[int, np.ndarray], graph: PoseGraph, delta: np.ndarray, anchor_id: int
-                     ) -> tuple[np.ndarray, np.ndarray]:
-    """(ids, values): ``delta_i^T C_i^{-1} delta_i`` for every free pose with a marginal block ``C_i``
-    (the CRLB's per-pose blocks by pose id; the anchor's is zero), by a Cholesky solve of each block
-    (vectorised)."""
-    ids = np.fromiter((k for k in blocks if k != anchor_id), dtype=np.int64)
-    cov = np.stack([blocks[int(i)] for i in ids]) if ids.size else np.empty((0,) + delta.shape[1:] * 2)
+def pose_mahalanobis(ids: np.ndarray, blocks: np.ndarray, graph: PoseGraph, delta: np.ndarray) -> np.ndarray:
+    """``delta_i^T C_i^{-1} delta_i`` of the poses ``ids`` with their marginal blocks ``C_i``
+    (``blocks``, (k, q, q): the CRLB's first-order blocks, ``posecrb.models.paper.crlb.crlb_blocks``),
+    by a Cholesky solve of each block (vectorised)."""
     d = delta[np.searchsorted(graph.ids, ids)]
-    chol = np.linalg.cholesky(cov)
+    chol = np.linalg.cholesky(blocks)
     y = np.linalg.solve(chol, d[:, :, None])[:, :, 0]
-    return ids, np.einsum("ka,ka->k", y, y)
+    return np.einsum("ka,ka->k", y, y)

@@ -18,7 +18,7 @@ import numpy as np
 from ..core.choices import Verdict
 from ..core.graph import PoseGraph
 from ..core.status import OK, Status
-from ..models.paper.crlb import crlb_from_fim
+from ..models.paper.crlb import crlb_blocks
 from ..models.paper.fim import paper_fim
 from ..solver.problem import Problem
 from ..solver.refine import refine
@@ -200,12 +200,14 @@ def _distances(graph: PoseGraph, estimate: Poses, optimum: SolveResult, anchor: 
                              "fim": f"paper model, {fim.variant} variant, rotation weight {fim.rotation_weight}, "
                                     f"anchored at pose {int(graph.ids[anchor])}, at the optimum"}
     status = OK
-    crlb = crlb_from_fim(fim, graph, True)
-    if crlb.accuracy is not None and not crlb.accuracy.status.available:
-        status = Status.warning(f"the per-pose distances are not available: {crlb.accuracy.status.reason}")
+    # only the first-order blocks: eq. (68)'s curvature term is not part of the distance
+    blocks, accuracy, _ = crlb_blocks(fim, graph)
+    if accuracy is not None and not accuracy.status.available:
+        status = Status.warning(f"the per-pose distances are not available: {accuracy.status.reason}")
         mahal.update(max_pose=None, max_pose_id=None)
     else:
-        ids, values = pose_mahalanobis(crlb.per_pose or {}, graph, delta, int(graph.ids[anchor]))
+        ids = fim.pose_ids
+        values = pose_mahalanobis(ids, blocks, graph, delta)
         k = int(np.argmax(values)) if values.size else None
         mahal.update(max_pose=None if k is None else float(values[k]), max_pose_id=None if k is None else int(ids[k]))
     if not status.ok:

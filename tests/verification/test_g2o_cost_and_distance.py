@@ -5,7 +5,7 @@ import numpy as np
 import pytest
 from scipy.spatial.transform import Rotation
 
-from posecrb.models.paper.crlb import paper_crlb
+from posecrb.models.paper.crlb import crlb_blocks
 from posecrb.models.paper.fim import paper_fim
 from posecrb.sim.random_graphs import random_graph
 from posecrb.verification.distance import paper_delta, pose_mahalanobis, squared_mahalanobis
@@ -96,9 +96,11 @@ def test_delta_and_mahalanobis_against_dense_references(dim):
     expected = v @ dense @ v
     cond = np.linalg.cond(dense)
     assert squared_mahalanobis(fim, g, delta) == pytest.approx(expected, rel=100 * cond * EPS)
-    crlb = paper_crlb(g, opt_rot, opt_trans, anchor=anchor, per_pose=True)
-    ids, values = pose_mahalanobis(crlb.per_pose, g, delta, int(g.ids[anchor]))
-    assert ids.size == g.n - 1
+    blocks, accuracy, _ = crlb_blocks(fim, g)
+    assert accuracy is not None and accuracy.status.ok
+    ids = fim.pose_ids
+    values = pose_mahalanobis(ids, blocks, g, delta)
+    assert ids.size == g.n - 1 and int(g.ids[anchor]) not in ids
     inv = np.linalg.inv(dense)
     for pid, val in zip(ids, values):
         i = int(np.searchsorted(g.ids, pid))

@@ -252,14 +252,15 @@ def _requested_ids(graph: PoseGraph, per_pose: bool | Sequence[int]) -> np.ndarr
     return ids
 
 
-def crlb_from_fim(fim: PaperFim, graph: PoseGraph, per_pose: bool | Sequence[int] = False, *,
-                  ordering: str = "auto") -> PaperCrlb:
-    """CRLB (eq. 67 / 68) from an already built paper FIM of ``graph``, with its accuracy
-    estimate and the validity of the curvature term (module docstring). ``ordering``: the FIM
-    factorization's fill-reducing ordering (posecrb.linalg.ordering; cost only)."""
-
+def crlb_blocks(fim: PaperFim, graph: PoseGraph, *, ordering: str = "auto"
+                ) -> tuple[np.ndarray, InverseAccuracy | None, dict[str, float]]:
+    """The first-order CRLB's marginal blocks (eq. 67; in 3D the leading term of eq. 68): the q x q
+    diagonal blocks of F^{-1}, one per free pose in the order of ``fim.pose_ids``, by selected
+    inversion; the inverse's accuracy estimate (None without free poses); and the stages' times
+    (``crlb_blocks``, ``accuracy``). ``crlb_from_fim`` adds the traces and the curvature term;
+    ``posecrb verify``'s per-pose distances need only these."""
     times: dict[str, float] = {}
-    d, dr, q = fim.dim, fim.rot_dim, fim.q
+    d, q = fim.dim, fim.q
     npf = fim.n_free
     t0 = time.perf_counter()
     fp = fim.to_layout("poses")
@@ -271,6 +272,18 @@ def crlb_from_fim(fim: PaperFim, graph: PoseGraph, per_pose: bool | Sequence[int
     accuracy = inverse_accuracy(fp.matrix, factor, "paper FIM", threaded=threaded_matrix(d, graph.n, "crlb")) \
         if npf else None
     times["accuracy"] = time.perf_counter() - t0
+    return blocks, accuracy, times
+
+
+def crlb_from_fim(fim: PaperFim, graph: PoseGraph, per_pose: bool | Sequence[int] = False, *,
+                  ordering: str = "auto") -> PaperCrlb:
+    """CRLB (eq. 67 / 68) from an already built paper FIM of ``graph``, with its accuracy
+    estimate and the validity of the curvature term (module docstring). ``ordering``: the FIM
+    factorization's fill-reducing ordering (posecrb.linalg.ordering; cost only)."""
+
+    d, dr, q = fim.dim, fim.rot_dim, fim.q
+    npf = fim.n_free
+    blocks, accuracy, times = crlb_blocks(fim, graph, ordering=ordering)
     diag = np.einsum("kii->ki", blocks)
     tr_t, tr_r = float(diag[:, :d].sum()), float(diag[:, d:].sum())
     trace = tr_t + tr_r
