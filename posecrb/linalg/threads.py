@@ -25,7 +25,7 @@ directory), which does posecrb's own small dense products.
   cores at most once a second. ``verify``'s certificates and refinement run inside the same
   policy (``posecrb.solver.solve.solver_thread_policy``), and the CRLB's accuracy estimate solves
   at one thread unless its matrix is threaded: a solve with one right-hand side through small
-  supernodes took several times longer on OpenBLAS's threads.
+  supernodes takes several times longer on OpenBLAS's threads.
 * numpy's/scipy's OpenBLAS stays at one thread in the solver and the selected inversion: its
   threads collapse under load (posecrb.linalg.selinv). The exception: the selected inversion's
   supernodes of at least 10^9 flops (the top separators of large graphs, nearly all of its flops

@@ -190,9 +190,9 @@ def solve(graph: PoseGraph, options: SolverOptions | None = None, **keywords: An
 def solver_thread_policy(graph: PoseGraph) -> Any:
     """The solver's thread policy for ``graph`` (a context manager): every BLAS at one thread,
     except CHOLMOD's in the factorizations of M_red of large graphs (``solve``). Every caller of the
-    solver's linear algebra (the certificate, the refinement) runs inside it: outside it the
-    certificate's Lanczos solves ran CHOLMOD's BLAS on its threads, each solve several times slower
-    on small supernodes (docs/decisions/blas-threads.md)."""
+    solver's linear algebra (the certificate, the refinement) runs inside it: outside it, the
+    certificate's Lanczos solves take CHOLMOD's BLAS threads, which make a solve through small
+    supernodes several times slower (docs/decisions/blas-threads.md)."""
     large = threaded_matrix(graph.dim, graph.n, "solver")
     return solver_threads(cholmod_threads() if large else 1)
 

@@ -134,8 +134,8 @@ def inverse_accuracy(a: sp.spmatrix, factor: Factor, name: str = "matrix", colum
 
     ``threaded``: ``a`` is a matrix whose factorization takes CHOLMOD's BLAS threads
     (``posecrb.linalg.ordering.threaded_matrix``); its solves here do too. Otherwise they run it at
-    one thread: the estimate's dozen solves with one or a few right-hand sides went through small
-    supernodes, where OpenBLAS's threads made them several times slower (posecrb.linalg.threads)."""
+    one thread: the estimate's dozen solves with one or a few right-hand sides go through small
+    supernodes, where OpenBLAS's threads make them several times slower (posecrb.linalg.threads)."""
     with load_aware_threads() if threaded else cholmod_single_threaded():
         return _inverse_accuracy(a, factor, name, columns, seed)
 
