@@ -38,6 +38,7 @@ Groups (each written to OUT/GROUP.json; ``--groups`` picks some):
 from __future__ import annotations
 
 import os
+import statistics
 import sys
 from pathlib import Path
 
@@ -185,8 +186,6 @@ def stage_samples(entry: dict, commands: list[Command], stage: str, rounds: int)
 
 
 def median_or_none(values: list[float]) -> float | None:
-    import statistics
-
     return statistics.median(values) if values else None
 
 
